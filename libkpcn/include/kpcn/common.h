@@ -1,0 +1,68 @@
+/* kpcn/common.h — status codes, error messages, logging and progress callbacks
+ * shared by every libkpcn module.
+ *
+ * Conventions (DESIGN.md §3):
+ *  - every fallible call returns kpcn_status; KPCN_OK (0) is success;
+ *  - the message of the last error on the calling thread is kpcn_last_error();
+ *    it names the file / channel / JSON path / argument that was wrong;
+ *  - the library never prints and never calls exit(): diagnostics go through a
+ *    caller-supplied kpcn_log_fn, long jobs report through kpcn_progress_fn;
+ *  - thread counts are explicit: 0 means "all cores".
+ */
+#ifndef KPCN_COMMON_H
+#define KPCN_COMMON_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define KPCN_VERSION_STRING "0.1.0"
+
+typedef enum kpcn_status {
+  KPCN_OK = 0,
+  KPCN_ERR_INVALID_ARGUMENT = 1, /* bad parameter value (NULL, negative size, unknown name) */
+  KPCN_ERR_IO = 2,               /* file cannot be opened/read/written */
+  KPCN_ERR_FORMAT = 3,           /* file exists but is malformed / truncated */
+  KPCN_ERR_MISSING_CHANNEL = 4,  /* a required channel / buffer is absent (message names it) */
+  KPCN_ERR_SIZE_MISMATCH = 5,    /* images or tensors of incompatible sizes */
+  KPCN_ERR_NONFINITE = 6,        /* NaN/Inf where finite values are required */
+  KPCN_ERR_OUT_OF_MEMORY = 7,    /* allocation failed or requested size is absurd */
+  KPCN_ERR_UNSUPPORTED = 8,      /* valid but unsupported feature (message names it) */
+  KPCN_ERR_CANCELLED = 9,        /* a progress callback asked to stop */
+  KPCN_ERR_INTERNAL = 10         /* a third-party library failed unexpectedly */
+} kpcn_status;
+
+/* Short constant name of a status code ("invalid argument", ...). */
+const char *kpcn_status_string(kpcn_status s);
+
+/* Message of the last error raised on the calling thread ("" if none). The
+ * storage is thread-local and valid until the next failing call on this thread. */
+const char *kpcn_last_error(void);
+/* Status of the last error raised on the calling thread. */
+kpcn_status kpcn_last_status(void);
+/* Clears the calling thread's error. */
+void kpcn_clear_error(void);
+
+/* Log levels for kpcn_log_fn. */
+typedef enum kpcn_log_level { KPCN_LOG_DEBUG, KPCN_LOG_INFO, KPCN_LOG_WARNING } kpcn_log_level;
+typedef void (*kpcn_log_fn)(void *user, kpcn_log_level level, const char *message);
+
+/* Progress callback for long jobs: fraction in [0,1]; return non-zero to cancel
+ * (the job then stops at the next safe point and returns KPCN_ERR_CANCELLED). */
+typedef int (*kpcn_progress_fn)(void *user, double fraction);
+
+/* Number of threads a call will use for the request n (0 = all cores). */
+int kpcn_resolve_threads(int n);
+
+/* Upper bound for any image dimension and pixel count accepted by the library;
+ * larger requests are rejected as "absurd" rather than attempted. */
+#define KPCN_MAX_DIM 65536
+#define KPCN_MAX_PIXELS ((int64_t)1 << 28)
+
+#ifdef __cplusplus
+}
+#endif
+#endif

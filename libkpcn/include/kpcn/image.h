@@ -1,0 +1,124 @@
+/* kpcn/image.h — planar float images with named channels, and AOV sets.
+ *
+ * kpcn_image is a plain, transparent struct: data is planar float32,
+ *   pixel (x, y) of channel c is data[(size_t)c * width * height + (size_t)y * width + x].
+ * Create with kpcn_image_create (owns data and names), free with kpcn_image_destroy.
+ *
+ * kpcn_aov_set holds the buffers of DESIGN.md §4. Canonical EXR channel names:
+ *
+ *   buffer      channels                         variance channel (variance of the mean,
+ *                                                averaged over the buffer's channels)
+ *   color       R G B                            color.var
+ *   diffuse     diffuse.R diffuse.G diffuse.B    diffuse.var
+ *   specular    specular.R specular.G specular.B specular.var
+ *   albedo      albedo.R albedo.G albedo.B       albedo.var
+ *   normal      N.X N.Y N.Z                      N.var       camera space: x right, y up,
+ *                                                            z toward the camera
+ *   depth       Z                                Z.var       distance camera -> first hit;
+ *                                                            0 where the ray missed
+ *   visibility  visibility.V                     visibility.var
+ *
+ * Aliases accepted on read (see exr.h): Blender/Cycles pass names
+ * (ViewLayer.Combined.*, Denoising Albedo.*, Denoising Normal.*, Denoising Depth.Z,
+ * DiffCol/GlossCol ...), normal.X/Y/Z, depth.Z / depth.V.
+ */
+#ifndef KPCN_IMAGE_H
+#define KPCN_IMAGE_H
+
+#include "kpcn/common.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct kpcn_image {
+  int width;
+  int height;
+  int nchannels;
+  char **names; /* nchannels NUL-terminated names, owned */
+  float *data;  /* planar, nchannels * width * height floats, owned */
+} kpcn_image;
+
+/* Allocates a zero-filled image. names may be NULL (channels named "0", "1", ...).
+ * Rejects zero/negative or absurd sizes (KPCN_MAX_DIM, KPCN_MAX_PIXELS). */
+kpcn_status kpcn_image_create(kpcn_image **out, int width, int height, int nchannels,
+                              const char *const *names);
+void kpcn_image_destroy(kpcn_image *img);
+/* Deep copy. */
+kpcn_status kpcn_image_clone(kpcn_image **out, const kpcn_image *src);
+/* Index of the channel named `name`, or -1. */
+int kpcn_image_find_channel(const kpcn_image *img, const char *name);
+/* Pointer to the plane of channel c. */
+static inline float *kpcn_image_plane(const kpcn_image *img, int c) {
+  return img->data + (size_t)c * (size_t)img->width * (size_t)img->height;
+}
+
+/* ---- AOV sets ---- */
+typedef enum kpcn_buffer {
+  KPCN_BUF_COLOR = 0,
+  KPCN_BUF_DIFFUSE,
+  KPCN_BUF_SPECULAR,
+  KPCN_BUF_ALBEDO,
+  KPCN_BUF_NORMAL,
+  KPCN_BUF_DEPTH,
+  KPCN_BUF_VISIBILITY,
+  KPCN_BUF_COUNT
+} kpcn_buffer;
+
+/* Number of channels of a buffer (3 for color-like and normal, 1 for depth/visibility). */
+int kpcn_buffer_channels(kpcn_buffer b);
+/* Short name: "color", "diffuse", "specular", "albedo", "normal", "depth", "visibility". */
+const char *kpcn_buffer_name(kpcn_buffer b);
+/* Canonical EXR channel name of channel c of buffer b ("R", "diffuse.G", "N.Z", "Z", ...). */
+const char *kpcn_buffer_channel_name(kpcn_buffer b, int c);
+/* Canonical EXR name of the variance channel of buffer b ("color.var", "N.var", ...). */
+const char *kpcn_buffer_variance_name(kpcn_buffer b);
+/* Buffer whose short name is `name`, or -1. */
+int kpcn_buffer_from_name(const char *name);
+/* True for buffers whose channels are RGB colours (color, diffuse, specular, albedo). */
+int kpcn_buffer_is_color(kpcn_buffer b);
+
+typedef struct kpcn_aov_set {
+  int width;
+  int height;
+  /* Planar buffers, kpcn_buffer_channels(b) planes each; NULL when absent. Owned. */
+  float *buf[KPCN_BUF_COUNT];
+  /* One plane each (variance of the mean); NULL when absent. Owned. */
+  float *var[KPCN_BUF_COUNT];
+  /* Header metadata (kpcn:spp, kpcn:seed, kpcn:scene, kpcn:version); spp/seed -1 if unknown. */
+  int spp;
+  int64_t seed;
+  char scene[256];
+  char version[32];
+} kpcn_aov_set;
+
+/* Allocates an empty set (no buffers) of the given size; validates the size. */
+kpcn_status kpcn_aov_create(kpcn_aov_set **out, int width, int height);
+void kpcn_aov_destroy(kpcn_aov_set *set);
+kpcn_status kpcn_aov_clone(kpcn_aov_set **out, const kpcn_aov_set *src);
+/* Allocates (zero-filled) buffer b and, if with_variance, its variance plane.
+ * Existing planes are kept. */
+kpcn_status kpcn_aov_add(kpcn_aov_set *set, kpcn_buffer b, int with_variance);
+/* Fails with KPCN_ERR_MISSING_CHANNEL naming the buffer (and `what`, e.g. a file
+ * name, in the message) if buffer b -- and its variance if need_variance -- is absent. */
+kpcn_status kpcn_aov_require(const kpcn_aov_set *set, kpcn_buffer b, int need_variance,
+                             const char *what);
+/* Number of floats in one plane. */
+static inline size_t kpcn_aov_plane_size(const kpcn_aov_set *s) {
+  return (size_t)s->width * (size_t)s->height;
+}
+
+/* Converts between an AOV set and a flat image with canonical channel names
+ * (only the buffers present). */
+kpcn_status kpcn_aov_to_image(kpcn_image **out, const kpcn_aov_set *set);
+/* Recognises canonical names and aliases; channels it does not know are ignored. */
+kpcn_status kpcn_aov_from_image(kpcn_aov_set **out, const kpcn_image *img);
+
+/* Counts non-finite values in every present plane; returns the count and, if
+ * first_name is non-NULL, the channel name of the first offender. */
+size_t kpcn_aov_count_nonfinite(const kpcn_aov_set *set, const char **first_name);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,124 @@
+/* Thread-local error state, logging, checked allocation, atomic file helpers. */
+#define _GNU_SOURCE
+#include "core/internal.h"
+
+#include <errno.h>
+#include <omp.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+/* Thread-local rather than global so concurrent callers never see each other's errors. */
+static _Thread_local char g_msg[2048];
+static _Thread_local kpcn_status g_status = KPCN_OK;
+
+const char *kpcn_status_string(kpcn_status s) {
+  switch (s) {
+  case KPCN_OK: return "ok";
+  case KPCN_ERR_INVALID_ARGUMENT: return "invalid argument";
+  case KPCN_ERR_IO: return "i/o error";
+  case KPCN_ERR_FORMAT: return "malformed input";
+  case KPCN_ERR_MISSING_CHANNEL: return "missing channel";
+  case KPCN_ERR_SIZE_MISMATCH: return "size mismatch";
+  case KPCN_ERR_NONFINITE: return "non-finite value";
+  case KPCN_ERR_OUT_OF_MEMORY: return "out of memory";
+  case KPCN_ERR_UNSUPPORTED: return "unsupported";
+  case KPCN_ERR_CANCELLED: return "cancelled";
+  case KPCN_ERR_INTERNAL: return "internal error";
+  }
+  return "unknown status";
+}
+
+const char *kpcn_last_error(void) { return g_msg; }
+kpcn_status kpcn_last_status(void) { return g_status; }
+void kpcn_clear_error(void) {
+  g_msg[0] = 0;
+  g_status = KPCN_OK;
+}
+
+kpcn_status kpcn_fail(kpcn_status s, const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(g_msg, sizeof g_msg, fmt, ap);
+  va_end(ap);
+  g_status = s;
+  return s;
+}
+
+kpcn_status kpcn_fail_context(const char *fmt, ...) {
+  char prefix[1024], old[sizeof g_msg];
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(prefix, sizeof prefix, fmt, ap);
+  va_end(ap);
+  memcpy(old, g_msg, sizeof old);
+  snprintf(g_msg, sizeof g_msg, "%s: %s", prefix, old);
+  return g_status == KPCN_OK ? KPCN_ERR_INTERNAL : g_status;
+}
+
+void kpcn_log(kpcn_log_fn fn, void *user, kpcn_log_level level, const char *fmt, ...) {
+  if (!fn) return;
+  char buf[2048];
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(buf, sizeof buf, fmt, ap);
+  va_end(ap);
+  fn(user, level, buf);
+}
+
+int kpcn_resolve_threads(int n) {
+  if (n > 0) return n;
+  int p = omp_get_num_procs();
+  return p > 0 ? p : 1;
+}
+
+void *kpcn_alloc(size_t bytes, const char *what) {
+  void *p = malloc(bytes ? bytes : 1);
+  if (!p) kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "cannot allocate %zu bytes for %s", bytes, what);
+  return p;
+}
+
+void *kpcn_calloc(size_t count, size_t size, const char *what) {
+  void *p = calloc(count ? count : 1, size ? size : 1);
+  if (!p)
+    kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "cannot allocate %zu x %zu bytes for %s", count, size, what);
+  return p;
+}
+
+void *kpcn_aligned_alloc(size_t bytes, const char *what) {
+  void *p = NULL;
+  if (posix_memalign(&p, 64, bytes ? bytes : 64) != 0) {
+    kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "cannot allocate %zu bytes for %s", bytes, what);
+    return NULL;
+  }
+  return p;
+}
+
+void kpcn_aligned_free(void *p) { free(p); }
+
+kpcn_status kpcn_check_size(int width, int height, const char *what) {
+  if (width <= 0 || height <= 0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: zero or negative size %dx%d", what, width,
+                     height);
+  if (width > KPCN_MAX_DIM || height > KPCN_MAX_DIM ||
+      (int64_t)width * (int64_t)height > KPCN_MAX_PIXELS)
+    return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "%s: absurd size %dx%d (limit %d per side, %lld pixels)",
+                     what, width, height, KPCN_MAX_DIM, (long long)KPCN_MAX_PIXELS);
+  return KPCN_OK;
+}
+
+void kpcn_temp_path(char *out, size_t outsz, const char *path) {
+  snprintf(out, outsz, "%s.tmp.%ld", path, (long)getpid());
+}
+
+kpcn_status kpcn_commit_file(const char *tmp, const char *path) {
+  if (rename(tmp, path) != 0) {
+    int e = errno;
+    unlink(tmp);
+    return kpcn_fail(KPCN_ERR_IO, "cannot rename '%s' to '%s': %s", tmp, path, strerror(e));
+  }
+  return KPCN_OK;
+}
+
+void kpcn_abort_file(const char *tmp) { unlink(tmp); }

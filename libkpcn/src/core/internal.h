@@ -1,0 +1,41 @@
+/* Internal helpers shared by libkpcn modules (not installed). */
+#ifndef KPCN_CORE_INTERNAL_H
+#define KPCN_CORE_INTERNAL_H
+
+#include "kpcn/common.h"
+#include <stdarg.h>
+
+/* Records an error for the calling thread and returns s, so call sites read
+ *   return kpcn_fail(KPCN_ERR_IO, "cannot open '%s': %s", path, strerror(errno)); */
+kpcn_status kpcn_fail(kpcn_status s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* Prepends context to the current error message ("reading 'x.exr': ...") and returns the
+ * current status. */
+kpcn_status kpcn_fail_context(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+
+/* Logs through an optional callback (no-op when fn is NULL). */
+void kpcn_log(kpcn_log_fn fn, void *user, kpcn_log_level level, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+
+/* Checked allocation: returns NULL and sets KPCN_ERR_OUT_OF_MEMORY naming `what`. */
+void *kpcn_alloc(size_t bytes, const char *what);
+void *kpcn_calloc(size_t count, size_t size, const char *what);
+/* 64-byte aligned allocation (free with kpcn_aligned_free). */
+void *kpcn_aligned_alloc(size_t bytes, const char *what);
+void kpcn_aligned_free(void *p);
+
+/* Validates an image size: positive, <= KPCN_MAX_DIM each, <= KPCN_MAX_PIXELS total. */
+kpcn_status kpcn_check_size(int width, int height, const char *what);
+
+/* Writes `path` atomically: callers write to the temp name from kpcn_temp_path, then
+ * kpcn_commit_file renames it over path (or kpcn_abort_file removes it). */
+void kpcn_temp_path(char *out, size_t outsz, const char *path);
+kpcn_status kpcn_commit_file(const char *tmp, const char *path);
+void kpcn_abort_file(const char *tmp);
+
+#define KPCN_TRY(expr)                                                                             \
+  do {                                                                                             \
+    kpcn_status _s = (expr);                                                                       \
+    if (_s != KPCN_OK) return _s;                                                                  \
+  } while (0)
+
+#endif

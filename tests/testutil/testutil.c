@@ -1,0 +1,42 @@
+#define _GNU_SOURCE
+#include "testutil.h"
+#include <stdlib.h>
+#include <string.h>
+
+int kt_failures = 0;
+int kt_checks = 0;
+
+int kt_summary(const char *suite) {
+  printf("%s: %d checks, %d passed, %d failed\n", suite, kt_checks, kt_checks - kt_failures,
+         kt_failures);
+  return kt_failures ? 1 : 0;
+}
+
+const char *kt_tmpdir(void) {
+  static char dir[256];
+  if (!dir[0]) {
+    snprintf(dir, sizeof dir, "/tmp/kpcn_test_XXXXXX");
+    if (!mkdtemp(dir)) {
+      perror("mkdtemp");
+      abort();
+    }
+  }
+  return dir;
+}
+
+const char *kt_tmpfile(const char *name) {
+  static char path[8][512];
+  static int slot = 0;
+  slot = (slot + 1) % 8;
+  snprintf(path[slot], sizeof path[slot], "%s/%s", kt_tmpdir(), name);
+  return path[slot];
+}
+
+float kt_randf(unsigned *state) {
+  unsigned x = *state ? *state : 2463534242u;
+  x ^= x << 13;
+  x ^= x >> 17;
+  x ^= x << 5;
+  *state = x;
+  return (x >> 8) * (1.0f / 16777216.0f);
+}

@@ -1,0 +1,43 @@
+/* Minimal test harness shared by all C unit tests: CHECK macros that count
+ * failures and a summary line ctest can read. Deliberately tiny. */
+#ifndef KPCN_TESTUTIL_H
+#define KPCN_TESTUTIL_H
+#include <math.h>
+#include <stdio.h>
+
+extern int kt_failures;
+extern int kt_checks;
+
+#define CHECK(cond)                                                                                \
+  do {                                                                                             \
+    kt_checks++;                                                                                   \
+    if (!(cond)) {                                                                                 \
+      kt_failures++;                                                                               \
+      fprintf(stderr, "%s:%d: CHECK failed: %s\n", __FILE__, __LINE__, #cond);                     \
+    }                                                                                              \
+  } while (0)
+
+#define CHECK_NEAR(a, b, tol)                                                                      \
+  do {                                                                                             \
+    double _a = (double)(a), _b = (double)(b), _t = (double)(tol);                                 \
+    kt_checks++;                                                                                   \
+    if (!(fabs(_a - _b) <= _t)) {                                                                  \
+      kt_failures++;                                                                               \
+      fprintf(stderr, "%s:%d: CHECK_NEAR failed: %s=%.9g vs %s=%.9g (tol %.3g)\n", __FILE__,       \
+              __LINE__, #a, _a, #b, _b, _t);                                                       \
+    }                                                                                              \
+  } while (0)
+
+/* Relative+absolute closeness: |a-b| <= atol + rtol*|b|. */
+#define CHECK_CLOSE(a, b, rtol, atol) CHECK_NEAR(a, b, (atol) + (rtol)*fabs((double)(b)))
+
+/* Prints "N passed, N failed" and returns the process exit code. */
+int kt_summary(const char *suite);
+
+/* Path helpers: a fresh temp dir for this test process, and a file path inside it. */
+const char *kt_tmpdir(void);
+const char *kt_tmpfile(const char *name);
+
+/* Deterministic PRNG for test data (xorshift). */
+float kt_randf(unsigned *state);
+#endif

@@ -1,0 +1,59 @@
+// kpcntool command registry. kpcntool follows oiiotool: an image stack, commands applied
+// left to right, `-o file` writes the top, `--cmd:key=value:key2=value2` modifiers.
+// Each command family lives in its own cmd_*.cpp file and registers itself with a static
+// initializer, so adding commands never edits main.cpp:
+//
+//   static bool reg = kpcntool::register_command({"ssim", 0, {"json"}, "help text",
+//       [](kpcntool::Context &ctx, const kpcntool::Modifiers &m,
+//          const std::vector<std::string> &args, std::string &err) -> bool { ... }});
+#pragma once
+#include <OpenImageIO/imagebuf.h>
+
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace kpcntool {
+
+struct Modifiers {
+  std::map<std::string, std::string> kv;
+  bool has(const std::string &k) const { return kv.count(k) != 0; }
+  std::string str(const std::string &k, const std::string &def = "") const {
+    auto it = kv.find(k);
+    return it == kv.end() ? def : it->second;
+  }
+  // Parse helpers: on a malformed value they throw kpcntool::Error naming the modifier.
+  double num(const std::string &k, double def) const;
+  long integer(const std::string &k, long def) const;
+};
+
+struct Error : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+struct Context {
+  std::vector<OIIO::ImageBuf> stack; // back() is the top
+  bool json = false;                 // --json: machine-readable results
+  int nthreads = 0;                  // --threads N (0 = all cores)
+  // Results of measuring commands, printed at exit (as one JSON object with --json).
+  std::vector<std::pair<std::string, double>> results;
+  OIIO::ImageBuf pop();              // throws Error on an empty stack
+  OIIO::ImageBuf &top();             // throws Error on an empty stack
+  void push(OIIO::ImageBuf buf) { stack.push_back(std::move(buf)); }
+};
+
+struct Command {
+  std::string name;                   // without dashes: "ssim" is invoked as --ssim
+  int nargs;                          // positional arguments it consumes
+  std::vector<std::string> modifiers; // accepted :key=value keys; others are an error
+  std::string help;                   // one line for --help
+  // Returns false and sets err (naming the problem) on failure; may also throw Error.
+  std::function<bool(Context &, const Modifiers &, const std::vector<std::string> &,
+                     std::string &)>
+      run;
+};
+
+bool register_command(Command c);
+
+} // namespace kpcntool
