@@ -38,6 +38,12 @@ struct Context {
   int nthreads = 0;                  // --threads N (0 = all cores)
   // Results of measuring commands, printed at exit (as one JSON object with --json).
   std::vector<std::pair<std::string, double>> results;
+  // Extension (main/cmd_core owner): non-numeric results as raw JSON text, e.g. --info.
+  std::vector<std::pair<std::string, std::string>> json_items;
+  // Extension: `-o` files, written only after every command succeeded (no partial output).
+  std::vector<std::pair<std::string, OIIO::ImageBuf>> outputs;
+  // Extension: records a numeric result under a unique key (key, key_2, key_3 ...).
+  void add_result(const std::string &key, double value);
   OIIO::ImageBuf pop();              // throws Error on an empty stack
   OIIO::ImageBuf &top();             // throws Error on an empty stack
   void push(OIIO::ImageBuf buf) { stack.push_back(std::move(buf)); }
@@ -55,5 +61,14 @@ struct Command {
 };
 
 bool register_command(Command c);
+
+// Extensions used by main.cpp (implemented in registry.cpp / cmd_core.cpp).
+const Command *find_command(const std::string &name);     // nullptr if unknown
+std::vector<const Command *> all_commands();              // sorted by name
+// Writes img to path atomically (temp file + rename); EXR keeps float, PNG/JPEG/TIFF-8
+// formats get 8 bits. Returns false with err naming the file on failure.
+bool write_image(const OIIO::ImageBuf &img, const std::string &path, std::string &err);
+// Reads an image file fully as float; false with err naming the file on failure.
+bool read_image(OIIO::ImageBuf &dst, const std::string &path, std::string &err);
 
 } // namespace kpcntool

@@ -55,6 +55,8 @@ typedef struct kpcn_exr_attr {
 typedef struct kpcn_exr_write_options {
   kpcn_exr_compression compression;
   kpcn_exr_pixel_type pixel_type;
+  /* Threads compressing chunks (0 = all cores); the file is byte-identical for any count. */
+  int nthreads;
   /* Extra attributes written to the header (kpcn:spp, kpcn:seed, ... for plain images;
    * kpcn_exr_write_aov writes the set's metadata itself). */
   int nattrs;
@@ -69,8 +71,11 @@ kpcn_status kpcn_exr_options_add_string(kpcn_exr_write_options *opt, const char 
                                         const char *value);
 kpcn_status kpcn_exr_options_add_int(kpcn_exr_write_options *opt, const char *name, int value);
 
-/* Reads every channel of part 0 as float32; names as stored in the file. */
+/* Reads every channel of part 0 as float32; names as stored in the file. Chunks are decoded
+ * by kpcn_resolve_threads(nthreads) threads (the _mt forms; the plain forms use 0 = all);
+ * the result does not depend on the thread count. */
 kpcn_status kpcn_exr_read_image(const char *path, kpcn_image **out);
+kpcn_status kpcn_exr_read_image_mt(const char *path, int nthreads, kpcn_image **out);
 /* Writes every channel of img. opt may be NULL (defaults). Channel names must be unique and
  * non-empty. */
 kpcn_status kpcn_exr_write_image(const char *path, const kpcn_image *img,
@@ -83,6 +88,7 @@ kpcn_status kpcn_exr_write_image(const char *path, const kpcn_image *img,
  * partially present buffer (e.g. N.X and N.Y without N.Z) is KPCN_ERR_MISSING_CHANNEL
  * naming the channel and file. Use kpcn_aov_require to demand buffers. */
 kpcn_status kpcn_exr_read_aov(const char *path, kpcn_aov_set **out);
+kpcn_status kpcn_exr_read_aov_mt(const char *path, int nthreads, kpcn_aov_set **out);
 /* Writes the present buffers with canonical names plus kpcn:spp/seed/scene/version
  * (spp/seed only when >= 0, strings only when non-empty). opt may be NULL. */
 kpcn_status kpcn_exr_write_aov(const char *path, const kpcn_aov_set *set,
@@ -91,29 +97,24 @@ kpcn_status kpcn_exr_write_aov(const char *path, const kpcn_aov_set *set,
 /* Header summary for `kpcntool --info`; reads the header only. */
 #define KPCN_EXR_MAX_INFO_CHANNELS 256
 typedef struct kpcn_exr_info_t {
-  int width, height;             /* data window size */
-  int data_x, data_y;            /* data window origin */
-  int tiled;                     /* 1 for tiled files */
-  int nparts;                    /* number of parts in the file (only part 0 is read) */
-  int nchannels;                 /* channels in part 0 (may exceed the list below) */
-  char channels[KPCN_EXR_MAX_INFO_CHANNELS][64]; /* names (truncated to 63 chars) */
+  int width, height;  /* data window size */
+  int data_x, data_y; /* data window origin */
+  int tiled;          /* 1 for tiled files */
+  int nparts;         /* number of parts in the file (only part 0 is read) */
+  int nchannels;      /* channels in part 0 (may exceed the list below) */
+  char channels[KPCN_EXR_MAX_INFO_CHANNELS][64];   /* names (truncated to 63 chars) */
   int channel_is_half[KPCN_EXR_MAX_INFO_CHANNELS]; /* 1 half, 0 float, 2 uint */
-  char compression[16];          /* "zip", "none", "piz", ... */
-  int spp;                       /* kpcn:spp, -1 if absent */
-  int64_t seed;                  /* kpcn:seed, -1 if absent */
-  char scene[256];               /* kpcn:scene, "" if absent */
-  char version[32];              /* kpcn:version, "" if absent */
+  char compression[16];                            /* "zip", "none", "piz", ... */
+  int spp;                                         /* kpcn:spp, -1 if absent */
+  int64_t seed;                                    /* kpcn:seed, -1 if absent */
+  char scene[256];                                 /* kpcn:scene, "" if absent */
+  char version[32];                                /* kpcn:version, "" if absent */
   /* AOV buffers recognised (canonical or alias): 1 if all channels present. */
   int has_buffer[KPCN_BUF_COUNT];
   int has_variance[KPCN_BUF_COUNT];
 } kpcn_exr_info_t;
 
 kpcn_status kpcn_exr_info(const char *path, kpcn_exr_info_t *out);
-
-/* Maps an EXR channel name (canonical or alias) to (buffer, channel index); channel index
- * -1 means "the variance plane of that buffer". Returns 1 if recognised, 0 otherwise.
- * Exposed so oiio_ops/kpcntool use the same alias table. */
-int kpcn_aov_channel_lookup(const char *name, kpcn_buffer *buffer, int *channel);
 
 #ifdef __cplusplus
 }

@@ -114,6 +114,20 @@ kpcn_status kpcn_aov_to_image(kpcn_image **out, const kpcn_aov_set *set);
 /* Recognises canonical names and aliases; channels it does not know are ignored. */
 kpcn_status kpcn_aov_from_image(kpcn_aov_set **out, const kpcn_image *img);
 
+/* Maps one channel name (canonical or alias, see docs/aov-exr.md) to a buffer and a
+ * channel index; *channel is -1 for the buffer's variance plane. *rank (may be NULL) is
+ * 0 for canonical names and grows for less preferred aliases. Returns 1 if recognised. */
+int kpcn_aov_channel_lookup(const char *name, kpcn_buffer *buffer, int *channel, int *rank);
+
+/* Which of `n` channel names feed which AOV plane: on return chan[b][c] is the index (into
+ * names) of channel c of buffer b and var[b] that of its variance, or -1 when absent.
+ * A buffer is mapped only when all its channels come from one group (same name prefix);
+ * among complete groups the canonical/most preferred wins. A buffer found only partially
+ * (e.g. N.X, N.Y but no N.Z) fails with KPCN_ERR_MISSING_CHANNEL naming the missing
+ * channel and `what` (a file name, for the message); the other buffers are still mapped. */
+kpcn_status kpcn_aov_map_channels(const char *const *names, int n, int chan[KPCN_BUF_COUNT][3],
+                                  int var[KPCN_BUF_COUNT], const char *what);
+
 /* Counts non-finite values in every present plane; returns the count and, if
  * first_name is non-NULL, the channel name of the first offender. */
 size_t kpcn_aov_count_nonfinite(const kpcn_aov_set *set, const char **first_name);

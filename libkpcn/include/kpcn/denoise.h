@@ -1,0 +1,245 @@
+/* kpcn/denoise.h — the KPCN denoiser (Bako et al. 2017, seed chapter 4, DESIGN.md §5):
+ * input preprocessing shared by inference AND training, the two-branch kernel-predicting
+ * pipeline, classical baselines (cross-bilateral, non-local means), and an oidn.h-style
+ * C API.
+ *
+ * ---------------------------------------------------------------------------------------
+ * 1. Network input ("features"), feature version KPCN_FEATURES_VERSION. One list per branch
+ *    (diffuse / specular), identical except for what "color" means:
+ *
+ *      diffuse branch:  color  = diffuse / (albedo + eps)            (per channel)
+ *                       color.var = diffuse.var * mean_c 1/(albedo_c + eps)^2
+ *      specular branch: color  = log(1 + max(specular, 0))           (per channel)
+ *                       color.var = specular.var * mean_c 1/(1 + max(specular_c, 0))^2
+ *
+ *    Ordered channel list (36 channels; names as returned by kpcn_features_channel_names):
+ *       0.. 2  color.R color.G color.B        preprocessed color (the branch's, above)
+ *       3      color.var                      its transformed variance
+ *       4.. 6  N.X N.Y N.Z                    normal, as stored (camera space)
+ *       7      N.var
+ *       8..10  albedo.R albedo.G albedo.B
+ *      11      albedo.var
+ *      12      Z                              depth normalised per image: (Z - off) * scale
+ *      13      Z.var                          Z.var * scale^2
+ *      14      visibility.V
+ *      15      visibility.var
+ *      16..25  dx.color.R dx.color.G dx.color.B dx.N.X dx.N.Y dx.N.Z
+ *              dx.albedo.R dx.albedo.G dx.albedo.B dx.Z
+ *      26..35  dy.<same ten, same order>
+ *
+ *    Gradients are central differences with replicated borders of the FULL image:
+ *      dx f(x,y) = (f(min(x+1,W-1), y) - f(max(x-1,0), y)) / 2   (dy likewise in y),
+ *    taken on the preprocessed / normalised values (color = the branch's preprocessed
+ *    color, Z = normalised depth). Central differences keep mirror augmentation exact
+ *    (mirroring negates dx). The region variant reads neighbours outside the region, so
+ *    a tile's features equal the corresponding crop of the full image's features.
+ *
+ *    Depth normalisation is per image: off = min Z, scale = 1/(max Z - min Z) over the
+ *    finite depth values of the WHOLE image (scale = 1 when the range is < 1e-12).
+ *    Compute it once with kpcn_features_norm_compute on the full image and pass it when
+ *    building features for tiles or training patches so they see identical inputs.
+ *
+ *    All buffers of the list plus the branch's color buffer and their variances are
+ *    required; a missing one fails with KPCN_ERR_MISSING_CHANNEL naming it ("diffuse",
+ *    "visibility.var" ...).
+ *
+ * 2. The kernel filters `noisy_pre` = feature channels 0..2 (the preprocessed noisy color).
+ *    Recombination: c = diffuse_out * (albedo + eps) + exp(specular_out) - 1
+ *    (seed eq. 4.4 has a sign typo: "+1").
+ * ---------------------------------------------------------------------------------------
+ */
+#ifndef KPCN_DENOISE_H
+#define KPCN_DENOISE_H
+
+#include "kpcn/common.h"
+#include "kpcn/image.h"
+#include "kpcn/nn.h" /* kpcn_branch, kpcn_model */
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Version of the feature definition above; models record it in arch.preprocess and a
+ * model whose preprocess string or input list differs is rejected by the denoiser. */
+#define KPCN_FEATURES_VERSION 1
+#define KPCN_FEATURES_PREPROCESS "kpcn-pre-1"
+/* Number of input channels per branch. */
+#define KPCN_FEATURES_COUNT 36
+/* Default demodulation epsilon (Bako 2017 code uses 0.00316); models carry their own. */
+#define KPCN_FEATURES_DEFAULT_EPS 0.00316f
+
+/* kpcn_branch (KPCN_BRANCH_DIFFUSE / KPCN_BRANCH_SPECULAR) comes from kpcn/nn.h. */
+
+/* "diffuse" / "specular" (NULL for other values). */
+const char *kpcn_branch_name(int branch);
+
+/* Number of feature channels of `branch` (KPCN_FEATURES_COUNT), or -1 for a bad branch. */
+int kpcn_features_count(int branch);
+/* Fills names[0..min(count,max)-1] with the ordered channel names (static strings) and
+ * returns the count (or -1 for a bad branch). names may be NULL to query the count. */
+int kpcn_features_channel_names(int branch, const char **names, int max);
+
+/* Writes this feature list and KPCN_FEATURES_PREPROCESS into an architecture (use on a
+ * preset before kpcn_model_create, so the model file records what it was trained on). */
+kpcn_status kpcn_features_set_arch(kpcn_arch *arch);
+/* Checks that a model's architecture expects exactly these features (names, count,
+ * preprocess string, eps > 0); the error names the first mismatch. */
+kpcn_status kpcn_features_check_arch(const kpcn_arch *arch);
+
+/* Per-image normalisation shared by every tile/patch of one image. */
+typedef struct kpcn_features_norm {
+  float depth_offset; /* subtracted from Z */
+  float depth_scale;  /* multiplies (Z - offset); Z.var is multiplied by scale^2 */
+} kpcn_features_norm;
+
+/* Computes the normalisation of the full image `aov` (needs depth; NaN/Inf depths are
+ * ignored). */
+kpcn_status kpcn_features_norm_compute(const kpcn_aov_set *aov, kpcn_features_norm *norm);
+
+/* Builds the features of `branch` for the whole of `aov` (which may itself be a training
+ * patch: pass the full image's norm). eps: demodulation epsilon (> 0). norm: NULL =
+ * computed from `aov` itself.
+ *   out_planar: [KPCN_FEATURES_COUNT][H][W] floats, caller-owned (may be NULL);
+ *   noisy_pre:  [3][H][W] floats, the preprocessed noisy color the kernel filters
+ *               (a copy of channels 0..2; may be NULL).
+ * nthreads: 0 = all cores. Deterministic regardless of thread count. */
+kpcn_status kpcn_features_build(const kpcn_aov_set *aov, int branch, float eps,
+                                const kpcn_features_norm *norm, float *out_planar, float *noisy_pre,
+                                int nthreads);
+
+/* Same for the region [x0, x0+w) x [y0, y0+h) of `aov` (must lie inside it). Gradients
+ * at the region's edge use the pixels outside it (replicated only at the IMAGE border),
+ * so the result equals the crop of the full-image features. Outputs are w*h planes. */
+kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, float eps,
+                                       const kpcn_features_norm *norm, int x0, int y0, int w, int h,
+                                       float *out_planar, float *noisy_pre, int nthreads);
+
+/* ---- Forward/inverse colour transforms (per element, n = number of floats) ---- */
+
+/* Diffuse demodulation: out[i] = diffuse[i] / (albedo[i] + eps). Used for training
+ * targets: pass the REFERENCE diffuse and the albedo that recombination will use (the
+ * noisy input's albedo), so that recombining the target reproduces the reference. */
+void kpcn_demodulate_diffuse(const float *diffuse, const float *albedo, float eps, size_t n,
+                             float *out);
+/* Specular transform: out[i] = log(1 + max(specular[i], 0)). Training target for the
+ * specular branch (reference specular). */
+void kpcn_log_specular(const float *specular, size_t n, float *out);
+
+/* Inverse transforms. out = diffuse_out * (albedo + eps); out = exp(spec_out) - 1. */
+void kpcn_remodulate_diffuse(const float *diffuse_out, const float *albedo, float eps, size_t n,
+                             float *out);
+void kpcn_exp_specular(const float *spec_out, size_t n, float *out);
+
+/* Recombination c = diffuse_out * (albedo + eps) + exp(spec_out) - 1 (n floats; typically
+ * 3 planes of H*W). Any of diffuse_out/spec_out may be NULL (that term is omitted). */
+void kpcn_recombine(const float *diffuse_out, const float *spec_out, const float *albedo, float eps,
+                    size_t n, float *out);
+/* Backward of kpcn_recombine: given dL/dc (grad_out), writes
+ *   grad_diffuse[i] = grad_out[i] * (albedo[i] + eps)
+ *   grad_spec[i]    = grad_out[i] * exp(spec_out[i])
+ * (either output may be NULL). */
+void kpcn_recombine_backward(const float *grad_out, const float *spec_out, const float *albedo,
+                             float eps, size_t n, float *grad_diffuse, float *grad_spec);
+
+/* ======================================================================================
+ * Denoiser (oidn.h style). Lifecycle:
+ *   kpcn_denoiser_options o; kpcn_denoiser_options_defaults(&o); o.model_path = "m.safetensors";
+ *   kpcn_denoiser *d; kpcn_denoiser_create(&d, &o);
+ *   kpcn_denoiser_set_buffer(d, "diffuse", ptr, w, h, pixel_stride, row_stride); ...
+ *   kpcn_denoiser_execute(d, out_rgb, w, h, pixel_stride, row_stride);
+ *   kpcn_denoiser_destroy(d);
+ * ====================================================================================== */
+
+typedef enum kpcn_denoise_method {
+  KPCN_DENOISE_KPCN = 0,      /* the network (needs model_path) */
+  KPCN_DENOISE_BILATERAL = 1, /* feature-guided cross-bilateral filter */
+  KPCN_DENOISE_NLMEANS = 2    /* feature-guided non-local means */
+} kpcn_denoise_method;
+
+/* Parameters of the classical baselines (defaults by kpcn_denoiser_options_defaults;
+ * see docs/denoiser.md for why). */
+typedef struct kpcn_baseline_params {
+  int radius;          /* half window: (2r+1)^2 neighbours; bilateral 7, nlmeans 7 */
+  float sigma_spatial; /* bilateral: pixel distance sigma (pixels) */
+  float k_color;       /* color distance scale in units of the variance (both filters) */
+  float sigma_normal;  /* feature distance sigmas (<= 0 disables that feature) */
+  float sigma_albedo;
+  float sigma_depth; /* on depth normalised per image */
+  int patch_radius;  /* nlmeans: patch half size (3 -> 7x7 patches... see doc) */
+} kpcn_baseline_params;
+
+typedef struct kpcn_denoiser_options {
+  int method;             /* kpcn_denoise_method */
+  const char *model_path; /* safetensors model (method KPCN); copied at create */
+  int bf16;               /* 1: bf16 inference (convolutions) */
+  int tile;               /* KPCN tile size (output pixels per side); 0 = default (512);
+                             a tile >= the image size denoises in one piece. Tiles overlap
+                             by kpcn_denoise_tile_overlap(arch) pixels; the result does not
+                             depend on the tile size. */
+  int nthreads;           /* 0 = all cores */
+  kpcn_baseline_params bilateral;
+  kpcn_baseline_params nlmeans;
+} kpcn_denoiser_options;
+
+void kpcn_denoiser_options_defaults(kpcn_denoiser_options *o);
+
+typedef struct kpcn_denoiser kpcn_denoiser;
+
+/* Creates a denoiser (loads the model for method KPCN). *out owned by caller. */
+kpcn_status kpcn_denoiser_create(kpcn_denoiser **out, const kpcn_denoiser_options *opts);
+/* Creates a KPCN denoiser around an in-memory model (borrowed: it must outlive the
+ * denoiser; used by training/evaluation and tests with randomly initialised models). */
+kpcn_status kpcn_denoiser_create_with_model(kpcn_denoiser **out, kpcn_model *model,
+                                            const kpcn_denoiser_options *opts);
+void kpcn_denoiser_destroy(kpcn_denoiser *d);
+
+/* Sets an input buffer by NAME: "color", "diffuse", "specular", "albedo", "normal",
+ * "depth", "visibility" (kpcn_buffer_channels(b) channels) or a variance "<name>.var"
+ * (1 channel). ptr is borrowed (must stay valid until execute returns). Channel c of pixel
+ * (x, y) is read at ((const char*)ptr + y*row_stride + x*pixel_stride)[c * sizeof(float)];
+ * pixel_stride 0 = packed (nch*4 bytes), row_stride 0 = width*pixel_stride. For planar
+ * data call once per channel with kpcn_denoiser_set_buffer_channel. ptr NULL unsets. */
+kpcn_status kpcn_denoiser_set_buffer(kpcn_denoiser *d, const char *name, const float *ptr,
+                                     int width, int height, size_t pixel_stride, size_t row_stride);
+/* Sets channel `channel` of buffer `name` alone (planar inputs). */
+kpcn_status kpcn_denoiser_set_buffer_channel(kpcn_denoiser *d, const char *name, int channel,
+                                             const float *ptr, int width, int height,
+                                             size_t pixel_stride, size_t row_stride);
+/* Progress callback: fraction in [0,1]; non-zero return cancels (KPCN_ERR_CANCELLED). */
+void kpcn_denoiser_set_progress(kpcn_denoiser *d, kpcn_progress_fn fn, void *user);
+
+/* Denoises into out (RGB, 3 floats per pixel at out + y*row_stride + x*pixel_stride;
+ * strides 0 = packed). width/height must match the inputs. Fails naming any missing
+ * input buffer. */
+kpcn_status kpcn_denoiser_execute(kpcn_denoiser *d, float *out, int width, int height,
+                                  size_t pixel_stride, size_t row_stride);
+
+/* Denoises a planar AOV set directly (no strided input buffers): out_planar is [3][H][W]. */
+kpcn_status kpcn_denoiser_execute_aov(kpcn_denoiser *d, const kpcn_aov_set *aov, float *out_planar);
+
+/* Timing of the last execute (seconds), for benchmarks. */
+typedef struct kpcn_denoise_stats {
+  double total_s;    /* whole execute, including input assembly */
+  double features_s; /* feature building */
+  double net_s;      /* network forward (kpcn_net_forward) */
+  double conv_s;     /* part of net_s inside oneDNN convolution primitives */
+  double kpa_s;      /* softmax + kernel apply */
+  double other_s;    /* recombination, copies, net creation */
+  double conv_flops; /* convolution FLOPs executed (both branches, overlap included) */
+  int tiles;         /* tiles processed (per branch) */
+} kpcn_denoise_stats;
+void kpcn_denoiser_get_stats(const kpcn_denoiser *d, kpcn_denoise_stats *s);
+
+/* Overlap (pixels per side) a tile needs so tiled == untiled: max(conv radius, K/2) —
+ * logits of an output pixel depend on inputs within the conv radius, the kernel reads
+ * the noisy image within K/2, and features are built from the full image. */
+int kpcn_denoise_tile_overlap(const kpcn_arch *arch);
+
+/* Convenience: denoises an AOV set into a new 3-channel image (R, G, B). */
+kpcn_status kpcn_denoise_aov(const kpcn_aov_set *aov, const kpcn_denoiser_options *opts,
+                             kpcn_image **out_rgb);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,210 @@
+/* kpcn/nn.h — the neural-network layer library of kpcn (DESIGN.md §5, seed ch. 4).
+ *
+ * What lives here
+ *  - kpcn_arch   : the KPCN architecture as plain data (layers, channels, conv sizes,
+ *                  dilations, kernel-prediction window K, input channel names, eps,
+ *                  preprocessing version). Presets "paper" and "cpu".
+ *  - kpcn_model  : the weights of the two branches (diffuse, specular) + the arch;
+ *                  Xavier init from a seed; safetensors save/load with full validation.
+ *  - kpcn_net    : one branch bound to a batch size N and spatial size H x W, executed on
+ *                  oneDNN (fp32 or bf16 inference; fp32 training with backward pass).
+ *  - kpcn_kpa_*  : the kernel-prediction layer (softmax over K² logits + weighted sum of
+ *                  the K x K noisy neighbourhood), forward and backward, plain C + OpenMP.
+ *
+ * Network (one branch), for layer l = 0 .. n_hidden (n_layers = n_hidden + 1 convs):
+ *   in_ch(0) = n_inputs, in_ch(l>0) = channels,
+ *   out_ch(l < n_hidden) = channels (ReLU), out_ch(n_hidden) = K*K (linear logits).
+ *   Conv l has size conv_size[l] (odd) and dilation dilation[l]; padding is "same"
+ *   (zero padding of dilation*(size-1)/2), stride 1, so logits are N x K² x H x W.
+ *
+ * Tensor layouts at the API boundary: planar NCHW fp32, i.e. element (n,c,y,x) at
+ *   ((n*C + c)*H + y)*W + x. Weights OIHW fp32 (out, in, ky, kx), bias [out].
+ * Kernel-prediction logits index t = dy*K + dx, (dy,dx) in [0,K)², offset (dy-K/2, dx-K/2).
+ *
+ * Ownership: create/destroy pairs; a kpcn_net references (does not copy) its model's
+ * weights and re-reads them at every forward, so an optimizer may update the model's
+ * parameter arrays in place between iterations. Destroy nets before their model.
+ * Thread counts are explicit (0 = all cores). Results are deterministic for a given
+ * thread count (oneDNN 2.6 has no cross-thread-count determinism switch; the kpa layer
+ * and init are deterministic regardless of threads).
+ */
+#ifndef KPCN_NN_H
+#define KPCN_NN_H
+
+#include "kpcn/common.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define KPCN_NN_MAX_LAYERS 32  /* conv layers per branch, including the output layer */
+#define KPCN_NN_MAX_INPUTS 128 /* input channels per branch */
+#define KPCN_NN_NAME_LEN 32    /* bytes per name, including the terminating NUL */
+#define KPCN_NN_MAX_KERNEL 41  /* largest kernel-prediction window K */
+
+/* ------------------------------------------------------------------ architecture */
+
+typedef struct kpcn_arch {
+  char name[KPCN_NN_NAME_LEN];       /* preset / free-form name, e.g. "paper" */
+  int n_hidden;                      /* hidden conv layers (ReLU); n_layers = n_hidden + 1 */
+  int channels;                      /* C: channels of every hidden layer */
+  int conv_size[KPCN_NN_MAX_LAYERS]; /* k per conv layer (odd, 1..11), [0..n_hidden] used */
+  int dilation[KPCN_NN_MAX_LAYERS];  /* dilation per conv layer (>= 1) */
+  int kernel_size;                   /* K: kernel-prediction window (odd, 3..KPCN_NN_MAX_KERNEL) */
+  int n_inputs;                      /* input channels per branch (same list for both) */
+  char inputs[KPCN_NN_MAX_INPUTS][KPCN_NN_NAME_LEN]; /* input channel names, in order */
+  float eps;                         /* albedo epsilon of the diffuse demodulation */
+  char preprocess[KPCN_NN_NAME_LEN]; /* preprocessing version string (denoise module) */
+} kpcn_arch;
+
+/* Zeroes *a and sets a valid small default (the "cpu" shape, no inputs named). */
+void kpcn_arch_defaults(kpcn_arch *a);
+
+/* Fills *a with a preset: "paper" = 9 hidden x 100 ch x 5x5, K = 21 (seed ch. 4);
+ * "cpu" = 6 hidden x 48 ch x 3x3, dilations 1,2,4,8,4,2 then a 3x3 linear layer, K = 11
+ * (see docs/nn.md for the FLOP reasoning); "tiny" = 2 hidden x 8 ch x 3x3, K = 5 (tests).
+ * Input names are NOT set by presets (n_inputs = 0): the feature builder of the denoise
+ * module supplies them with kpcn_arch_set_inputs. eps = 0.00316, preprocess = "kpcn-pre-1". */
+kpcn_status kpcn_arch_preset(const char *name, kpcn_arch *a);
+
+/* Sets the input channel list (n <= KPCN_NN_MAX_INPUTS, names < KPCN_NN_NAME_LEN bytes). */
+kpcn_status kpcn_arch_set_inputs(kpcn_arch *a, int n, const char *const *names);
+
+/* Checks every field; the error names the offending field ("arch.conv_size[3] = 4: ..."). */
+kpcn_status kpcn_arch_validate(const kpcn_arch *a);
+
+static inline int kpcn_arch_n_layers(const kpcn_arch *a) { return a->n_hidden + 1; }
+/* Input / output channel count of conv layer l. */
+int kpcn_arch_layer_in(const kpcn_arch *a, int l);
+int kpcn_arch_layer_out(const kpcn_arch *a, int l);
+/* Receptive-field radius of the conv stack in pixels: sum_l dilation*(size-1)/2. A pixel's
+ * logits depend on inputs within this radius; the kernel-prediction output additionally
+ * reads the noisy image within K/2. Tiles need overlap >= conv radius + K/2. */
+int kpcn_arch_conv_radius(const kpcn_arch *a);
+/* Convolution FLOPs (2 per multiply-add) per output pixel of ONE branch, forward only. */
+double kpcn_arch_flops_per_pixel(const kpcn_arch *a);
+/* Parameter count of one branch. */
+size_t kpcn_arch_param_count(const kpcn_arch *a);
+
+/* Architecture <-> JSON text (the form stored in the model file's __metadata__).
+ * kpcn_arch_to_json returns a malloc'ed string (caller frees) or NULL on error. */
+char *kpcn_arch_to_json(const kpcn_arch *a);
+kpcn_status kpcn_arch_from_json(const char *json, kpcn_arch *a);
+
+/* ------------------------------------------------------------------ model */
+
+typedef enum kpcn_branch { KPCN_BRANCH_DIFFUSE = 0, KPCN_BRANCH_SPECULAR = 1 } kpcn_branch;
+#define KPCN_N_BRANCHES 2
+
+typedef struct kpcn_model kpcn_model;
+
+/* A view of one conv layer's parameters (pointers into the model; valid until destroy). */
+typedef struct kpcn_layer_view {
+  float *weight; /* OIHW: [out][in][size][size] */
+  float *bias;   /* [out] */
+  int out_ch, in_ch, size, dilation;
+  int relu; /* 1 for hidden layers, 0 for the output layer */
+} kpcn_layer_view;
+
+/* New model with Xavier/Glorot-uniform weights (limit sqrt(6/(fan_in+fan_out)), fan =
+ * ch*size²) and zero biases, deterministic in `seed`. arch is copied. */
+kpcn_status kpcn_model_create(const kpcn_arch *arch, uint64_t seed, kpcn_model **out);
+/* Deep copy. */
+kpcn_status kpcn_model_clone(const kpcn_model *m, kpcn_model **out);
+void kpcn_model_destroy(kpcn_model *m);
+
+const kpcn_arch *kpcn_model_arch(const kpcn_model *m);
+kpcn_status kpcn_model_layer(kpcn_model *m, kpcn_branch b, int layer, kpcn_layer_view *out);
+
+/* Safetensors I/O. Tensor names: "<branch>.conv<l>.weight" / ".bias", branch in
+ * {diffuse, specular}, dtype F32, shapes [out,in,k,k] / [out]. __metadata__ (all string
+ * values): "kpcn.format" = "kpcn-model-1", "kpcn.architecture" (kpcn_arch_to_json),
+ * "kpcn.inputs" (JSON array), "kpcn.eps", "kpcn.preprocess", plus user entries.
+ * Save is atomic (temp file + rename). Load validates header length vs file size, JSON,
+ * dtypes, offsets (in range, non-overlapping, covering the data), shapes vs architecture,
+ * presence of every tensor, finiteness; errors are KPCN_ERR_FORMAT naming the field or
+ * tensor, KPCN_ERR_IO for open/read failures. */
+kpcn_status kpcn_model_save(const kpcn_model *m, const char *path);
+kpcn_status kpcn_model_load(const char *path, kpcn_model **out);
+
+/* Free-form user metadata stored in __metadata__ (e.g. training iteration, dataset).
+ * Keys must not start with "kpcn." (reserved). get returns NULL when absent. */
+kpcn_status kpcn_model_set_meta(kpcn_model *m, const char *key, const char *value);
+const char *kpcn_model_get_meta(const kpcn_model *m, const char *key);
+int kpcn_model_meta_count(const kpcn_model *m);
+const char *kpcn_model_meta_key(const kpcn_model *m, int i);
+
+/* ------------------------------------------------------------------ net (oneDNN) */
+
+typedef enum kpcn_precision { KPCN_PREC_F32 = 0, KPCN_PREC_BF16 = 1 } kpcn_precision;
+
+typedef struct kpcn_net_options {
+  int batch, height, width; /* N, H, W the net is bound to */
+  kpcn_precision precision; /* BF16: weights+activations bf16, fp32 accumulate, fp32 I/O */
+  int training;             /* 1: keep activations, enable kpcn_net_backward (F32 only) */
+  int input_grad;           /* 1: backward also computes dL/dinput */
+  int nthreads;             /* 0 = all cores */
+} kpcn_net_options;
+
+void kpcn_net_options_defaults(kpcn_net_options *o); /* N=1, 64x64, F32, inference, 0 */
+
+typedef struct kpcn_net kpcn_net;
+
+/* Binds branch b of model m. m must outlive the net. */
+kpcn_status kpcn_net_create(kpcn_model *m, kpcn_branch b, const kpcn_net_options *o,
+                            kpcn_net **out);
+void kpcn_net_destroy(kpcn_net *net);
+
+/* Forward: input [N][n_inputs][H][W] fp32 -> logits [N][K²][H][W] fp32. Re-reads the
+ * model's weights each call. */
+kpcn_status kpcn_net_forward(kpcn_net *net, const float *input, float *logits);
+
+/* Backward of the last forward (training nets only): dlogits [N][K²][H][W] -> parameter
+ * gradients (overwritten, not accumulated; see kpcn_net_params) and, when the net was
+ * created with input_grad, dinput [N][n_inputs][H][W] (may be NULL otherwise). */
+kpcn_status kpcn_net_backward(kpcn_net *net, const float *dlogits, float *dinput);
+
+/* Parameter list for an optimizer: value points into the model, grad into the net. Order:
+ * conv0.weight, conv0.bias, conv1.weight, ... ; 2*n_layers entries. */
+typedef struct kpcn_param {
+  char name[48]; /* "diffuse.conv3.weight" — the safetensors name */
+  float *value;
+  float *grad;
+  size_t count;
+} kpcn_param;
+int kpcn_net_param_count(const kpcn_net *net);
+kpcn_status kpcn_net_params(kpcn_net *net, kpcn_param *out, int max);
+
+/* Timing counters since creation (seconds): total forward/backward time and the part
+ * spent in convolution primitives, for benchmarks. */
+typedef struct kpcn_net_stats {
+  double fwd_s, fwd_conv_s, bwd_s, bwd_conv_s;
+  long n_fwd, n_bwd;
+  size_t bytes; /* memory held by the net (activations, scratchpad, weight copies) */
+} kpcn_net_stats;
+void kpcn_net_get_stats(const kpcn_net *net, kpcn_net_stats *s);
+/* Name of the oneDNN implementation chosen for conv layer l forward ("brgconv:..."). */
+const char *kpcn_net_impl_name(const kpcn_net *net, int layer);
+
+/* ------------------------------------------------------------------ kernel prediction */
+
+/* Forward of softmax + kernel apply over N images:
+ *   w[t](p) = softmax_t(logits[t](p)),  out[c](p) = sum_t w[t](p) * noisy[c](p + off(t)).
+ * logits [N][K²][H][W], noisy and out [N][nc][H][W] (same weights for every channel c).
+ * Border: noisy is clamped to the image (replicate edge), so weights always sum to 1 over
+ * real pixels. weights (optional, [N][K²][H][W]) receives the softmax for backward; it may
+ * alias logits (in-place). */
+kpcn_status kpcn_kpa_forward(int K, int n, int nc, int h, int w, const float *logits,
+                             const float *noisy, float *out, float *weights, int nthreads);
+
+/* Backward: given the softmax weights from the forward, the noisy input and dL/dout,
+ * writes dL/dlogits [N][K²][H][W] (may alias weights) and, if dnoisy is non-NULL,
+ * dL/dnoisy [N][nc][H][W] (overwritten; clamped reads accumulate onto edge pixels). */
+kpcn_status kpcn_kpa_backward(int K, int n, int nc, int h, int w, const float *weights,
+                              const float *noisy, const float *dout, float *dlogits,
+                              float *dnoisy, int nthreads);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,71 @@
+/* kpcn/render.h — the Embree path tracer: scene -> AOV set (DESIGN.md §4).
+ *
+ *   kpcn_scene *s; kpcn_scene_load("scene.json", &s);
+ *   kpcn_render_settings rs = kpcn_render_settings_defaults(); rs.spp = 16; rs.seed = 1;
+ *   kpcn_aov_set *aov; kpcn_render(s, &rs, &aov);  ... kpcn_exr_write_aov(path, aov, NULL);
+ *   kpcn_aov_destroy(aov); kpcn_scene_destroy(s);
+ *
+ * Output: buffers color, diffuse, specular, albedo, normal (camera space), depth, visibility
+ * with their variance-of-the-mean planes (Welford per pixel, averaged over the channels);
+ * color_only renders only color (+ color.var). Semantics in docs/renderer.md.
+ *
+ * Determinism: every pixel draws its own sample sequence (Owen-scrambled Sobol keyed on seed
+ * and pixel) and accumulates its samples in order, so the result is bit-identical for a seed
+ * whatever nthreads is.
+ *
+ * Ownership: *out is allocated by kpcn_render; free with kpcn_aov_destroy. Thread-safe: a
+ * scene may be rendered concurrently by several calls.
+ */
+#ifndef KPCN_RENDER_H
+#define KPCN_RENDER_H
+
+#include "kpcn/common.h"
+#include "kpcn/image.h"
+#include "kpcn/scene.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* How direct light is estimated. SCENE follows integrator.enable_light_sampling (MIS when on,
+ * BSDF sampling only when off); the others exist for tests and comparisons. */
+typedef enum kpcn_light_strategy {
+  KPCN_LIGHTS_SCENE = 0,
+  KPCN_LIGHTS_MIS,       /* next-event estimation + BSDF sampling, power heuristic */
+  KPCN_LIGHTS_BSDF_ONLY, /* emitters found only by BSDF sampling */
+  KPCN_LIGHTS_NEE_ONLY   /* non-delta bounces see emitters only through shadow rays */
+} kpcn_light_strategy;
+
+typedef struct kpcn_render_settings {
+  int spp;             /* samples per pixel; 0 = the scene's renderer.spp */
+  int64_t seed;        /* sampler seed */
+  int nthreads;        /* 0 = all cores */
+  int width, height;   /* resolution override (0 = scene's); Tungsten keeps the horizontal fov */
+  int crop_x, crop_y;  /* crop window in the (possibly overridden) resolution; */
+  int crop_w, crop_h;  /*   crop_w/crop_h 0 = whole image. Output is crop-sized. */
+  int color_only;      /* 1: only color + color.var (fast references) */
+  int max_bounces;     /* -1 = scene's integrator.max_bounces */
+  kpcn_light_strategy lights;
+  kpcn_progress_fn progress; /* called from the calling thread; non-zero return cancels */
+  void *progress_user;
+} kpcn_render_settings;
+
+kpcn_render_settings kpcn_render_settings_defaults(void);
+
+/* Figures of the last render (optional). */
+typedef struct kpcn_render_stats {
+  double seconds;        /* wall time of the sampling loop */
+  uint64_t samples;      /* camera samples traced */
+  uint64_t rays;         /* Embree queries (intersect + occluded) */
+} kpcn_render_stats;
+
+kpcn_status kpcn_render(const kpcn_scene *scene, const kpcn_render_settings *settings,
+                        kpcn_aov_set **out);
+/* Same, also filling *stats (may be NULL). */
+kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *settings,
+                           kpcn_aov_set **out, kpcn_render_stats *stats);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

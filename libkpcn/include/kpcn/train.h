@@ -1,0 +1,264 @@
+/* kpcn/train.h — training the KPCN in C (seed chapters 4.4, 5, 6; DESIGN.md §5, §9).
+ *
+ * Pieces, usable on their own:
+ *   - losses with gradients (L1, L2, relMSE, relL1, SSIM) on planar fp32 images;
+ *   - Adam with exponential learning-rate decay and optional global-norm clipping;
+ *   - Xavier init and the trainer's checkpointable RNG;
+ *   - training curves: CSV log and a PNG plot;
+ *   - the trainer (kpcn_trainer_*): patch store -> augmentation -> features -> two
+ *     branches -> kernel prediction -> loss -> Adam, two stages, validation on full
+ *     images, atomic checkpoints with bit-exact resume.
+ * Conventions as in common.h: status returns, kpcn_last_error(), no printing, explicit
+ * nthreads (0 = all cores), results independent of the thread count.
+ */
+#ifndef KPCN_TRAIN_H
+#define KPCN_TRAIN_H
+
+#include "kpcn/augment.h"
+#include "kpcn/common.h"
+#include "kpcn/nn.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ====================================================================== losses ====
+ * Images are planar fp32: n images x c planes x h rows x w columns, image-major.
+ * Every loss is a MEAN (over all elements; for SSIM over all valid window positions of
+ * all planes), so its scale does not depend on batch or patch size.
+ *   l1     |x - y|
+ *   l2     (x - y)^2                    (plain mean; the seed's 1/2 factor is dropped so
+ *                                        the value equals the MSE metric)
+ *   relmse (x - y)^2 / (y^2 + eps)      eps = rel_eps (0.01, as the relMSE metric)
+ *   rell1  |x - y| / (|y| + eps)
+ *   ssim   1 - SSIM(x, y)               Wang 2004 per plane, Gaussian window
+ *                                        (ssim_window x ssim_window, sigma ssim_sigma),
+ *                                        C1 = (k1 L)^2, C2 = (k2 L)^2, L = ssim_range;
+ *                                        only "valid" window positions (never padded)
+ * The relative losses divide by a function of the REFERENCE y only, so the denominator is
+ * a constant w.r.t. the prediction x (Rousselle 2011, Bako 2017 normalise the same way);
+ * the gradient does not differentiate it. L1's subgradient at x == y is 0.
+ */
+typedef enum kpcn_loss_kind {
+  KPCN_LOSS_L1 = 0,
+  KPCN_LOSS_L2 = 1,
+  KPCN_LOSS_RELMSE = 2,
+  KPCN_LOSS_RELL1 = 3,
+  KPCN_LOSS_SSIM = 4
+} kpcn_loss_kind;
+
+typedef struct kpcn_loss_settings {
+  double rel_eps;  /* 0.01 */
+  int ssim_window; /* odd; 11 (Wang 2004). 64x64 patches leave 54x54 valid positions. */
+  float ssim_sigma; /* 1.5 */
+  float ssim_k1, ssim_k2; /* 0.01, 0.03 */
+  float ssim_range; /* dynamic range L, 1.0 */
+} kpcn_loss_settings;
+
+void kpcn_loss_settings_defaults(kpcn_loss_settings *s);
+/* "l1", "l2", "relmse", "rell1", "ssim". */
+const char *kpcn_loss_name(kpcn_loss_kind k);
+/* Accepts the names above and "mse" for l2; error names the string. */
+kpcn_status kpcn_loss_parse(const char *name, kpcn_loss_kind *out);
+
+/* value = loss(pred, ref); grad (may be NULL) receives d value / d pred (n*c*h*w floats).
+ * settings NULL = defaults. The value is summed in double in a fixed order. */
+kpcn_status kpcn_loss_compute(kpcn_loss_kind kind, const kpcn_loss_settings *settings,
+                              const float *pred, const float *ref, int n, int c, int w, int h,
+                              float *grad, double *value, int nthreads);
+
+/* ======================================================================= RNG ====
+ * splitmix64: the whole state is one word, stored in checkpoints. */
+typedef struct kpcn_rng {
+  uint64_t state;
+} kpcn_rng;
+void kpcn_rng_seed(kpcn_rng *r, uint64_t seed);
+uint64_t kpcn_rng_next(kpcn_rng *r);
+double kpcn_rng_uniform(kpcn_rng *r);           /* [0, 1) with 53 bits */
+uint32_t kpcn_rng_below(kpcn_rng *r, uint32_t n); /* [0, n) */
+
+/* Xavier/Glorot uniform init: U(-a, a), a = sqrt(6/(fan_in+fan_out)); for a k x k conv
+ * fan_in = Cin k^2, fan_out = Cout k^2. Draws `count` values in order from rng. */
+kpcn_status kpcn_xavier_uniform(float *w, size_t count, int fan_in, int fan_out, kpcn_rng *rng);
+
+/* ====================================================================== Adam ====
+ * Kingma & Ba Algorithm 1: m = b1 m + (1-b1) g; v = b2 v + (1-b2) g^2;
+ * p -= lr_t * m_hat / (sqrt(v_hat) + eps), m_hat = m/(1-b1^t), v_hat = v/(1-b2^t).
+ * lr_t = lr * lr_decay^(t / decay_every)   (t = steps already taken; with staircase the
+ * exponent is floored — TensorFlow's exponential_decay, which the seed used).
+ * clip_norm > 0: gradients are scaled by min(1, clip_norm / ||g||_2) over ALL blocks. */
+typedef struct kpcn_adam_settings {
+  double lr;          /* 1e-3 (seed) */
+  double beta1;       /* 0.9 */
+  double beta2;       /* 0.999 */
+  double eps;         /* 1e-8 */
+  double lr_decay;    /* 0.96 (seed §6) */
+  int64_t decay_every; /* 100000 (seed §6.4); <= 0 disables decay */
+  int staircase;      /* 0 */
+  double clip_norm;   /* 0 = off */
+} kpcn_adam_settings;
+
+void kpcn_adam_settings_defaults(kpcn_adam_settings *s);
+/* Learning rate used for the step after `iter` completed steps. */
+double kpcn_adam_lr_at(const kpcn_adam_settings *s, int64_t iter);
+
+/* One contiguous parameter tensor and its gradient (same length). */
+typedef struct kpcn_param_block {
+  float *param;
+  const float *grad;
+  size_t count;
+} kpcn_param_block;
+
+/* Opaque optimizer for `count` parameters in total (the blocks passed to every step
+ * must be the same sequence, summing to count). */
+typedef struct kpcn_adam kpcn_adam;
+kpcn_status kpcn_adam_create(kpcn_adam **out, const kpcn_adam_settings *s, size_t count);
+void kpcn_adam_destroy(kpcn_adam *a);
+/* One update of all blocks; grad_norm (may be NULL) receives the pre-clip L2 norm.
+ * Fails with KPCN_ERR_NONFINITE when the gradient norm is not finite (nothing updated). */
+kpcn_status kpcn_adam_step(kpcn_adam *a, const kpcn_param_block *blocks, int nblocks,
+                           int nthreads, double *grad_norm);
+/* Global L2 norm of the gradients (fixed-order reduction). */
+double kpcn_grad_norm(const kpcn_param_block *blocks, int nblocks, int nthreads);
+/* State access for checkpoints: moments are `count` floats each, in block order. */
+size_t kpcn_adam_count(const kpcn_adam *a);
+int64_t kpcn_adam_steps(const kpcn_adam *a);
+void kpcn_adam_set_steps(kpcn_adam *a, int64_t t);
+float *kpcn_adam_moment1(kpcn_adam *a);
+float *kpcn_adam_moment2(kpcn_adam *a);
+const kpcn_adam_settings *kpcn_adam_get_settings(const kpcn_adam *a);
+
+/* ============================================================ curves: PNG plot ====
+ * Draws up to KPCN_PLOT_MAX_SERIES poly-lines on shared axes (x linear, y linear or
+ * log10) with tick labels in a built-in 5x7 bitmap font, a title and a legend, and
+ * writes an RGB PNG atomically (stb_image_write). NaN points are skipped. */
+#define KPCN_PLOT_MAX_SERIES 8
+typedef struct kpcn_plot_series {
+  const char *label;
+  const double *x, *y;
+  int n;
+} kpcn_plot_series;
+
+typedef struct kpcn_plot_settings {
+  int width, height; /* 800 x 500 */
+  int log_y;         /* 1: y axis in log10 (non-positive values skipped) */
+  const char *title, *xlabel, *ylabel;
+} kpcn_plot_settings;
+
+void kpcn_plot_settings_defaults(kpcn_plot_settings *s);
+kpcn_status kpcn_plot_png(const char *path, const kpcn_plot_settings *s,
+                          const kpcn_plot_series *series, int nseries);
+
+/* =================================================================== trainer ====
+ * Data: a patch store (kpcn/dataset.h) holding, per patch, the raw noisy AOV channels and
+ * the reference channels "ref.R.. ref.diffuse.* ref.specular.*" (S x S, S = 65). Only
+ * patches whose source split is "train" are drawn (all of them when no source is marked
+ * "train"). Each sample: a random P x P crop of the S x S patch (the "shift" augmentation,
+ * offsets 0..S-P), then one kpcn_augment_draw (colour swap, mirror, rotation) applied to
+ * noisy and reference channels together, then the denoise module's feature builder with the
+ * depth normalisation of the patch's SOURCE image (from the store's source statistics).
+ *
+ * Per branch b: logits = net_b(features_b); out_b = KPA(logits, noisy_pre_b) with "same"
+ * borders (the kernel clamps at the patch edge, exactly as inference does at image edges).
+ *   stage 1 (iterations < stage1_iters): loss1(out_diffuse, ref_diffuse / (albedo + eps))
+ *            and loss1(out_specular, log(1 + ref_specular)), each branch its own Adam step;
+ *   stage 2: c = recombine(out_diffuse, out_specular, albedo); loss2(c, ref color), one
+ *            step of both branches through the recombination.
+ * loss_margin > 0 excludes that many border pixels of the patch from the loss (the
+ * gradient there is zero); 0 (default) uses every pixel, as the seed did.
+ *
+ * Determinism: batches come from a splitmix64 stream and kpcn_augment_draw(seed, counter);
+ * every reduction is fixed-order; for a given seed AND thread count the weights after N
+ * iterations are bitwise reproducible (oneDNN's convolutions are deterministic for a fixed
+ * thread count only). A checkpoint holds weights, both Adam states, the RNG word, the
+ * iteration and elapsed time, so --resume continues bit-exactly.
+ */
+typedef struct kpcn_train_progress {
+  int64_t iter, total; /* iterations done, planned */
+  int stage;           /* 1 or 2 */
+  double loss;         /* mean training loss over the last log interval */
+  double lr;
+  double its_per_s;    /* over the last log interval */
+  double elapsed_s, eta_s;
+  int has_val;         /* 1 when validation ran at this iteration: */
+  double val_relmse, val_ssim, val_psnr; /* means over the validation images */
+} kpcn_train_progress;
+
+/* Called after every iteration; return non-zero to stop (the trainer then writes a
+ * checkpoint and returns KPCN_OK with stopped = 1). */
+typedef int (*kpcn_train_progress_fn)(void *user, const kpcn_train_progress *p);
+
+typedef struct kpcn_train_settings {
+  const char *store_path;   /* patch store (.kps), required */
+  kpcn_arch arch;           /* architecture (inputs are set by the trainer); from a preset */
+  const char *init_model;   /* optional model file to start from (fine-tuning) */
+  kpcn_loss_kind loss1;     /* stage-1 loss, default l1 (seed §4.4) */
+  kpcn_loss_kind loss2;     /* stage-2 loss, default l1 (seed fine-tunes with ssim) */
+  kpcn_loss_settings loss;  /* defaults */
+  int loss_margin;          /* 0 */
+  kpcn_adam_settings adam;  /* defaults; decay_every default 100000 */
+  kpcn_augment_draw_settings augment; /* defaults of augment.h (colour swap, mirror, rot90) */
+  int crop_jitter;          /* 1: random crop offset (shift); 0: centred crop */
+  int batch;                /* 16 */
+  int patch;                /* P, 64 (<= store patch size) */
+  int64_t iters;            /* total iterations, 1000 */
+  int64_t stage1_iters;     /* stage-1 iterations, default 0.6 * iters (seed 600k/1M) */
+  int nthreads;             /* 0 = all cores */
+  uint64_t seed;            /* 1 */
+  int64_t log_every;        /* CSV row every N iterations, 10 */
+  int64_t val_every;        /* 0 = only at the end */
+  int64_t ckpt_every;       /* 0 = only at the end / on stop */
+  double time_limit_s;      /* 0 = none: stop cleanly, checkpoint, stopped = 1 */
+  const char *out_path;     /* final model, required (written atomically) */
+  const char *ckpt_path;    /* NULL = "<out_path>.ckpt" */
+  const char *csv_path;     /* NULL = "<out_path>.csv"; "" = none */
+  const char *plot_path;    /* NULL = "<out_path>.png"; "" = none */
+  int resume;               /* 1: continue from ckpt_path (must exist) */
+  int nval;                 /* validation image pairs (full images) */
+  const char *const *val_noisy; /* noisy AOV EXRs */
+  const char *const *val_ref;   /* reference EXRs (color R G B used) */
+  kpcn_log_fn log;
+  void *log_user;
+  kpcn_train_progress_fn progress;
+  void *progress_user;
+} kpcn_train_settings;
+
+/* Defaults as documented above; arch = the "cpu" preset. */
+void kpcn_train_settings_defaults(kpcn_train_settings *s);
+
+typedef struct kpcn_trainer kpcn_trainer;
+
+/* Opens and validates the store (channels needed by the feature builder and the targets,
+ * patch size >= P; a missing channel fails with KPCN_ERR_FORMAT naming it), loads the
+ * validation images, creates the model (Xavier, seed) or loads init_model (its input list
+ * must equal the feature list), or restores the checkpoint when resume is set. */
+kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s);
+void kpcn_trainer_destroy(kpcn_trainer *t);
+
+/* One iteration (stage chosen by the iteration count); loss receives the iteration's loss
+ * (stage 1: sum of both branches' losses), may be NULL. */
+kpcn_status kpcn_trainer_step(kpcn_trainer *t, double *loss);
+/* Full-image validation of the current model over the validation pairs. */
+kpcn_status kpcn_trainer_validate(kpcn_trainer *t, double *relmse, double *ssim, double *psnr);
+/* Atomic checkpoint / restore (the arch, batch, patch and seed must match the trainer). */
+kpcn_status kpcn_trainer_save_checkpoint(kpcn_trainer *t, const char *path);
+kpcn_status kpcn_trainer_load_checkpoint(kpcn_trainer *t, const char *path);
+/* Runs to s->iters (or the time limit / a stop request): logs, validates, checkpoints,
+ * writes the model, the CSV and the plot. stopped (may be NULL) = 1 if it stopped early. */
+kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped);
+
+int64_t kpcn_trainer_iteration(const kpcn_trainer *t);
+kpcn_model *kpcn_trainer_model(kpcn_trainer *t);
+/* Conv FLOPs (forward + backward, both branches) of one iteration, for benchmarks:
+ * 3 x forward FLOPs (forward, backward-data, backward-weights; the first layer's
+ * backward-data is skipped, so this slightly over-counts). */
+double kpcn_trainer_flops_per_iter(const kpcn_trainer *t);
+
+/* Writes the training-curve plot from a CSV written by the trainer (any columns named
+ * loss, val_relmse, val_ssim of the header are drawn against iter). */
+kpcn_status kpcn_train_plot_csv(const char *csv_path, const char *png_path, const char *title);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

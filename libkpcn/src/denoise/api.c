@@ -1,0 +1,305 @@
+/* The oidn.h-style denoiser object: options, named strided input buffers, execute. */
+#include "core/internal.h"
+#include "denoise_internal.h"
+
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+typedef struct slot {
+  const float *ptr;
+  int width, height;
+  size_t pixel_stride, row_stride; /* bytes */
+} slot;
+
+struct kpcn_denoiser {
+  kpcn_denoiser_options opt;
+  char *model_path;
+  kpcn_model *model;
+  slot buf[KPCN_BUF_COUNT][3];
+  slot var[KPCN_BUF_COUNT];
+  kpcn_progress prog;
+  kpcn_denoise_stats stats;
+};
+
+void kpcn_denoiser_options_defaults(kpcn_denoiser_options *o) {
+  memset(o, 0, sizeof *o);
+  o->method = KPCN_DENOISE_KPCN;
+  /* Defaults chosen on the Tungsten Cornell 16 spp pair (docs/denoiser.md, tests). */
+  o->bilateral.radius = 7;
+  o->bilateral.sigma_spatial = 4.0f;
+  o->bilateral.k_color = 2.0f;
+  o->bilateral.sigma_normal = 0.1f;
+  o->bilateral.sigma_albedo = 0.05f;
+  o->bilateral.sigma_depth = 0.02f;
+  o->bilateral.patch_radius = 0;
+  o->nlmeans.radius = 7;
+  o->nlmeans.sigma_spatial = 0.0f;
+  o->nlmeans.k_color = 0.7f;
+  o->nlmeans.sigma_normal = 0.1f;
+  o->nlmeans.sigma_albedo = 0.05f;
+  o->nlmeans.sigma_depth = 0.02f;
+  o->nlmeans.patch_radius = 3;
+}
+
+static double now_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+kpcn_status kpcn_denoiser_create(kpcn_denoiser **out, const kpcn_denoiser_options *opts) {
+  if (!out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: out is NULL");
+  *out = NULL;
+  kpcn_denoiser_options o;
+  if (opts)
+    o = *opts;
+  else
+    kpcn_denoiser_options_defaults(&o);
+  if (o.method < KPCN_DENOISE_KPCN || o.method > KPCN_DENOISE_NLMEANS)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: unknown method %d", o.method);
+  if (o.tile < 0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: tile %d must be >= 0", o.tile);
+  if (o.method == KPCN_DENOISE_KPCN && (!o.model_path || !*o.model_path))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: method kpcn needs model_path");
+  kpcn_denoiser *d = kpcn_calloc(1, sizeof *d, "denoiser");
+  if (!d) return KPCN_ERR_OUT_OF_MEMORY;
+  d->opt = o;
+  if (o.method == KPCN_DENOISE_KPCN) {
+    d->model_path = strdup(o.model_path);
+    kpcn_status s = d->model_path ? kpcn_model_load(o.model_path, &d->model)
+                                  : kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "denoiser model path");
+    if (s == KPCN_OK) s = kpcn_features_check_arch(kpcn_model_arch(d->model));
+    if (s != KPCN_OK) {
+      kpcn_fail_context("denoiser model '%s'", o.model_path);
+      kpcn_denoiser_destroy(d);
+      return s;
+    }
+    d->opt.model_path = d->model_path;
+  } else {
+    d->opt.model_path = NULL;
+  }
+  *out = d;
+  return KPCN_OK;
+}
+
+kpcn_status kpcn_denoiser_create_with_model(kpcn_denoiser **out, kpcn_model *model,
+                                            const kpcn_denoiser_options *opts) {
+  if (!out || !model)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create_with_model: NULL argument");
+  *out = NULL;
+  KPCN_TRY(kpcn_features_check_arch(kpcn_model_arch(model)));
+  kpcn_denoiser_options o;
+  if (opts)
+    o = *opts;
+  else
+    kpcn_denoiser_options_defaults(&o);
+  if (o.tile < 0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: tile %d must be >= 0", o.tile);
+  kpcn_denoiser *d = kpcn_calloc(1, sizeof *d, "denoiser");
+  if (!d) return KPCN_ERR_OUT_OF_MEMORY;
+  d->opt = o;
+  d->opt.method = KPCN_DENOISE_KPCN;
+  d->opt.model_path = NULL;
+  d->model = model; /* borrowed: model_path is NULL so destroy leaves it alone */
+  *out = d;
+  return KPCN_OK;
+}
+
+void kpcn_denoiser_destroy(kpcn_denoiser *d) {
+  if (!d) return;
+  if (d->model_path) kpcn_model_destroy(d->model);
+  free(d->model_path);
+  free(d);
+}
+
+void kpcn_denoiser_set_progress(kpcn_denoiser *d, kpcn_progress_fn fn, void *user) {
+  if (!d) return;
+  d->prog.fn = fn;
+  d->prog.user = user;
+}
+
+void kpcn_denoiser_get_stats(const kpcn_denoiser *d, kpcn_denoise_stats *s) {
+  if (d && s) *s = d->stats;
+}
+
+/* "diffuse" -> (buffer, 0); "diffuse.var" -> (buffer, 1). */
+static kpcn_status parse_name(const char *name, int *b, int *is_var) {
+  if (!name) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_set_buffer: name is NULL");
+  char tmp[64];
+  size_t n = strlen(name);
+  *is_var = 0;
+  if (n > 4 && n < sizeof tmp && strcmp(name + n - 4, ".var") == 0) {
+    memcpy(tmp, name, n - 4);
+    tmp[n - 4] = 0;
+    *is_var = 1;
+    *b = kpcn_buffer_from_name(tmp);
+  } else {
+    *b = kpcn_buffer_from_name(name);
+  }
+  if (*b < 0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "denoiser_set_buffer: unknown buffer '%s' (color, diffuse, specular, albedo, "
+                     "normal, depth, visibility, or <name>.var)",
+                     name);
+  return KPCN_OK;
+}
+
+static kpcn_status check_geom(const char *name, int width, int height) {
+  return kpcn_check_size(width, height, name);
+}
+
+kpcn_status kpcn_denoiser_set_buffer_channel(kpcn_denoiser *d, const char *name, int channel,
+                                             const float *ptr, int width, int height,
+                                             size_t pixel_stride, size_t row_stride) {
+  if (!d) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_set_buffer: denoiser is NULL");
+  int b = -1, is_var = 0;
+  KPCN_TRY(parse_name(name, &b, &is_var));
+  int nch = is_var ? 1 : kpcn_buffer_channels((kpcn_buffer)b);
+  if (channel < 0 || channel >= nch)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_set_buffer: '%s' has no channel %d", name,
+                     channel);
+  slot *sl = is_var ? &d->var[b] : &d->buf[b][channel];
+  if (!ptr) {
+    memset(sl, 0, sizeof *sl);
+    return KPCN_OK;
+  }
+  KPCN_TRY(check_geom(name, width, height));
+  if (pixel_stride == 0) pixel_stride = sizeof(float);
+  if (row_stride == 0) row_stride = (size_t)width * pixel_stride;
+  sl->ptr = ptr;
+  sl->width = width;
+  sl->height = height;
+  sl->pixel_stride = pixel_stride;
+  sl->row_stride = row_stride;
+  return KPCN_OK;
+}
+
+kpcn_status kpcn_denoiser_set_buffer(kpcn_denoiser *d, const char *name, const float *ptr,
+                                     int width, int height, size_t pixel_stride,
+                                     size_t row_stride) {
+  if (!d) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_set_buffer: denoiser is NULL");
+  int b = -1, is_var = 0;
+  KPCN_TRY(parse_name(name, &b, &is_var));
+  int nch = is_var ? 1 : kpcn_buffer_channels((kpcn_buffer)b);
+  if (pixel_stride == 0) pixel_stride = (size_t)nch * sizeof(float);
+  if (row_stride == 0 && width > 0) row_stride = (size_t)width * pixel_stride;
+  for (int c = 0; c < nch; c++)
+    KPCN_TRY(kpcn_denoiser_set_buffer_channel(d, name, c, ptr ? ptr + c : NULL, width, height,
+                                              pixel_stride, row_stride));
+  return KPCN_OK;
+}
+
+static void copy_in(const slot *sl, float *dst, int W, int H) {
+  for (int y = 0; y < H; y++) {
+    const char *row = (const char *)sl->ptr + (size_t)y * sl->row_stride;
+    for (int x = 0; x < W; x++)
+      dst[(size_t)y * W + x] = *(const float *)(row + x * sl->pixel_stride);
+  }
+}
+
+/* Gathers the set buffers into a planar AOV set; partially set buffers and size
+ * mismatches are named. */
+static kpcn_status assemble(const kpcn_denoiser *d, int W, int H, kpcn_aov_set **out) {
+  KPCN_TRY(kpcn_aov_create(out, W, H));
+  kpcn_aov_set *a = *out;
+  const size_t P = kpcn_aov_plane_size(a);
+  for (int b = 0; b < KPCN_BUF_COUNT; b++) {
+    int nch = kpcn_buffer_channels((kpcn_buffer)b), nset = 0;
+    for (int c = 0; c < nch; c++)
+      nset += d->buf[b][c].ptr != NULL;
+    if (nset == 0) continue;
+    const char *bn = kpcn_buffer_name((kpcn_buffer)b);
+    if (nset != nch)
+      return kpcn_fail(KPCN_ERR_MISSING_CHANNEL, "denoiser input '%s': only %d of %d channels set",
+                       bn, nset, nch);
+    const int hv = d->var[b].ptr != NULL;
+    for (int c = 0; c < nch + hv; c++) {
+      const slot *sl = c < nch ? &d->buf[b][c] : &d->var[b];
+      if (sl->width != W || sl->height != H)
+        return kpcn_fail(KPCN_ERR_SIZE_MISMATCH, "denoiser input '%s%s' is %dx%d, output is %dx%d",
+                         bn, c < nch ? "" : ".var", sl->width, sl->height, W, H);
+    }
+    KPCN_TRY(kpcn_aov_add(a, (kpcn_buffer)b, hv));
+    for (int c = 0; c < nch; c++)
+      copy_in(&d->buf[b][c], a->buf[b] + c * P, W, H);
+    if (hv) copy_in(&d->var[b], a->var[b], W, H);
+  }
+  return KPCN_OK;
+}
+
+/* Runs the configured method on a planar AOV set into planar RGB out. */
+static kpcn_status run_method(kpcn_denoiser *d, const kpcn_aov_set *aov, float *out) {
+  d->prog.cancelled = 0;
+  switch (d->opt.method) {
+  case KPCN_DENOISE_BILATERAL:
+    return kpcn_baseline_bilateral(aov, &d->opt.bilateral, out, d->opt.nthreads, &d->prog);
+  case KPCN_DENOISE_NLMEANS:
+    return kpcn_baseline_nlmeans(aov, &d->opt.nlmeans, out, d->opt.nthreads, &d->prog);
+  default:
+    return kpcn_pipeline_run(d->model, aov, d->opt.tile, d->opt.bf16, d->opt.nthreads, &d->prog,
+                             out, &d->stats);
+  }
+}
+
+kpcn_status kpcn_denoiser_execute(kpcn_denoiser *d, float *out, int width, int height,
+                                  size_t pixel_stride, size_t row_stride) {
+  if (!d || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_execute: NULL argument");
+  KPCN_TRY(kpcn_check_size(width, height, "denoiser output"));
+  double t0 = now_s();
+  memset(&d->stats, 0, sizeof d->stats);
+  if (pixel_stride == 0) pixel_stride = 3 * sizeof(float);
+  if (row_stride == 0) row_stride = (size_t)width * pixel_stride;
+  kpcn_aov_set *aov = NULL;
+  float *rgb = NULL;
+  kpcn_status s = assemble(d, width, height, &aov);
+  if (s == KPCN_OK) {
+    rgb = kpcn_aligned_alloc(sizeof(float) * 3 * kpcn_aov_plane_size(aov), "denoiser output");
+    s = rgb ? run_method(d, aov, rgb) : KPCN_ERR_OUT_OF_MEMORY;
+  }
+  if (s == KPCN_OK) {
+    const size_t P = kpcn_aov_plane_size(aov);
+    for (int y = 0; y < height; y++) {
+      char *row = (char *)out + (size_t)y * row_stride;
+      for (int x = 0; x < width; x++) {
+        float *px = (float *)(row + (size_t)x * pixel_stride);
+        for (int c = 0; c < 3; c++)
+          px[c] = rgb[c * P + (size_t)y * width + x];
+      }
+    }
+  }
+  kpcn_aligned_free(rgb);
+  kpcn_aov_destroy(aov);
+  d->stats.total_s = now_s() - t0;
+  return s;
+}
+
+kpcn_status kpcn_denoiser_execute_aov(kpcn_denoiser *d, const kpcn_aov_set *aov,
+                                      float *out_planar) {
+  if (!d || !aov || !out_planar)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_execute_aov: NULL argument");
+  double t0 = now_s();
+  memset(&d->stats, 0, sizeof d->stats);
+  kpcn_status s = run_method(d, aov, out_planar);
+  d->stats.total_s = now_s() - t0;
+  return s;
+}
+
+kpcn_status kpcn_denoise_aov(const kpcn_aov_set *aov, const kpcn_denoiser_options *opts,
+                             kpcn_image **out_rgb) {
+  if (!aov || !out_rgb) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoise_aov: NULL argument");
+  *out_rgb = NULL;
+  kpcn_denoiser *d = NULL;
+  KPCN_TRY(kpcn_denoiser_create(&d, opts));
+  static const char *const names[3] = {"R", "G", "B"};
+  kpcn_image *img = NULL;
+  kpcn_status s = kpcn_image_create(&img, aov->width, aov->height, 3, names);
+  if (s == KPCN_OK) s = kpcn_denoiser_execute_aov(d, aov, img->data);
+  kpcn_denoiser_destroy(d);
+  if (s != KPCN_OK) {
+    kpcn_image_destroy(img);
+    return s;
+  }
+  *out_rgb = img;
+  return KPCN_OK;
+}

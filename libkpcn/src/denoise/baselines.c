@@ -1,0 +1,270 @@
+/* Classical baselines (seed §2.3): feature-guided cross-bilateral filter and non-local
+ * means with variance-normalised colour distances (Rousselle et al. 2012/2013).
+ *
+ * Both filter the `color` buffer. Weight of neighbour q for pixel p:
+ *   bilateral: exp(-|p-q|^2 / (2 sigma_s^2)) * exp(-max(0, dc(p,q))) * wf(p,q)
+ *   nlmeans:   exp(-max(0, mean over the (2f+1)^2 patch of dc(p+n, q+n)))   * wf(p,q)
+ * with the variance-cancelled colour distance (v = color.var, variance of the mean)
+ *   dc(p,q) = (mean_c (c_p - c_q)^2 - (v_p + min(v_p, v_q))) / (1e-10 + k^2 (v_p + v_q))
+ * (the subtracted term removes the expected noise part of the squared difference, so
+ * equal underlying colours give dc ~ 0), and the feature weight
+ *   wf = exp(-|dN|^2/(2 sn^2) - |dA|^2/(2 sa^2) - dZ^2/(2 sz^2))
+ * over normal, albedo and depth normalised per image (a sigma <= 0 disables a feature).
+ * Deterministic: each output pixel is accumulated by one thread in a fixed order. */
+#include "core/internal.h"
+#include "denoise_internal.h"
+
+#include <math.h>
+#include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+typedef struct guide {
+  int W, H;
+  const float *c[3], *v;
+  const float *n[3], *a[3], *z;
+  float in, ia, iz; /* 1/(2 sigma^2) or 0 */
+  float zoff, zscale;
+  float k2;
+} guide;
+
+static kpcn_status guide_init(guide *g, const kpcn_aov_set *aov, const kpcn_baseline_params *p,
+                              const char *what) {
+  memset(g, 0, sizeof *g);
+  if (!p) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: parameters are NULL", what);
+  if (p->radius < 0 || p->radius > 64)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: radius %d outside [0, 64]", what, p->radius);
+  if (!(p->k_color > 0.0f))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: k_color must be > 0", what);
+  KPCN_TRY(kpcn_aov_require(aov, KPCN_BUF_COLOR, 1, what));
+  g->W = aov->width;
+  g->H = aov->height;
+  const size_t P = kpcn_aov_plane_size(aov);
+  for (int c = 0; c < 3; c++)
+    g->c[c] = aov->buf[KPCN_BUF_COLOR] + c * P;
+  g->v = aov->var[KPCN_BUF_COLOR];
+  g->k2 = p->k_color * p->k_color;
+  if (p->sigma_normal > 0.0f) {
+    KPCN_TRY(kpcn_aov_require(aov, KPCN_BUF_NORMAL, 0, what));
+    for (int c = 0; c < 3; c++)
+      g->n[c] = aov->buf[KPCN_BUF_NORMAL] + c * P;
+    g->in = 0.5f / (p->sigma_normal * p->sigma_normal);
+  }
+  if (p->sigma_albedo > 0.0f) {
+    KPCN_TRY(kpcn_aov_require(aov, KPCN_BUF_ALBEDO, 0, what));
+    for (int c = 0; c < 3; c++)
+      g->a[c] = aov->buf[KPCN_BUF_ALBEDO] + c * P;
+    g->ia = 0.5f / (p->sigma_albedo * p->sigma_albedo);
+  }
+  if (p->sigma_depth > 0.0f) {
+    kpcn_features_norm nm;
+    KPCN_TRY(kpcn_features_norm_compute(aov, &nm));
+    g->z = aov->buf[KPCN_BUF_DEPTH];
+    g->zoff = nm.depth_offset;
+    g->zscale = nm.depth_scale;
+    g->iz = 0.5f / (p->sigma_depth * p->sigma_depth);
+  }
+  return KPCN_OK;
+}
+
+/* Exponent of the feature weight between pixel indices i and j. */
+static inline float feat_dist(const guide *g, size_t i, size_t j) {
+  float d = 0.0f;
+  if (g->in > 0.0f) {
+    float s = 0.0f;
+    for (int c = 0; c < 3; c++) {
+      float t = g->n[c][i] - g->n[c][j];
+      s += t * t;
+    }
+    d += s * g->in;
+  }
+  if (g->ia > 0.0f) {
+    float s = 0.0f;
+    for (int c = 0; c < 3; c++) {
+      float t = g->a[c][i] - g->a[c][j];
+      s += t * t;
+    }
+    d += s * g->ia;
+  }
+  if (g->iz > 0.0f) {
+    float t = (g->z[i] - g->z[j]) * g->zscale;
+    d += t * t * g->iz;
+  }
+  return d;
+}
+
+static inline float color_dist(const guide *g, size_t i, size_t j) {
+  float s = 0.0f;
+  for (int c = 0; c < 3; c++) {
+    float t = g->c[c][i] - g->c[c][j];
+    s += t * t;
+  }
+  float vi = g->v[i], vj = g->v[j];
+  float vmin = vi < vj ? vi : vj;
+  return (s * (1.0f / 3.0f) - (vi + vmin)) / (1e-10f + g->k2 * (vi + vj));
+}
+
+/* Rows are processed in bands so the progress callback is called between bands. */
+#define BAND 32
+
+kpcn_status kpcn_baseline_bilateral(const kpcn_aov_set *aov, const kpcn_baseline_params *p,
+                                    float *out, int nthreads, kpcn_progress *prog) {
+  guide g;
+  KPCN_TRY(guide_init(&g, aov, p, "bilateral filter"));
+  if (!(p->sigma_spatial > 0.0f))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "bilateral filter: sigma_spatial must be > 0");
+  const int W = g.W, H = g.H, r = p->radius, nt = kpcn_resolve_threads(nthreads);
+  const size_t P = (size_t)W * H;
+  const float is = 0.5f / (p->sigma_spatial * p->sigma_spatial);
+  for (int y0 = 0; y0 < H; y0 += BAND) {
+    if (kpcn_progress_report(prog, (double)y0 / H))
+      return kpcn_fail(KPCN_ERR_CANCELLED, "bilateral filter: cancelled by the progress callback");
+    const int y1 = y0 + BAND < H ? y0 + BAND : H;
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 1)
+    for (int y = y0; y < y1; y++) {
+      for (int x = 0; x < W; x++) {
+        const size_t i = (size_t)y * W + x;
+        double acc[3] = {0, 0, 0}, ws = 0.0;
+        for (int qy = y - r; qy <= y + r; qy++) {
+          if (qy < 0 || qy >= H) continue;
+          for (int qx = x - r; qx <= x + r; qx++) {
+            if (qx < 0 || qx >= W) continue;
+            const size_t j = (size_t)qy * W + qx;
+            float dc = color_dist(&g, i, j);
+            float e = (float)((qx - x) * (qx - x) + (qy - y) * (qy - y)) * is +
+                      (dc > 0.0f ? dc : 0.0f) + feat_dist(&g, i, j);
+            float w = expf(-e);
+            ws += w;
+            for (int c = 0; c < 3; c++)
+              acc[c] += w * g.c[c][j];
+          }
+        }
+        for (int c = 0; c < 3; c++)
+          out[c * P + i] = (float)(acc[c] / ws); /* ws >= 1 (self) */
+      }
+    }
+  }
+  kpcn_progress_report(prog, 1.0);
+  return KPCN_OK;
+}
+
+/* NL-means over square tiles: for every offset o of the search window the per-pixel
+ * colour distance image of the tile (plus the patch margin) is box-filtered with the
+ * patch size, which makes the patch distance O(1) per pixel and offset. */
+#define NLM_TILE 64
+
+kpcn_status kpcn_baseline_nlmeans(const kpcn_aov_set *aov, const kpcn_baseline_params *p,
+                                  float *out, int nthreads, kpcn_progress *prog) {
+  guide g;
+  KPCN_TRY(guide_init(&g, aov, p, "non-local means"));
+  if (p->patch_radius < 0 || p->patch_radius > 16)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "non-local means: patch_radius %d outside [0, 16]",
+                     p->patch_radius);
+  const int W = g.W, H = g.H, r = p->radius, f = p->patch_radius;
+  const int nt = kpcn_resolve_threads(nthreads);
+  const size_t P = (size_t)W * H;
+  const int tx = (W + NLM_TILE - 1) / NLM_TILE, ty = (H + NLM_TILE - 1) / NLM_TILE;
+  const int ntiles = tx * ty;
+  const int M = NLM_TILE + 2 * f; /* tile plus patch margin */
+  /* Per-thread scratch: distance image, row-summed image, accumulators. */
+  const size_t per = (size_t)M * M * 2 + (size_t)NLM_TILE * NLM_TILE * 4;
+  float *scratch = kpcn_aligned_alloc(per * (size_t)nt * sizeof(float), "nlmeans scratch");
+  if (!scratch) return KPCN_ERR_OUT_OF_MEMORY;
+  int done = 0, cancelled = 0;
+#pragma omp parallel num_threads(nt)
+  {
+#ifdef _OPENMP
+    float *s = scratch + per * (size_t)omp_get_thread_num();
+#else
+    float *s = scratch;
+#endif
+    float *D = s, *R = s + (size_t)M * M, *acc = R + (size_t)M * M;
+#pragma omp for schedule(dynamic, 1)
+    for (int t = 0; t < ntiles; t++) {
+      int stop;
+#pragma omp atomic read
+      stop = cancelled;
+      if (stop) continue;
+      const int x0 = (t % tx) * NLM_TILE, y0 = (t / tx) * NLM_TILE;
+      const int x1 = x0 + NLM_TILE < W ? x0 + NLM_TILE : W,
+                y1 = y0 + NLM_TILE < H ? y0 + NLM_TILE : H;
+      const int tw = x1 - x0, th = y1 - y0;
+      /* margin region clipped to the image */
+      const int mx0 = x0 - f > 0 ? x0 - f : 0, my0 = y0 - f > 0 ? y0 - f : 0;
+      const int mx1 = x1 + f < W ? x1 + f : W, my1 = y1 + f < H ? y1 + f : H;
+      const int mw = mx1 - mx0, mh = my1 - my0;
+      memset(acc, 0, sizeof(float) * 4 * (size_t)NLM_TILE * NLM_TILE);
+      for (int oy = -r; oy <= r; oy++) {
+        for (int ox = -r; ox <= r; ox++) {
+          /* distance image over the margin region; partner coordinates clamped */
+          for (int yy = 0; yy < mh; yy++) {
+            const int y = my0 + yy;
+            int qy = y + oy;
+            qy = qy < 0 ? 0 : qy >= H ? H - 1 : qy;
+            for (int xx = 0; xx < mw; xx++) {
+              const int x = mx0 + xx;
+              int qx = x + ox;
+              qx = qx < 0 ? 0 : qx >= W ? W - 1 : qx;
+              D[yy * mw + xx] = color_dist(&g, (size_t)y * W + x, (size_t)qy * W + qx);
+            }
+          }
+          /* horizontal box sums (window clipped to the margin region) */
+          for (int yy = 0; yy < mh; yy++) {
+            const float *d = D + yy * mw;
+            float *o = R + yy * mw;
+            for (int xx = 0; xx < mw; xx++) {
+              int a = xx - f < 0 ? 0 : xx - f, b = xx + f >= mw ? mw - 1 : xx + f;
+              float sum = 0.0f;
+              for (int k = a; k <= b; k++)
+                sum += d[k];
+              o[xx] = sum;
+            }
+          }
+          for (int y = y0; y < y1; y++) {
+            const int qy = y + oy;
+            if (qy < 0 || qy >= H) continue;
+            const int yy = y - my0;
+            const int a = yy - f < 0 ? 0 : yy - f, b = yy + f >= mh ? mh - 1 : yy + f;
+            for (int x = x0; x < x1; x++) {
+              const int qx = x + ox;
+              if (qx < 0 || qx >= W) continue;
+              const int xx = x - mx0;
+              const int ca = xx - f < 0 ? 0 : xx - f, cb = xx + f >= mw ? mw - 1 : xx + f;
+              float sum = 0.0f;
+              for (int k = a; k <= b; k++)
+                sum += R[k * mw + xx];
+              const float dp = sum / (float)((b - a + 1) * (cb - ca + 1));
+              const size_t i = (size_t)y * W + x, j = (size_t)qy * W + qx;
+              const float w = expf(-((dp > 0.0f ? dp : 0.0f) + feat_dist(&g, i, j)));
+              float *ac = acc + 4 * ((size_t)(y - y0) * NLM_TILE + (x - x0));
+              ac[0] += w * g.c[0][j];
+              ac[1] += w * g.c[1][j];
+              ac[2] += w * g.c[2][j];
+              ac[3] += w;
+            }
+          }
+        }
+      }
+      for (int yy = 0; yy < th; yy++)
+        for (int xx = 0; xx < tw; xx++) {
+          const float *ac = acc + 4 * ((size_t)yy * NLM_TILE + xx);
+          const size_t i = (size_t)(y0 + yy) * W + x0 + xx;
+          for (int c = 0; c < 3; c++)
+            out[c * P + i] = ac[c] / ac[3];
+        }
+#pragma omp critical(kpcn_nlm_progress)
+      {
+        done++;
+        if (kpcn_progress_report(prog, (double)done / ntiles)) {
+#pragma omp atomic write
+          cancelled = 1;
+        }
+      }
+    }
+  }
+  kpcn_aligned_free(scratch);
+  if (cancelled)
+    return kpcn_fail(KPCN_ERR_CANCELLED, "non-local means: cancelled by the progress callback");
+  return KPCN_OK;
+}

@@ -1,0 +1,186 @@
+/* The KPCN pipeline (DESIGN.md §5): per tile and branch, build the features of the tile
+ * plus its overlap from the full image, run the branch's network, softmax + kernel apply
+ * on the preprocessed noisy color, invert the preprocessing and add the branches.
+ *
+ * Tiling: output tiles of T x T pixels, each computed on the tile grown by
+ * kpcn_denoise_tile_overlap() pixels per side (clipped at the image border). Inside that
+ * padded tile every core pixel sees exactly the inputs the untiled net would see (the conv
+ * stack reads within its radius, the kernel within K/2, and features come from the full
+ * image), so tiled == untiled up to floating-point summation order inside oneDNN.
+ * Memory is bounded by the padded tile, not the image: for T = 512 with the paper preset
+ * the largest buffers are the logits (K² = 441 planes of 552² floats = 0.5 GiB). */
+#include "core/internal.h"
+#include "denoise_internal.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+static double now_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+int kpcn_denoise_tile_overlap(const kpcn_arch *arch) {
+  if (!arch) return 0;
+  int r = kpcn_arch_conv_radius(arch), k = arch->kernel_size / 2;
+  return r > k ? r : k;
+}
+
+typedef struct tile_t {
+  int x0, y0, x1, y1;   /* core (output) region */
+  int px0, py0, pw, ph; /* padded region */
+} tile_t;
+
+/* Tiles sorted so equal padded sizes are adjacent (nets are bound to a size and only one
+ * is alive at a time), largest first so the memory peak is reached at the first tile. */
+static int tile_cmp(const void *a, const void *b) {
+  const tile_t *s = a, *t = b;
+  if (s->pw != t->pw) return s->pw > t->pw ? -1 : 1;
+  if (s->ph != t->ph) return s->ph > t->ph ? -1 : 1;
+  if (s->y0 != t->y0) return s->y0 < t->y0 ? -1 : 1;
+  return s->x0 < t->x0 ? -1 : s->x0 > t->x0;
+}
+
+static kpcn_status require_all(const kpcn_aov_set *aov) {
+  const kpcn_buffer need[] = {KPCN_BUF_DIFFUSE, KPCN_BUF_SPECULAR, KPCN_BUF_ALBEDO,
+                              KPCN_BUF_NORMAL,  KPCN_BUF_DEPTH,    KPCN_BUF_VISIBILITY};
+  for (size_t i = 0; i < sizeof need / sizeof need[0]; i++)
+    KPCN_TRY(kpcn_aov_require(aov, need[i], 1, "KPCN denoiser input"));
+  return KPCN_OK;
+}
+
+static void add_net_stats(kpcn_net *net, kpcn_denoise_stats *st) {
+  if (!net) return;
+  kpcn_net_stats ns;
+  kpcn_net_get_stats(net, &ns);
+  st->conv_s += ns.fwd_conv_s;
+}
+
+kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov, int tile, int bf16,
+                              int nthreads, kpcn_progress *prog, float *out,
+                              kpcn_denoise_stats *st) {
+  const kpcn_arch *arch = kpcn_model_arch(model);
+  KPCN_TRY(kpcn_features_check_arch(arch));
+  KPCN_TRY(require_all(aov));
+  const int W = aov->width, H = aov->height, K = arch->kernel_size, K2 = K * K;
+  const int ov = kpcn_denoise_tile_overlap(arch);
+  const float eps = arch->eps;
+  const size_t P = kpcn_aov_plane_size(aov);
+  const int T = tile > 0 ? tile : KPCN_DEFAULT_TILE;
+  kpcn_features_norm norm;
+  KPCN_TRY(kpcn_features_norm_compute(aov, &norm));
+
+  const int nx = (W + T - 1) / T, ny = (H + T - 1) / T, nt = nx * ny;
+  tile_t *tiles = kpcn_alloc(sizeof(tile_t) * (size_t)nt, "denoiser tile list");
+  if (!tiles) return KPCN_ERR_OUT_OF_MEMORY;
+  int maxp = 0;
+  for (int j = 0; j < ny; j++)
+    for (int i = 0; i < nx; i++) {
+      tile_t *t = &tiles[j * nx + i];
+      t->x0 = i * T;
+      t->y0 = j * T;
+      t->x1 = t->x0 + T < W ? t->x0 + T : W;
+      t->y1 = t->y0 + T < H ? t->y0 + T : H;
+      t->px0 = t->x0 - ov > 0 ? t->x0 - ov : 0;
+      t->py0 = t->y0 - ov > 0 ? t->y0 - ov : 0;
+      t->pw = (t->x1 + ov < W ? t->x1 + ov : W) - t->px0;
+      t->ph = (t->y1 + ov < H ? t->y1 + ov : H) - t->py0;
+      if (t->pw * t->ph > maxp) maxp = t->pw * t->ph;
+    }
+  qsort(tiles, (size_t)nt, sizeof(tile_t), tile_cmp);
+
+  const size_t mp = (size_t)maxp;
+  float *feat = kpcn_aligned_alloc(sizeof(float) * mp * KPCN_FEATURES_COUNT, "denoiser features");
+  float *noisy = kpcn_aligned_alloc(sizeof(float) * mp * 3, "denoiser noisy tile");
+  float *logits = kpcn_aligned_alloc(sizeof(float) * mp * (size_t)K2, "denoiser logits");
+  float *filt = kpcn_aligned_alloc(sizeof(float) * mp * 3, "denoiser filtered tile");
+  kpcn_net *net = NULL;
+  int net_w = 0, net_h = 0;
+  kpcn_status s = KPCN_OK;
+  if (!feat || !noisy || !logits || !filt) {
+    s = KPCN_ERR_OUT_OF_MEMORY;
+    goto done;
+  }
+  const int nthr = kpcn_resolve_threads(nthreads);
+  const float *alb = aov->buf[KPCN_BUF_ALBEDO];
+  /* Branch-major order: only one network (activations of one padded tile) is alive at a
+   * time; the diffuse pass stores its remodulated result in `out`, the specular pass adds
+   * exp(s) - 1. This is what keeps a 4K frame with the paper preset under 4 GiB. */
+  for (int b = 0; b < 2; b++) {
+    net_w = net_h = 0;
+    for (int ti = 0; ti < nt; ti++) {
+      const tile_t *t = &tiles[ti];
+      if (kpcn_progress_report(prog, (double)(b * nt + ti) / (2.0 * nt))) {
+        s = kpcn_fail(KPCN_ERR_CANCELLED, "KPCN denoiser: cancelled by the progress callback");
+        goto done;
+      }
+      if (t->pw != net_w || t->ph != net_h) {
+        double tc = now_s();
+        add_net_stats(net, st);
+        kpcn_net_destroy(net);
+        net = NULL;
+        kpcn_net_options no;
+        kpcn_net_options_defaults(&no);
+        no.batch = 1;
+        no.width = t->pw;
+        no.height = t->ph;
+        no.precision = bf16 ? KPCN_PREC_BF16 : KPCN_PREC_F32;
+        no.nthreads = nthreads;
+        s = kpcn_net_create(model, (kpcn_branch)b, &no, &net);
+        if (s != KPCN_OK) {
+          kpcn_fail_context("KPCN denoiser: creating the %dx%d %s network", t->pw, t->ph,
+                            kpcn_branch_name(b));
+          goto done;
+        }
+        net_w = t->pw;
+        net_h = t->ph;
+        st->other_s += now_s() - tc;
+      }
+      const size_t Q = (size_t)t->pw * t->ph;
+      double ta = now_s();
+      s = kpcn_features_build_region(aov, b, eps, &norm, t->px0, t->py0, t->pw, t->ph, feat, noisy,
+                                     nthreads);
+      if (s != KPCN_OK) goto done;
+      double tb = now_s();
+      s = kpcn_net_forward(net, feat, logits);
+      if (s != KPCN_OK) goto done;
+      double tc = now_s();
+      s = kpcn_kpa_forward(K, 1, 3, t->ph, t->pw, logits, noisy, filt, NULL, nthreads);
+      if (s != KPCN_OK) goto done;
+      double td = now_s();
+      st->features_s += tb - ta;
+      st->net_s += tc - tb;
+      st->kpa_s += td - tc;
+      st->conv_flops += kpcn_arch_flops_per_pixel(arch) * (double)Q;
+      /* Invert the preprocessing on the core: c = d * (albedo + eps) + exp(s) - 1. */
+#pragma omp parallel for num_threads(nthr) schedule(static)
+      for (int y = t->y0; y < t->y1; y++) {
+        for (int c = 0; c < 3; c++) {
+          const float *f = filt + c * Q + (size_t)(y - t->py0) * t->pw - t->px0;
+          const size_t go = (size_t)c * P + (size_t)y * W;
+          if (b == KPCN_BRANCH_DIFFUSE)
+            for (int x = t->x0; x < t->x1; x++)
+              out[go + x] = f[x] * (alb[go + x] + eps);
+          else
+            for (int x = t->x0; x < t->x1; x++)
+              out[go + x] += expm1f(f[x]);
+        }
+      }
+      st->other_s += now_s() - td;
+      if (b == 0) st->tiles++;
+    }
+  }
+  kpcn_progress_report(prog, 1.0);
+done:
+  add_net_stats(net, st);
+  kpcn_net_destroy(net);
+  kpcn_aligned_free(feat);
+  kpcn_aligned_free(noisy);
+  kpcn_aligned_free(logits);
+  kpcn_aligned_free(filt);
+  free(tiles);
+  return s;
+}

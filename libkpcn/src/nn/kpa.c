@@ -1,0 +1,175 @@
+/* Kernel-prediction layer (Bako 2017 / seed eq. 4.x): per pixel a softmax over K² logits
+ * gives a normalized K x K filter that is applied to the noisy neighbourhood, the same
+ * filter for every colour channel. Plain C: rows are independent, so we parallelize over
+ * (image, row) and keep the inner loops over x contiguous for the vectorizer.
+ * Border: reads outside the image are clamped to the nearest edge pixel (replicate). */
+#include "core/internal.h"
+#include "kpcn/nn.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+static kpcn_status check_args(const char *fn, int K, int n, int nc, int h, int w) {
+  if (K < 1 || K % 2 == 0 || K > KPCN_NN_MAX_KERNEL)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: K = %d must be odd in [1, %d]", fn, K,
+                     KPCN_NN_MAX_KERNEL);
+  if (n < 1 || nc < 1 || nc > 64)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: n = %d, nc = %d invalid", fn, n, nc);
+  return kpcn_check_size(w, h, fn);
+}
+
+/* row[x + r] = src[clamp(x)] for x in [-r, w + r) */
+static void padded_row(float *restrict row, const float *restrict src, int w, int r) {
+  for (int x = 0; x < r; x++) row[x] = src[0];
+  memcpy(row + r, src, (size_t)w * sizeof(float));
+  for (int x = 0; x < r; x++) row[r + w + x] = src[w - 1];
+}
+
+static inline int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
+
+kpcn_status kpcn_kpa_forward(int K, int n, int nc, int h, int w, const float *logits,
+                             const float *noisy, float *out, float *weights, int nthreads) {
+  KPCN_TRY(check_args("kpcn_kpa_forward", K, n, nc, h, w));
+  if (!logits || !noisy || !out)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_kpa_forward: NULL buffer");
+  const int r = K / 2, K2 = K * K, nt = kpcn_resolve_threads(nthreads);
+  const size_t plane = (size_t)h * w;
+  const size_t scratch = (size_t)K2 * w + 2 * (size_t)w + (size_t)w + 2 * r + 64;
+  float *buf = kpcn_aligned_alloc((size_t)nt * scratch * sizeof(float), "kpa scratch");
+  if (!buf) return KPCN_ERR_OUT_OF_MEMORY;
+#pragma omp parallel for num_threads(nt) schedule(static)
+  for (long row = 0; row < (long)n * h; row++) {
+    int tid = 0;
+#ifdef _OPENMP
+    tid = omp_get_thread_num();
+#endif
+    float *wt = buf + (size_t)tid * scratch; /* [K2][w] softmax of this row */
+    float *mx = wt + (size_t)K2 * w, *sum = mx + w, *pr = sum + w;
+    const int b = (int)(row / h), y = (int)(row % h);
+    const float *L = logits + (size_t)b * K2 * plane + (size_t)y * w;
+    for (int x = 0; x < w; x++) mx[x] = L[x];
+    for (int t = 1; t < K2; t++)
+      for (int x = 0; x < w; x++) mx[x] = fmaxf(mx[x], L[t * plane + x]);
+    for (int x = 0; x < w; x++) sum[x] = 0.f;
+    for (int t = 0; t < K2; t++) {
+      float *wr = wt + (size_t)t * w;
+      for (int x = 0; x < w; x++) {
+        wr[x] = expf(L[t * plane + x] - mx[x]);
+        sum[x] += wr[x];
+      }
+    }
+    for (int x = 0; x < w; x++) sum[x] = 1.f / sum[x];
+    for (int t = 0; t < K2; t++) {
+      float *wr = wt + (size_t)t * w;
+      for (int x = 0; x < w; x++) wr[x] *= sum[x];
+    }
+    for (int c = 0; c < nc; c++) {
+      float *o = out + ((size_t)b * nc + c) * plane + (size_t)y * w;
+      for (int x = 0; x < w; x++) o[x] = 0.f;
+      for (int dy = 0; dy < K; dy++) {
+        int yy = clampi(y + dy - r, 0, h - 1);
+        padded_row(pr, noisy + ((size_t)b * nc + c) * plane + (size_t)yy * w, w, r);
+        for (int dx = 0; dx < K; dx++) {
+          const float *wr = wt + (size_t)(dy * K + dx) * w, *src = pr + dx;
+          for (int x = 0; x < w; x++) o[x] += wr[x] * src[x];
+        }
+      }
+    }
+    if (weights) {
+      /* written last so weights may alias logits */
+      float *W = weights + (size_t)b * K2 * plane + (size_t)y * w;
+      for (int t = 0; t < K2; t++) memcpy(W + t * plane, wt + (size_t)t * w, (size_t)w * 4);
+    }
+  }
+  kpcn_aligned_free(buf);
+  return KPCN_OK;
+}
+
+kpcn_status kpcn_kpa_backward(int K, int n, int nc, int h, int w, const float *weights,
+                              const float *noisy, const float *dout, float *dlogits,
+                              float *dnoisy, int nthreads) {
+  KPCN_TRY(check_args("kpcn_kpa_backward", K, n, nc, h, w));
+  if (!weights || !noisy || !dout || !dlogits)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_kpa_backward: NULL buffer");
+  const int r = K / 2, K2 = K * K, nt = kpcn_resolve_threads(nthreads);
+  const size_t plane = (size_t)h * w;
+  const size_t scratch = (size_t)K2 * w + 2 * (size_t)w + (size_t)w + 2 * r + 64;
+  float *buf = kpcn_aligned_alloc((size_t)nt * scratch * sizeof(float), "kpa scratch");
+  if (!buf) return KPCN_ERR_OUT_OF_MEMORY;
+  /* dnoisy first: it reads weights, which dlogits may alias. Gather over output rows qy
+   * (each thread owns its rows, so the sum order is fixed and thread-count independent);
+   * within a row the x-scatter goes to a padded accumulator folded at the edges. */
+  if (dnoisy) {
+#pragma omp parallel for num_threads(nt) schedule(static)
+    for (long row = 0; row < (long)n * nc * h; row++) {
+      int tid = 0;
+#ifdef _OPENMP
+      tid = omp_get_thread_num();
+#endif
+      float *acc = buf + (size_t)tid * scratch;
+      const int qy = (int)(row % h), c = (int)((row / h) % nc), b = (int)(row / ((long)h * nc));
+      for (int x = 0; x < w + 2 * r; x++) acc[x] = 0.f;
+      const float *dO = dout + ((size_t)b * nc + c) * plane;
+      for (int dy = 0; dy < K; dy++) {
+        /* source rows py with clamp(py + dy - r) == qy */
+        int lo = qy - (dy - r), hi = lo;
+        if (qy == 0) lo = 0;
+        if (qy == h - 1) hi = h - 1;
+        if (lo < 0) lo = 0;
+        if (hi > h - 1) hi = h - 1;
+        for (int py = lo; py <= hi; py++) {
+          if (clampi(py + dy - r, 0, h - 1) != qy) continue;
+          const float *dor = dO + (size_t)py * w;
+          for (int dx = 0; dx < K; dx++) {
+            const float *wr = weights + (size_t)b * K2 * plane + (size_t)(dy * K + dx) * plane +
+                              (size_t)py * w;
+            float *a = acc + dx;
+            for (int x = 0; x < w; x++) a[x] += wr[x] * dor[x];
+          }
+        }
+      }
+      float *dn = dnoisy + ((size_t)b * nc + c) * plane + (size_t)qy * w;
+      memcpy(dn, acc + r, (size_t)w * 4);
+      for (int x = 0; x < r; x++) {
+        dn[0] += acc[x];
+        dn[w - 1] += acc[r + w + x];
+      }
+    }
+  }
+#pragma omp parallel for num_threads(nt) schedule(static)
+  for (long row = 0; row < (long)n * h; row++) {
+    int tid = 0;
+#ifdef _OPENMP
+    tid = omp_get_thread_num();
+#endif
+    float *g = buf + (size_t)tid * scratch; /* [K2][w]: dL/dw_t */
+    float *dot = g + (size_t)K2 * w, *pr = dot + 2 * (size_t)w;
+    const int b = (int)(row / h), y = (int)(row % h);
+    for (size_t i = 0; i < (size_t)K2 * w; i++) g[i] = 0.f;
+    for (int c = 0; c < nc; c++) {
+      const float *dor = dout + ((size_t)b * nc + c) * plane + (size_t)y * w;
+      for (int dy = 0; dy < K; dy++) {
+        int yy = clampi(y + dy - r, 0, h - 1);
+        padded_row(pr, noisy + ((size_t)b * nc + c) * plane + (size_t)yy * w, w, r);
+        for (int dx = 0; dx < K; dx++) {
+          float *gr = g + (size_t)(dy * K + dx) * w;
+          const float *src = pr + dx;
+          for (int x = 0; x < w; x++) gr[x] += dor[x] * src[x];
+        }
+      }
+    }
+    const float *W = weights + (size_t)b * K2 * plane + (size_t)y * w;
+    for (int x = 0; x < w; x++) dot[x] = 0.f;
+    for (int t = 0; t < K2; t++)
+      for (int x = 0; x < w; x++) dot[x] += W[t * plane + x] * g[(size_t)t * w + x];
+    float *D = dlogits + (size_t)b * K2 * plane + (size_t)y * w;
+    for (int t = 0; t < K2; t++)
+      for (int x = 0; x < w; x++) D[t * plane + x] = W[t * plane + x] * (g[(size_t)t * w + x] - dot[x]);
+  }
+  kpcn_aligned_free(buf);
+  return KPCN_OK;
+}

@@ -1,0 +1,557 @@
+/* kpcn_net: one KPCN branch executed with oneDNN (C API, OpenMP runtime).
+ *
+ * Layout strategy: every conv primitive is created with format "any" for weights and for
+ * its destination, and with the previous layer's chosen destination descriptor as its
+ * source, so activations stay in oneDNN's preferred blocked layout (nChw16c for f32 jit,
+ * nhwc for bf16 brgconv) from layer to layer. Reorders happen only at the ends (user NCHW
+ * input -> layer 0, last layer -> user NCHW logits, and the weights from the model's OIHW
+ * arrays, which are re-read each forward so an optimizer can update them in place).
+ * Backward (f32 training nets): ReLU backward (from the stored post-ReLU activation) in
+ * place on the gradient buffer, then backward-weights and backward-data per layer.
+ * One user-mode scratchpad is shared by all primitives. */
+#include "core/internal.h"
+#include "nn/model_internal.h"
+
+#include <oneapi/dnnl/dnnl.h>
+#include <oneapi/dnnl/dnnl_debug.h>
+#include <omp.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#define DN(call)                                                                                   \
+  do {                                                                                             \
+    dnnl_status_t _d = (call);                                                                     \
+    if (_d != dnnl_success)                                                                        \
+      return kpcn_fail(KPCN_ERR_INTERNAL, "oneDNN: %s failed: %s (%s:%d)", #call,                  \
+                       dnnl_status2str(_d), __FILE__, __LINE__);                                   \
+  } while (0)
+
+typedef struct reorder {
+  dnnl_primitive_t prim;
+  dnnl_memory_t src, dst;
+} reorder;
+
+typedef struct layer {
+  int cin, cout, k, d, has_relu;
+  dnnl_memory_desc_t src_md, dst_md, w_md, bw_md, dw_md;
+  dnnl_primitive_desc_t fwd_pd, bwdd_pd, bwdw_pd, relu_pd;
+  dnnl_primitive_t fwd, bwdd, bwdw, relu;
+  dnnl_memory_t src, dst, w, bias;     /* forward operands */
+  dnnl_memory_t bw, dw, db, ddst, dsrc; /* backward operands */
+  reorder w_in, bw_in, dw_out;          /* OIHW <-> primitive weight layouts */
+  float *gw, *gb;                       /* gradients, OIHW f32 (net-owned) */
+  void *act;                            /* dst buffer */
+  void *wp, *bwp, *dwp;                 /* weight copies in primitive layouts */
+} layer;
+
+struct kpcn_net {
+  kpcn_model *model;
+  kpcn_branch branch;
+  kpcn_net_options o;
+  int nl, nt;
+  dnnl_engine_t eng;
+  dnnl_stream_t stream;
+  dnnl_primitive_attr_t attr, attr_relu; /* user scratchpad; + fused ReLU post-op */
+  layer L[KPCN_NN_MAX_LAYERS];
+  reorder in, out, dout_in, dinput_out;
+  void *xbuf;                 /* layer-0 input in its primitive layout */
+  void *pp[2];                /* inference ping-pong activation buffers */
+  void *dbuf[2];              /* backward gradient ping-pong buffers */
+  void *wbuf;                 /* all primitive-layout weight copies */
+  float *grads;               /* all gradients */
+  void *scratch;
+  dnnl_memory_t scratch_mem;
+  size_t bytes;
+  kpcn_net_stats st;
+  char impl[KPCN_NN_MAX_LAYERS][64];
+};
+
+static double now_s(void) {
+  struct timespec t;
+  clock_gettime(CLOCK_MONOTONIC, &t);
+  return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+/* oneDNN's OpenMP runtime sizes its parallel regions from omp_get_max_threads() of the
+ * calling thread, both when a primitive is created and when it runs. */
+typedef struct thr_guard {
+  int saved;
+} thr_guard;
+static thr_guard thr_push(int n) {
+  thr_guard g = {omp_get_max_threads()};
+  omp_set_num_threads(n);
+  return g;
+}
+static void thr_pop(thr_guard g) { omp_set_num_threads(g.saved); }
+
+static void *net_alloc(kpcn_net *n, size_t bytes, const char *what) {
+  void *p = kpcn_aligned_alloc(bytes ? bytes : 64, what);
+  if (p) n->bytes += bytes;
+  return p;
+}
+
+static kpcn_status mem(kpcn_net *n, dnnl_memory_t *m, const dnnl_memory_desc_t *md, void *h) {
+  DN(dnnl_memory_create(m, md, n->eng, h ? h : DNNL_MEMORY_NONE));
+  return KPCN_OK;
+}
+
+static size_t pd_scratch(const_dnnl_primitive_desc_t pd) {
+  const dnnl_memory_desc_t *md = dnnl_primitive_desc_query_md(pd, dnnl_query_scratchpad_md, 0);
+  return md ? dnnl_memory_desc_get_size(md) : 0;
+}
+
+/* Creates a reorder between two descriptors; memories get their handles later. */
+static kpcn_status make_reorder(kpcn_net *n, reorder *r, const dnnl_memory_desc_t *from,
+                                const dnnl_memory_desc_t *to, size_t *scratch) {
+  dnnl_primitive_desc_t pd;
+  DN(dnnl_reorder_primitive_desc_create(&pd, from, n->eng, to, n->eng, n->attr));
+  size_t s = pd_scratch(pd);
+  if (s > *scratch) *scratch = s;
+  dnnl_status_t d = dnnl_primitive_create(&r->prim, pd);
+  dnnl_primitive_desc_destroy(pd);
+  DN(d);
+  KPCN_TRY(mem(n, &r->src, from, NULL));
+  KPCN_TRY(mem(n, &r->dst, to, NULL));
+  return KPCN_OK;
+}
+
+static kpcn_status run_reorder(kpcn_net *n, reorder *r, const void *src, void *dst) {
+  DN(dnnl_memory_set_data_handle(r->src, (void *)src));
+  DN(dnnl_memory_set_data_handle(r->dst, dst));
+  dnnl_exec_arg_t a[3] = {{DNNL_ARG_FROM, r->src}, {DNNL_ARG_TO, r->dst},
+                          {DNNL_ARG_SCRATCHPAD, n->scratch_mem}};
+  DN(dnnl_primitive_execute(r->prim, n->stream, 3, a));
+  return KPCN_OK;
+}
+
+static void free_reorder(reorder *r) {
+  if (r->prim) dnnl_primitive_destroy(r->prim);
+  if (r->src) dnnl_memory_destroy(r->src);
+  if (r->dst) dnnl_memory_destroy(r->dst);
+}
+
+static kpcn_status make_pd(kpcn_net *n, dnnl_primitive_desc_t *pd, const void *desc,
+                           const_dnnl_primitive_attr_t attr, const_dnnl_primitive_desc_t hint,
+                           const char *what, int l, size_t *scratch) {
+  dnnl_status_t d = dnnl_primitive_desc_create(pd, desc, attr, n->eng, hint);
+  if (d != dnnl_success)
+    return kpcn_fail(d == dnnl_unimplemented ? KPCN_ERR_UNSUPPORTED : KPCN_ERR_INTERNAL,
+                     "oneDNN has no %s implementation for conv layer %d (%s)", what, l,
+                     dnnl_status2str(d));
+  size_t s = pd_scratch(*pd);
+  if (s > *scratch) *scratch = s;
+  return KPCN_OK;
+}
+
+void kpcn_net_options_defaults(kpcn_net_options *o) {
+  memset(o, 0, sizeof *o);
+  o->batch = 1;
+  o->height = o->width = 64;
+}
+
+/* Builds the primitives of layer l; src_md is the previous layer's destination. */
+static kpcn_status build_layer(kpcn_net *n, int l, const dnnl_memory_desc_t *src_md,
+                               size_t *scratch) {
+  const kpcn_arch *a = &n->model->arch;
+  layer *y = &n->L[l];
+  y->cin = kpcn_arch_layer_in(a, l);
+  y->cout = kpcn_arch_layer_out(a, l);
+  y->k = a->conv_size[l];
+  y->d = a->dilation[l];
+  y->has_relu = l < a->n_hidden;
+  const int bf = n->o.precision == KPCN_PREC_BF16;
+  const dnnl_data_type_t adt = bf ? dnnl_bf16 : dnnl_f32;
+  const dnnl_data_type_t ddt = (bf && y->has_relu) ? dnnl_bf16 : dnnl_f32; /* logits stay f32 */
+  const int N = n->o.batch, H = n->o.height, W = n->o.width;
+  dnnl_dims_t wd = {y->cout, y->cin, y->k, y->k}, bd = {y->cout}, dd = {N, y->cout, H, W};
+  dnnl_dims_t strides = {1, 1}, dil = {y->d - 1, y->d - 1};
+  const int pad = y->d * (y->k - 1) / 2;
+  dnnl_dims_t pl = {pad, pad}, pr = {pad, pad};
+  dnnl_memory_desc_t wany, bmd, dany;
+  DN(dnnl_memory_desc_init_by_tag(&wany, 4, wd, adt, dnnl_format_tag_any));
+  DN(dnnl_memory_desc_init_by_tag(&bmd, 1, bd, dnnl_f32, dnnl_x));
+  DN(dnnl_memory_desc_init_by_tag(&dany, 4, dd, ddt, dnnl_format_tag_any));
+  dnnl_convolution_desc_t cd;
+  DN(dnnl_dilated_convolution_forward_desc_init(
+      &cd, n->o.training ? dnnl_forward_training : dnnl_forward_inference,
+      dnnl_convolution_direct, src_md, &wany, &bmd, &dany, strides, dil, pl, pr));
+  KPCN_TRY(make_pd(n, &y->fwd_pd, &cd, y->has_relu ? n->attr_relu : n->attr, NULL, "forward", l,
+                   scratch));
+  y->src_md = *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_src_md, 0);
+  y->w_md = *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_weights_md, 0);
+  y->dst_md = *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_dst_md, 0);
+  const char *impl = NULL;
+  dnnl_primitive_desc_query(y->fwd_pd, dnnl_query_impl_info_str, 0, &impl);
+  snprintf(n->impl[l], sizeof n->impl[l], "%s", impl ? impl : "?");
+  DN(dnnl_primitive_create(&y->fwd, y->fwd_pd));
+  KPCN_TRY(mem(n, &y->src, &y->src_md, NULL));
+  KPCN_TRY(mem(n, &y->dst, &y->dst_md, NULL));
+  KPCN_TRY(mem(n, &y->w, &y->w_md, NULL));
+  KPCN_TRY(mem(n, &y->bias, &bmd, NULL));
+  dnnl_memory_desc_t oihw;
+  DN(dnnl_memory_desc_init_by_tag(&oihw, 4, wd, dnnl_f32, dnnl_oihw));
+  KPCN_TRY(make_reorder(n, &y->w_in, &oihw, &y->w_md, scratch));
+  if (!n->o.training) return KPCN_OK;
+
+  /* backward: weights (always), data (for l > 0, or l == 0 when input_grad) */
+  dnnl_convolution_desc_t bwd;
+  DN(dnnl_dilated_convolution_backward_weights_desc_init(&bwd, dnnl_convolution_direct, &y->src_md,
+                                                         &wany, &bmd, &y->dst_md, strides, dil,
+                                                         pl, pr));
+  KPCN_TRY(make_pd(n, &y->bwdw_pd, &bwd, n->attr, y->fwd_pd, "backward-weights", l, scratch));
+  y->dw_md = *dnnl_primitive_desc_query_md(y->bwdw_pd, dnnl_query_diff_weights_md, 0);
+  DN(dnnl_primitive_create(&y->bwdw, y->bwdw_pd));
+  KPCN_TRY(mem(n, &y->dw, &y->dw_md, NULL));
+  KPCN_TRY(mem(n, &y->db, &bmd, NULL));
+  KPCN_TRY(mem(n, &y->ddst, &y->dst_md, NULL));
+  KPCN_TRY(make_reorder(n, &y->dw_out, &y->dw_md, &oihw, scratch));
+  if (l > 0 || n->o.input_grad) {
+    DN(dnnl_dilated_convolution_backward_data_desc_init(&bwd, dnnl_convolution_direct, &y->src_md,
+                                                        &wany, &y->dst_md, strides, dil, pl, pr));
+    KPCN_TRY(make_pd(n, &y->bwdd_pd, &bwd, n->attr, y->fwd_pd, "backward-data", l, scratch));
+    y->bw_md = *dnnl_primitive_desc_query_md(y->bwdd_pd, dnnl_query_weights_md, 0);
+    DN(dnnl_primitive_create(&y->bwdd, y->bwdd_pd));
+    KPCN_TRY(mem(n, &y->bw, &y->bw_md, NULL));
+    KPCN_TRY(mem(n, &y->dsrc, &y->src_md, NULL));
+    KPCN_TRY(make_reorder(n, &y->bw_in, &oihw, &y->bw_md, scratch));
+  }
+  if (y->has_relu) {
+    /* eltwise backward needs a forward hint; ReLU derivative from the stored output */
+    dnnl_eltwise_desc_t ef, eb;
+    dnnl_primitive_desc_t hint;
+    DN(dnnl_eltwise_forward_desc_init(&ef, dnnl_forward_training,
+                                      dnnl_eltwise_relu_use_dst_for_bwd, &y->dst_md, 0.f, 0.f));
+    KPCN_TRY(make_pd(n, &hint, &ef, n->attr, NULL, "relu-forward", l, scratch));
+    DN(dnnl_eltwise_backward_desc_init(&eb, dnnl_eltwise_relu_use_dst_for_bwd, &y->dst_md,
+                                       &y->dst_md, 0.f, 0.f));
+    kpcn_status s = make_pd(n, &y->relu_pd, &eb, n->attr, hint, "relu-backward", l, scratch);
+    dnnl_primitive_desc_destroy(hint);
+    KPCN_TRY(s);
+    DN(dnnl_primitive_create(&y->relu, y->relu_pd));
+  }
+  return KPCN_OK;
+}
+
+static size_t md_size(const dnnl_memory_desc_t *md) { return dnnl_memory_desc_get_size(md); }
+
+/* Allocates buffers and binds them to the memories created by build_layer. */
+static kpcn_status bind_buffers(kpcn_net *n, size_t scratch) {
+  const int nl = n->nl;
+  size_t wbytes = 0, gfloats = 0, pp[2] = {0, 0}, db = 0;
+  for (int l = 0; l < nl; l++) {
+    layer *y = &n->L[l];
+    wbytes += (md_size(&y->w_md) + 63) & ~(size_t)63;
+    if (y->bwdd) wbytes += (md_size(&y->bw_md) + 63) & ~(size_t)63;
+    if (y->bwdw) wbytes += (md_size(&y->dw_md) + 63) & ~(size_t)63;
+    gfloats += (((size_t)y->cout * y->cin * y->k * y->k + 15) & ~(size_t)15) +
+               (((size_t)y->cout + 15) & ~(size_t)15);
+    size_t ds = md_size(&y->dst_md);
+    if (ds > pp[l & 1]) pp[l & 1] = ds;
+    if (ds > db) db = ds;
+    if (md_size(&y->src_md) > db) db = md_size(&y->src_md);
+  }
+  n->wbuf = net_alloc(n, wbytes, "net weight copies");
+  n->xbuf = net_alloc(n, md_size(&n->L[0].src_md), "net input");
+  n->scratch = net_alloc(n, scratch, "oneDNN scratchpad");
+  if (!n->wbuf || !n->xbuf || !n->scratch) return KPCN_ERR_OUT_OF_MEMORY;
+  dnnl_memory_desc_t smd;
+  dnnl_dims_t sd = {(dnnl_dim_t)(scratch ? scratch : 1)};
+  DN(dnnl_memory_desc_init_by_tag(&smd, 1, sd, dnnl_u8, dnnl_x));
+  KPCN_TRY(mem(n, &n->scratch_mem, &smd, n->scratch));
+  if (n->o.training) {
+    n->grads = net_alloc(n, gfloats * sizeof(float), "net gradients");
+    n->dbuf[0] = net_alloc(n, db, "net gradient buffer");
+    n->dbuf[1] = net_alloc(n, db, "net gradient buffer");
+    if (!n->grads || !n->dbuf[0] || !n->dbuf[1]) return KPCN_ERR_OUT_OF_MEMORY;
+    memset(n->grads, 0, gfloats * sizeof(float));
+  } else {
+    n->pp[0] = net_alloc(n, pp[0], "net activations");
+    n->pp[1] = net_alloc(n, pp[1] ? pp[1] : 64, "net activations");
+    if (!n->pp[0] || !n->pp[1]) return KPCN_ERR_OUT_OF_MEMORY;
+  }
+  char *wp = n->wbuf;
+  float *gp = n->grads;
+  for (int l = 0; l < nl; l++) {
+    layer *y = &n->L[l];
+    if (n->o.training) {
+      y->act = net_alloc(n, md_size(&y->dst_md), "net activations");
+      if (!y->act) return KPCN_ERR_OUT_OF_MEMORY;
+      y->gw = gp;
+      gp += ((size_t)y->cout * y->cin * y->k * y->k + 15) & ~(size_t)15;
+      y->gb = gp;
+      gp += ((size_t)y->cout + 15) & ~(size_t)15;
+    } else {
+      y->act = n->pp[l & 1];
+    }
+    y->wp = wp;
+    DN(dnnl_memory_set_data_handle(y->w, wp));
+    wp += (md_size(&y->w_md) + 63) & ~(size_t)63;
+    if (y->bwdd) {
+      y->bwp = wp;
+      DN(dnnl_memory_set_data_handle(y->bw, wp));
+      wp += (md_size(&y->bw_md) + 63) & ~(size_t)63;
+    }
+    if (y->bwdw) {
+      y->dwp = wp;
+      DN(dnnl_memory_set_data_handle(y->dw, wp));
+      wp += (md_size(&y->dw_md) + 63) & ~(size_t)63;
+    }
+    DN(dnnl_memory_set_data_handle(y->src, l == 0 ? n->xbuf : n->L[l - 1].act));
+    DN(dnnl_memory_set_data_handle(y->dst, y->act));
+  }
+  return KPCN_OK;
+}
+
+static kpcn_status build(kpcn_net *n) {
+  const kpcn_arch *a = &n->model->arch;
+  const int N = n->o.batch, H = n->o.height, W = n->o.width;
+  DN(dnnl_engine_create(&n->eng, dnnl_cpu, 0));
+  DN(dnnl_stream_create(&n->stream, n->eng, dnnl_stream_default_flags));
+  DN(dnnl_primitive_attr_create(&n->attr));
+  DN(dnnl_primitive_attr_set_scratchpad_mode(n->attr, dnnl_scratchpad_mode_user));
+  DN(dnnl_primitive_attr_create(&n->attr_relu));
+  DN(dnnl_primitive_attr_set_scratchpad_mode(n->attr_relu, dnnl_scratchpad_mode_user));
+  dnnl_post_ops_t po;
+  DN(dnnl_post_ops_create(&po));
+  dnnl_status_t d = dnnl_post_ops_append_eltwise(po, 1.f, dnnl_eltwise_relu, 0.f, 0.f);
+  if (d == dnnl_success) d = dnnl_primitive_attr_set_post_ops(n->attr_relu, po);
+  dnnl_post_ops_destroy(po);
+  DN(d);
+  size_t scratch = 0;
+  const dnnl_data_type_t adt = n->o.precision == KPCN_PREC_BF16 ? dnnl_bf16 : dnnl_f32;
+  dnnl_dims_t xd = {N, a->n_inputs, H, W};
+  dnnl_memory_desc_t xany, user_in;
+  DN(dnnl_memory_desc_init_by_tag(&xany, 4, xd, adt, dnnl_format_tag_any));
+  DN(dnnl_memory_desc_init_by_tag(&user_in, 4, xd, dnnl_f32, dnnl_nchw));
+  for (int l = 0; l < n->nl; l++)
+    KPCN_TRY(build_layer(n, l, l == 0 ? &xany : &n->L[l - 1].dst_md, &scratch));
+  /* We asked backward for the exact forward layouts; make sure oneDNN honoured them. */
+  for (int l = 0; l < n->nl; l++) {
+    const layer *y = &n->L[l];
+    const dnnl_memory_desc_t *m;
+    if (y->bwdd_pd && (!(m = dnnl_primitive_desc_query_md(y->bwdd_pd, dnnl_query_diff_src_md, 0)) ||
+                       !dnnl_memory_desc_equal(m, &y->src_md)))
+      return kpcn_fail(KPCN_ERR_UNSUPPORTED, "oneDNN chose a different layout for the "
+                                              "backward-data gradient of conv layer %d", l);
+    if (y->bwdw_pd && (!(m = dnnl_primitive_desc_query_md(y->bwdw_pd, dnnl_query_src_md, 0)) ||
+                       !dnnl_memory_desc_equal(m, &y->src_md)))
+      return kpcn_fail(KPCN_ERR_UNSUPPORTED, "oneDNN chose a different input layout for the "
+                                              "backward-weights of conv layer %d", l);
+  }
+  KPCN_TRY(make_reorder(n, &n->in, &user_in, &n->L[0].src_md, &scratch));
+  const layer *last = &n->L[n->nl - 1];
+  dnnl_dims_t od = {N, last->cout, H, W};
+  dnnl_memory_desc_t user_out;
+  DN(dnnl_memory_desc_init_by_tag(&user_out, 4, od, dnnl_f32, dnnl_nchw));
+  KPCN_TRY(make_reorder(n, &n->out, &last->dst_md, &user_out, &scratch));
+  if (n->o.training) {
+    KPCN_TRY(make_reorder(n, &n->dout_in, &user_out, &last->dst_md, &scratch));
+    if (n->o.input_grad)
+      KPCN_TRY(make_reorder(n, &n->dinput_out, &n->L[0].src_md, &user_in, &scratch));
+  }
+  return bind_buffers(n, scratch);
+}
+
+kpcn_status kpcn_net_create(kpcn_model *m, kpcn_branch b, const kpcn_net_options *o,
+                            kpcn_net **out) {
+  if (!m || !o || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_create: NULL argument");
+  *out = NULL;
+  if ((int)b < 0 || (int)b >= KPCN_N_BRANCHES)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_create: branch %d invalid", (int)b);
+  if (o->batch < 1 || o->batch > 4096)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_create: batch = %d not in [1, 4096]",
+                     o->batch);
+  KPCN_TRY(kpcn_check_size(o->width, o->height, "kpcn_net_create"));
+  if ((int64_t)o->batch * o->width * o->height > KPCN_MAX_PIXELS)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_create: batch x pixels too large");
+  if (o->precision != KPCN_PREC_F32 && o->precision != KPCN_PREC_BF16)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_create: unknown precision %d",
+                     (int)o->precision);
+  if (o->training && o->precision != KPCN_PREC_F32)
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED, "kpcn_net_create: bf16 is inference-only");
+  kpcn_net *n = kpcn_calloc(1, sizeof *n, "kpcn_net");
+  if (!n) return KPCN_ERR_OUT_OF_MEMORY;
+  n->model = m;
+  n->branch = b;
+  n->o = *o;
+  n->o.training = o->training != 0;
+  n->o.input_grad = n->o.training && o->input_grad;
+  n->nl = m->arch.n_hidden + 1;
+  n->nt = kpcn_resolve_threads(o->nthreads);
+  thr_guard g = thr_push(n->nt);
+  kpcn_status s = build(n);
+  thr_pop(g);
+  if (s != KPCN_OK) {
+    kpcn_net_destroy(n);
+    return s;
+  }
+  *out = n;
+  return KPCN_OK;
+}
+
+void kpcn_net_destroy(kpcn_net *n) {
+  if (!n) return;
+  for (int l = 0; l < n->nl; l++) {
+    layer *y = &n->L[l];
+    dnnl_primitive_desc_t pds[4] = {y->fwd_pd, y->bwdd_pd, y->bwdw_pd, y->relu_pd};
+    dnnl_primitive_t ps[4] = {y->fwd, y->bwdd, y->bwdw, y->relu};
+    for (int i = 0; i < 4; i++) {
+      if (ps[i]) dnnl_primitive_destroy(ps[i]);
+      if (pds[i]) dnnl_primitive_desc_destroy(pds[i]);
+    }
+    dnnl_memory_t ms[9] = {y->src, y->dst, y->w, y->bias, y->bw, y->dw, y->db, y->ddst, y->dsrc};
+    for (int i = 0; i < 9; i++)
+      if (ms[i]) dnnl_memory_destroy(ms[i]);
+    free_reorder(&y->w_in);
+    free_reorder(&y->bw_in);
+    free_reorder(&y->dw_out);
+    if (n->o.training) kpcn_aligned_free(y->act);
+  }
+  free_reorder(&n->in);
+  free_reorder(&n->out);
+  free_reorder(&n->dout_in);
+  free_reorder(&n->dinput_out);
+  if (n->scratch_mem) dnnl_memory_destroy(n->scratch_mem);
+  kpcn_aligned_free(n->xbuf);
+  kpcn_aligned_free(n->pp[0]);
+  kpcn_aligned_free(n->pp[1]);
+  kpcn_aligned_free(n->dbuf[0]);
+  kpcn_aligned_free(n->dbuf[1]);
+  kpcn_aligned_free(n->wbuf);
+  kpcn_aligned_free(n->grads);
+  kpcn_aligned_free(n->scratch);
+  if (n->attr) dnnl_primitive_attr_destroy(n->attr);
+  if (n->attr_relu) dnnl_primitive_attr_destroy(n->attr_relu);
+  if (n->stream) dnnl_stream_destroy(n->stream);
+  if (n->eng) dnnl_engine_destroy(n->eng);
+  free(n);
+}
+
+static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
+  const kpcn_model *m = n->model;
+  KPCN_TRY(run_reorder(n, &n->in, input, n->xbuf));
+  for (int l = 0; l < n->nl; l++) {
+    layer *y = &n->L[l];
+    KPCN_TRY(run_reorder(n, &y->w_in, m->w[n->branch][l], y->wp));
+    DN(dnnl_memory_set_data_handle(y->bias, m->b[n->branch][l]));
+    dnnl_exec_arg_t a[5] = {{DNNL_ARG_SRC, y->src},
+                            {DNNL_ARG_WEIGHTS, y->w},
+                            {DNNL_ARG_BIAS, y->bias},
+                            {DNNL_ARG_DST, y->dst},
+                            {DNNL_ARG_SCRATCHPAD, n->scratch_mem}};
+    double t0 = now_s();
+    DN(dnnl_primitive_execute(y->fwd, n->stream, 5, a));
+    DN(dnnl_stream_wait(n->stream));
+    n->st.fwd_conv_s += now_s() - t0;
+  }
+  return run_reorder(n, &n->out, n->L[n->nl - 1].act, logits);
+}
+
+kpcn_status kpcn_net_forward(kpcn_net *n, const float *input, float *logits) {
+  if (!n || !input || !logits)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_forward: NULL argument");
+  thr_guard g = thr_push(n->nt);
+  double t0 = now_s();
+  kpcn_status s = forward(n, input, logits);
+  n->st.fwd_s += now_s() - t0;
+  n->st.n_fwd++;
+  thr_pop(g);
+  return s;
+}
+
+static kpcn_status backward(kpcn_net *n, const float *dlogits, float *dinput) {
+  const kpcn_model *m = n->model;
+  int cur = 0;
+  KPCN_TRY(run_reorder(n, &n->dout_in, dlogits, n->dbuf[cur]));
+  for (int l = n->nl - 1; l >= 0; l--) {
+    layer *y = &n->L[l];
+    double t0;
+    DN(dnnl_memory_set_data_handle(y->ddst, n->dbuf[cur]));
+    if (y->has_relu) {
+      dnnl_exec_arg_t a[4] = {{DNNL_ARG_DST, y->dst},
+                              {DNNL_ARG_DIFF_DST, y->ddst},
+                              {DNNL_ARG_DIFF_SRC, y->ddst},
+                              {DNNL_ARG_SCRATCHPAD, n->scratch_mem}};
+      DN(dnnl_primitive_execute(y->relu, n->stream, 4, a));
+    }
+    DN(dnnl_memory_set_data_handle(y->db, y->gb));
+    dnnl_exec_arg_t aw[5] = {{DNNL_ARG_SRC, y->src},
+                             {DNNL_ARG_DIFF_DST, y->ddst},
+                             {DNNL_ARG_DIFF_WEIGHTS, y->dw},
+                             {DNNL_ARG_DIFF_BIAS, y->db},
+                             {DNNL_ARG_SCRATCHPAD, n->scratch_mem}};
+    t0 = now_s();
+    DN(dnnl_primitive_execute(y->bwdw, n->stream, 5, aw));
+    DN(dnnl_stream_wait(n->stream));
+    n->st.bwd_conv_s += now_s() - t0;
+    KPCN_TRY(run_reorder(n, &y->dw_out, y->dwp, y->gw));
+    if (y->bwdd) {
+      KPCN_TRY(run_reorder(n, &y->bw_in, m->w[n->branch][l], y->bwp));
+      DN(dnnl_memory_set_data_handle(y->dsrc, n->dbuf[cur ^ 1]));
+      dnnl_exec_arg_t ad[4] = {{DNNL_ARG_DIFF_DST, y->ddst},
+                               {DNNL_ARG_WEIGHTS, y->bw},
+                               {DNNL_ARG_DIFF_SRC, y->dsrc},
+                               {DNNL_ARG_SCRATCHPAD, n->scratch_mem}};
+      t0 = now_s();
+      DN(dnnl_primitive_execute(y->bwdd, n->stream, 4, ad));
+      DN(dnnl_stream_wait(n->stream));
+      n->st.bwd_conv_s += now_s() - t0;
+      cur ^= 1;
+    }
+  }
+  if (n->o.input_grad) KPCN_TRY(run_reorder(n, &n->dinput_out, n->dbuf[cur], dinput));
+  return KPCN_OK;
+}
+
+kpcn_status kpcn_net_backward(kpcn_net *n, const float *dlogits, float *dinput) {
+  if (!n || !dlogits)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_backward: NULL argument");
+  if (!n->o.training)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "kpcn_net_backward: net was created for inference (options.training = 0)");
+  if (n->st.n_fwd == 0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_backward: no forward pass to differentiate");
+  if (n->o.input_grad && !dinput)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_backward: dinput is NULL but the net "
+                                                "was created with input_grad");
+  thr_guard g = thr_push(n->nt);
+  double t0 = now_s();
+  kpcn_status s = backward(n, dlogits, dinput);
+  n->st.bwd_s += now_s() - t0;
+  n->st.n_bwd++;
+  thr_pop(g);
+  return s;
+}
+
+int kpcn_net_param_count(const kpcn_net *n) { return n ? 2 * n->nl : 0; }
+
+kpcn_status kpcn_net_params(kpcn_net *n, kpcn_param *out, int max) {
+  if (!n || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_params: NULL argument");
+  if (max < 2 * n->nl)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_params: max = %d < %d parameters", max,
+                     2 * n->nl);
+  for (int l = 0; l < n->nl; l++) {
+    layer *y = &n->L[l];
+    for (int isb = 0; isb < 2; isb++) {
+      kpcn_param *p = &out[2 * l + isb];
+      snprintf(p->name, sizeof p->name, "%s.conv%d.%s", kpcn_nn_branch_names[n->branch], l,
+               isb ? "bias" : "weight");
+      p->value = isb ? n->model->b[n->branch][l] : n->model->w[n->branch][l];
+      p->grad = n->o.training ? (isb ? y->gb : y->gw) : NULL;
+      p->count = isb ? (size_t)y->cout : (size_t)y->cout * y->cin * y->k * y->k;
+    }
+  }
+  return KPCN_OK;
+}
+
+void kpcn_net_get_stats(const kpcn_net *n, kpcn_net_stats *s) {
+  if (!n || !s) return;
+  *s = n->st;
+  s->bytes = n->bytes;
+}
+
+const char *kpcn_net_impl_name(const kpcn_net *n, int l) {
+  return n && l >= 0 && l < n->nl ? n->impl[l] : "";
+}

@@ -1,0 +1,192 @@
+/* Per-primitive hit shading (position, normals, Tungsten's uv parametrisation) and
+ * uniform-area sampling of emissive primitives. Hit points are re-projected onto the
+ * analytic surface (planes, sphere) or rebuilt from barycentrics (triangles), so the
+ * float-robust offset below gets an accurate point to push off from. */
+#include "render/render_internal.h"
+
+#include <math.h>
+#include <string.h>
+
+static inline float clamp01(float x) { return x < 0.0f ? 0.0f : (x > 1.0f ? 1.0f : x); }
+
+static inline kpcn_vec3 mesh_vtx(const kpcn_mesh *m, unsigned i) {
+  return kv3(m->pos[3 * i], m->pos[3 * i + 1], m->pos[3 * i + 2]);
+}
+
+void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_vec3 d, float t,
+                   unsigned prim_id, float bu, float bv, kpcn_hit *h) {
+  (void)s;
+  h->prim = p;
+  h->t = t;
+  kpcn_vec3 x = kv3_madd(o, d, t);
+  switch (p->type) {
+  case KPCN_PRIM_QUAD: {
+    kpcn_vec3 r = kv3_sub(x, p->base);
+    x = kv3_sub(x, kv3_scale(p->n, kv3_dot(r, p->n)));
+    r = kv3_sub(x, p->base);
+    h->ng = p->n;
+    h->u = clamp01(kv3_dot(r, p->e0) * p->inv_e0sq);
+    h->v = clamp01(kv3_dot(r, p->e1) * p->inv_e1sq);
+    break;
+  }
+  case KPCN_PRIM_CUBE: {
+    kpcn_vec3 r = kv3_sub(x, p->center);
+    float l[3] = {kv3_dot(r, p->axis[0]), kv3_dot(r, p->axis[1]), kv3_dot(r, p->axis[2])};
+    float hf[3] = {p->half.x, p->half.y, p->half.z};
+    int dim = 0;
+    float best = fabsf(l[0]) - hf[0];
+    for (int i = 1; i < 3; i++)
+      if (fabsf(l[i]) - hf[i] > best) best = fabsf(l[i]) - hf[i], dim = i;
+    float sgn = l[dim] < 0.0f ? -1.0f : 1.0f;
+    h->ng = kv3_scale(p->axis[dim], sgn);
+    x = kv3_madd(x, p->axis[dim], sgn * hf[dim] - l[dim]); /* onto the face plane */
+    float uvw[3];
+    for (int i = 0; i < 3; i++) uvw[i] = clamp01(l[i] / hf[i] * 0.5f + 0.5f);
+    h->u = uvw[(dim + 1) % 3];
+    h->v = uvw[(dim + 2) % 3];
+    break;
+  }
+  case KPCN_PRIM_SPHERE: {
+    kpcn_vec3 n = kv3_normalize(kv3_sub(x, p->center));
+    x = kv3_madd(p->center, n, p->radius);
+    h->ng = n;
+    kpcn_vec3 l = kpcn_frame_to_local(&p->frame, n);
+    h->u = atan2f(l.y, l.x) * KPCN_INV_2PI + 0.5f;
+    h->v = acosf(fmaxf(-1.0f, fminf(1.0f, l.z))) * KPCN_INV_PI;
+    break;
+  }
+  case KPCN_PRIM_DISK: {
+    kpcn_vec3 r = kv3_sub(x, p->center);
+    x = kv3_sub(x, kv3_scale(p->n, kv3_dot(r, p->n)));
+    r = kv3_sub(x, p->center);
+    h->ng = p->n;
+    float a = kv3_dot(r, p->frame.b), b = kv3_dot(r, p->frame.t);
+    h->v = fminf(1.0f, kv3_length(r) / p->radius);
+    h->u = (a == 0.0f && b == 0.0f) ? 0.0f : atan2f(b, a) * KPCN_INV_2PI + 0.5f;
+    break;
+  }
+  case KPCN_PRIM_MESH: {
+    const kpcn_mesh *m = &p->mesh;
+    const unsigned *id = m->idx + 3 * prim_id;
+    kpcn_vec3 v0 = mesh_vtx(m, id[0]), v1 = mesh_vtx(m, id[1]), v2 = mesh_vtx(m, id[2]);
+    float b0 = 1.0f - bu - bv;
+    x = kv3_add(kv3_add(kv3_scale(v0, b0), kv3_scale(v1, bu)), kv3_scale(v2, bv));
+    kpcn_vec3 ng = kv3_normalize(kv3_cross(kv3_sub(v1, v0), kv3_sub(v2, v0)));
+    if (m->nrm) {
+      const float *n0 = m->nrm + 3 * id[0], *n1 = m->nrm + 3 * id[1], *n2 = m->nrm + 3 * id[2];
+      kpcn_vec3 ns = kv3(b0 * n0[0] + bu * n1[0] + bv * n2[0], b0 * n0[1] + bu * n1[1] + bv * n2[1],
+                         b0 * n0[2] + bu * n1[2] + bv * n2[2]);
+      ns = kv3_normalize(ns);
+      /* vertex normals define the outside; orient the face normal with them */
+      if (kv3_dot(ns, ng) < 0.0f) ng = kv3_neg(ng);
+      h->ns = (m->smooth && kv3_length2(ns) > 0.5f) ? ns : ng;
+    } else {
+      h->ns = ng;
+    }
+    h->ng = ng;
+    if (m->uv) {
+      const float *t0 = m->uv + 2 * id[0], *t1 = m->uv + 2 * id[1], *t2 = m->uv + 2 * id[2];
+      h->u = b0 * t0[0] + bu * t1[0] + bv * t2[0];
+      h->v = b0 * t0[1] + bu * t1[1] + bv * t2[1];
+    } else {
+      h->u = bu, h->v = bv;
+    }
+    h->p = x;
+    return;
+  }
+  case KPCN_PRIM_INFINITE_SPHERE: break;
+  }
+  h->ns = h->ng;
+  h->p = x;
+}
+
+kpcn_vec3 kpcn_prim_emission(const kpcn_prim *p, const kpcn_hit *h, kpcn_vec3 d) {
+  if (!p->emissive || kv3_dot(d, h->ng) >= 0.0f) return kv3s(0.0f);
+  return p->emission;
+}
+
+void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_point *lp) {
+  lp->pdf_area = 1.0f / p->area;
+  switch (p->type) {
+  case KPCN_PRIM_QUAD:
+    lp->p = kv3_add(kv3_add(p->base, kv3_scale(p->e0, u1)), kv3_scale(p->e1, u2));
+    lp->n = p->n;
+    break;
+  case KPCN_PRIM_CUBE: {
+    /* pick one of the 6 faces by area, reuse u1 inside it */
+    float t = u1 * p->face_cdf[2];
+    int dim = t < p->face_cdf[0] ? 0 : (t < p->face_cdf[1] ? 1 : 2);
+    float lo = dim == 0 ? 0.0f : p->face_cdf[dim - 1], hi = p->face_cdf[dim];
+    float w = (t - lo) / (hi - lo);
+    float sgn = w < 0.5f ? -1.0f : 1.0f;
+    w = w < 0.5f ? 2.0f * w : 2.0f * w - 1.0f;
+    float hf[3] = {p->half.x, p->half.y, p->half.z};
+    int a = (dim + 1) % 3, b = (dim + 2) % 3;
+    kpcn_vec3 q = p->center;
+    q = kv3_madd(q, p->axis[dim], sgn * hf[dim]);
+    q = kv3_madd(q, p->axis[a], (2.0f * w - 1.0f) * hf[a]);
+    q = kv3_madd(q, p->axis[b], (2.0f * u2 - 1.0f) * hf[b]);
+    lp->p = q;
+    lp->n = kv3_scale(p->axis[dim], sgn);
+    break;
+  }
+  case KPCN_PRIM_SPHERE: {
+    kpcn_vec3 n = kpcn_warp_uniform_sphere(u1, u2);
+    lp->p = kv3_madd(p->center, n, p->radius);
+    lp->n = n;
+    break;
+  }
+  case KPCN_PRIM_DISK: {
+    float x, y;
+    kpcn_warp_concentric_disk(u1, u2, &x, &y);
+    lp->p = kv3_add(p->center, kv3_add(kv3_scale(p->frame.b, x * p->radius), kv3_scale(p->frame.t, y * p->radius)));
+    lp->n = p->n;
+    break;
+  }
+  case KPCN_PRIM_MESH: {
+    const kpcn_mesh *m = &p->mesh;
+    float pmf;
+    int tri = kpcn_distrib1d_sample_discrete(&m->area_cdf, u1, &pmf);
+    float lo = m->area_cdf.cdf[tri], hi = m->area_cdf.cdf[tri + 1];
+    float w = hi > lo ? (u1 - lo) / (hi - lo) : 0.5f;
+    w = fminf(fmaxf(w, 0.0f), 0.99999994f);
+    float b0, b1;
+    kpcn_warp_uniform_triangle(w, u2, &b0, &b1);
+    const unsigned *id = m->idx + 3 * tri;
+    kpcn_vec3 v0 = mesh_vtx(m, id[0]), v1 = mesh_vtx(m, id[1]), v2 = mesh_vtx(m, id[2]);
+    lp->p = kv3_add(kv3_add(kv3_scale(v0, b0), kv3_scale(v1, b1)), kv3_scale(v2, 1.0f - b0 - b1));
+    kpcn_vec3 ng = kv3_normalize(kv3_cross(kv3_sub(v1, v0), kv3_sub(v2, v0)));
+    if (m->nrm) {
+      const float *n0 = m->nrm + 3 * id[0], *n1 = m->nrm + 3 * id[1], *n2 = m->nrm + 3 * id[2];
+      kpcn_vec3 ns = kv3(n0[0] + n1[0] + n2[0], n0[1] + n1[1] + n2[1], n0[2] + n1[2] + n2[2]);
+      if (kv3_dot(ns, ng) < 0.0f) ng = kv3_neg(ng);
+    }
+    lp->n = ng;
+    break;
+  }
+  case KPCN_PRIM_INFINITE_SPHERE:
+    memset(lp, 0, sizeof(*lp));
+    break;
+  }
+}
+
+static inline int f2i(float f) {
+  int i;
+  memcpy(&i, &f, 4);
+  return i;
+}
+static inline float i2f(int i) {
+  float f;
+  memcpy(&f, &i, 4);
+  return f;
+}
+
+kpcn_vec3 kpcn_offset_ray(kpcn_vec3 p, kpcn_vec3 n) {
+  const float origin = 1.0f / 32.0f, float_scale = 1.0f / 65536.0f, int_scale = 256.0f;
+  int ox = (int)(int_scale * n.x), oy = (int)(int_scale * n.y), oz = (int)(int_scale * n.z);
+  kpcn_vec3 pi = kv3(i2f(f2i(p.x) + (p.x < 0.0f ? -ox : ox)), i2f(f2i(p.y) + (p.y < 0.0f ? -oy : oy)),
+                     i2f(f2i(p.z) + (p.z < 0.0f ? -oz : oz)));
+  return kv3(fabsf(p.x) < origin ? p.x + float_scale * n.x : pi.x,
+             fabsf(p.y) < origin ? p.y + float_scale * n.y : pi.y,
+             fabsf(p.z) < origin ? p.z + float_scale * n.z : pi.z);
+}

@@ -1,0 +1,188 @@
+/* The render loop: rows of the (cropped) image are distributed over OpenMP threads; each
+ * pixel traces all of its samples in order with its own sample sequence and keeps per
+ * channel Welford accumulators (mean, M2) in double. Nothing is shared between pixels, so
+ * the result is bit-identical whatever the thread count or schedule.
+ *
+ * Filtering is done by importance sampling the reconstruction filter (Tungsten's approach):
+ * every sample has weight 1 and lands in its own pixel, so the variance of the mean is the
+ * plain sample variance / n. */
+#include "core/internal.h"
+#include "render/render_internal.h"
+
+#include <math.h>
+#include <omp.h>
+#include <stdio.h>
+#include <pmmintrin.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <xmmintrin.h>
+
+kpcn_render_settings kpcn_render_settings_defaults(void) {
+  kpcn_render_settings s;
+  memset(&s, 0, sizeof(s));
+  s.spp = 0;
+  s.seed = 1;
+  s.nthreads = 0;
+  s.max_bounces = -1;
+  s.lights = KPCN_LIGHTS_SCENE;
+  return s;
+}
+
+enum { NCH = 17 }; /* color 3, diffuse 3, specular 3, albedo 3, normal 3, depth, visibility */
+static const int buf_first[KPCN_BUF_COUNT] = {0, 3, 6, 9, 12, 15, 16};
+
+static double now_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static void sample_to_channels(const kpcn_sample_out *so, float *v) {
+  kpcn_vec3 c = kv3_add(so->diffuse, so->specular);
+  const kpcn_vec3 vs[5] = {c, so->diffuse, so->specular, so->albedo, so->normal};
+  for (int b = 0; b < 5; b++) {
+    v[3 * b] = vs[b].x;
+    v[3 * b + 1] = vs[b].y;
+    v[3 * b + 2] = vs[b].z;
+  }
+  v[15] = so->depth;
+  v[16] = so->visibility;
+}
+
+kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *settings,
+                           kpcn_aov_set **out, kpcn_render_stats *stats) {
+  if (!scene || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_render: NULL scene or out");
+  *out = NULL;
+  kpcn_render_settings st = settings ? *settings : kpcn_render_settings_defaults();
+  kpcn_render_ctx ctx;
+  memset(&ctx, 0, sizeof(ctx));
+  ctx.scene = scene;
+  ctx.width = st.width > 0 ? st.width : scene->cam.width;
+  ctx.height = st.height > 0 ? st.height : scene->cam.height;
+  if ((st.width > 0) != (st.height > 0) || st.width < 0 || st.height < 0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "resolution override: give both width and height (> 0)");
+  KPCN_TRY(kpcn_check_size(ctx.width, ctx.height, "render resolution"));
+  int spp = st.spp > 0 ? st.spp : scene->spp;
+  if (st.spp < 0 || spp > (1 << 24))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "spp: %d is out of range [1, 2^24]", st.spp);
+  int cx = 0, cy = 0, cw = ctx.width, chh = ctx.height;
+  if (st.crop_w > 0 || st.crop_h > 0 || st.crop_x || st.crop_y) {
+    cx = st.crop_x, cy = st.crop_y, cw = st.crop_w, chh = st.crop_h;
+    if (cx < 0 || cy < 0 || cw <= 0 || chh <= 0 || cx + cw > ctx.width || cy + chh > ctx.height)
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "crop %d,%d,%d,%d lies outside the %dx%d image", cx, cy,
+                       cw, chh, ctx.width, ctx.height);
+  }
+  ctx.ratio = (float)ctx.height / (float)ctx.width;
+  ctx.max_bounces = st.max_bounces >= 0 ? st.max_bounces : scene->max_bounces;
+  ctx.min_bounces = scene->min_bounces;
+  kpcn_light_strategy ls = st.lights;
+  if (ls == KPCN_LIGHTS_SCENE) ls = scene->light_sampling ? KPCN_LIGHTS_MIS : KPCN_LIGHTS_BSDF_ONLY;
+  ctx.nee = ls == KPCN_LIGHTS_MIS || ls == KPCN_LIGHTS_NEE_ONLY;
+  ctx.bsdf_emission = ls == KPCN_LIGHTS_MIS || ls == KPCN_LIGHTS_BSDF_ONLY;
+  ctx.mis = ls == KPCN_LIGHTS_MIS;
+  ctx.color_only = st.color_only;
+  ctx.seed = (uint64_t)st.seed;
+  kpcn_filter_table_init(&ctx.filter, scene->cam.filter);
+
+  kpcn_aov_set *set = NULL;
+  KPCN_TRY(kpcn_aov_create(&set, cw, chh));
+  for (int b = 0; b < KPCN_BUF_COUNT; b++) {
+    if (st.color_only && b != KPCN_BUF_COLOR) continue;
+    kpcn_status s2 = kpcn_aov_add(set, (kpcn_buffer)b, 1);
+    if (s2 != KPCN_OK) {
+      kpcn_aov_destroy(set);
+      return s2;
+    }
+  }
+  set->spp = spp;
+  set->seed = st.seed;
+  snprintf(set->scene, sizeof(set->scene), "%s", scene->name);
+  snprintf(set->version, sizeof(set->version), "%s", KPCN_VERSION_STRING);
+
+  const size_t plane = (size_t)cw * (size_t)chh;
+  int nthreads = kpcn_resolve_threads(st.nthreads);
+  volatile int cancel = 0;
+  int rows_done = 0;
+  uint64_t total_rays = 0, nonfinite = 0;
+  unsigned saved_csr = _mm_getcsr();
+  double t0 = now_s();
+#pragma omp parallel num_threads(nthreads) reduction(+ : total_rays, nonfinite)
+  {
+    /* denormals are slow and never matter for radiance */
+    _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+    _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+#pragma omp for schedule(dynamic, 1)
+    for (int row = 0; row < chh; row++) {
+      if (cancel) continue;
+      int py = cy + row;
+      for (int col = 0; col < cw; col++) {
+        int px = cx + col;
+        double mean[NCH], m2[NCH];
+        memset(mean, 0, sizeof(mean));
+        memset(m2, 0, sizeof(m2));
+        for (int i = 0; i < spp; i++) {
+          kpcn_sampler smp;
+          kpcn_sampler_start(&smp, ctx.seed, (uint32_t)px, (uint32_t)py, (uint32_t)i);
+          kpcn_sample_out so;
+          kpcn_trace_sample(&ctx, px, py, &smp, &so);
+          total_rays += so.rays;
+          float v[NCH];
+          sample_to_channels(&so, v);
+          int ok = 1;
+          for (int c = 0; c < NCH; c++) ok &= isfinite(v[c]) != 0;
+          if (!ok) { /* a NaN/Inf sample (should not happen) counts as black */
+            nonfinite++;
+            memset(v, 0, sizeof(v));
+          }
+          double inv_n = 1.0 / (double)(i + 1);
+          for (int c = 0; c < NCH; c++) {
+            double delta = (double)v[c] - mean[c];
+            mean[c] += delta * inv_n;
+            m2[c] += delta * ((double)v[c] - mean[c]);
+          }
+        }
+        size_t pi = (size_t)row * (size_t)cw + (size_t)col;
+        for (int b = 0; b < KPCN_BUF_COUNT; b++) {
+          if (!set->buf[b]) continue;
+          int nc = kpcn_buffer_channels((kpcn_buffer)b);
+          double var = 0.0;
+          for (int c = 0; c < nc; c++) {
+            int ch = buf_first[b] + c;
+            set->buf[b][(size_t)c * plane + pi] = (float)mean[ch];
+            if (spp > 1) var += m2[ch] / ((double)(spp - 1) * (double)spp);
+          }
+          if (set->var[b]) set->var[b][pi] = (float)(var / nc);
+        }
+      }
+#pragma omp atomic
+      rows_done++;
+      if (omp_get_thread_num() == 0 && st.progress) {
+        int done;
+#pragma omp atomic read
+        done = rows_done;
+        if (st.progress(st.progress_user, (double)done / chh)) cancel = 1;
+      }
+    }
+  }
+  _mm_setcsr(saved_csr);
+  double secs = now_s() - t0;
+  if (cancel) {
+    kpcn_aov_destroy(set);
+    return kpcn_fail(KPCN_ERR_CANCELLED, "render of '%s' cancelled", scene->name);
+  }
+  if (st.progress) st.progress(st.progress_user, 1.0);
+  if (stats) {
+    stats->seconds = secs;
+    stats->samples = (uint64_t)plane * (uint64_t)spp;
+    stats->rays = total_rays;
+  }
+  (void)nonfinite;
+  *out = set;
+  return KPCN_OK;
+}
+
+kpcn_status kpcn_render(const kpcn_scene *scene, const kpcn_render_settings *settings,
+                        kpcn_aov_set **out) {
+  return kpcn_render_ex(scene, settings, out, NULL);
+}

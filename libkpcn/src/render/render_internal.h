@@ -1,0 +1,69 @@
+/* Internals of the path tracer shared by render.c (film, threads), integrator.c (paths) and
+ * geometry.c (hit shading, light sampling). Not installed; no Embree types leak out of the
+ * .c files that trace rays. */
+#ifndef KPCN_RENDER_INTERNAL_H
+#define KPCN_RENDER_INTERNAL_H
+
+#include "kpcn/render.h"
+#include "render/sampler.h"
+#include "scene/scene_internal.h"
+
+/* Everything known about a surface hit. */
+typedef struct kpcn_hit {
+  const kpcn_prim *prim;
+  kpcn_vec3 p;   /* position */
+  kpcn_vec3 ng;  /* unit geometric normal, the primitive's outward/front orientation */
+  kpcn_vec3 ns;  /* unit shading normal, same hemisphere as ng */
+  float u, v;    /* texture coordinates */
+  float t;       /* ray distance */
+} kpcn_hit;
+
+/* A point sampled on an area light. */
+typedef struct kpcn_light_point {
+  kpcn_vec3 p, n;    /* position and front normal */
+  float pdf_area;    /* area density (1/area for uniform sampling) */
+} kpcn_light_point;
+
+/* Filter importance sampling tables (Gaussian uses an inverted tabulated CDF). */
+#define KPCN_FILTER_TABLE 256
+typedef struct kpcn_filter_table {
+  kpcn_filter_type type;
+  float inv_cdf[KPCN_FILTER_TABLE + 1]; /* gaussian: offset for u = i / N */
+} kpcn_filter_table;
+
+typedef struct kpcn_render_ctx {
+  const kpcn_scene *scene;
+  int width, height;        /* full image (after override) */
+  float ratio;              /* height / width */
+  int max_bounces, min_bounces;
+  int nee, bsdf_emission;   /* what direct light estimators are active */
+  int mis;                  /* power-heuristic weights (both estimators on) */
+  int color_only;
+  uint64_t seed;
+  kpcn_filter_table filter;
+} kpcn_render_ctx;
+
+/* Per-sample outputs (DESIGN.md §4). */
+typedef struct kpcn_sample_out {
+  kpcn_vec3 diffuse, specular, albedo, normal;
+  float depth, visibility;
+  uint32_t rays; /* Embree queries issued */
+} kpcn_sample_out;
+
+/* geometry.c */
+void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_vec3 d, float t,
+                   unsigned prim_id, float bu, float bv, kpcn_hit *h);
+/* Emitted radiance leaving the hit towards -d (one-sided: front face only). */
+kpcn_vec3 kpcn_prim_emission(const kpcn_prim *p, const kpcn_hit *h, kpcn_vec3 d);
+/* Uniform-area sample of a point on an emissive primitive. */
+void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_point *lp);
+/* Float-robust ray origin: p pushed off the surface along n (Waechter & Binder 2019). */
+kpcn_vec3 kpcn_offset_ray(kpcn_vec3 p, kpcn_vec3 n);
+
+/* integrator.c */
+void kpcn_filter_table_init(kpcn_filter_table *t, kpcn_filter_type type);
+/* Traces one camera sample through pixel (px, py) of the full image. */
+void kpcn_trace_sample(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler *smp,
+                       kpcn_sample_out *out);
+
+#endif

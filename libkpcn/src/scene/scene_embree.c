@@ -1,0 +1,130 @@
+/* Embree 3 geometry for the loaded primitives. Analytic shapes use Embree's own analytic
+ * types (quads, sphere points, oriented discs) so the silhouettes are exact; meshes are
+ * triangle geometries. */
+#include "core/internal.h"
+#include "scene/scene_internal.h"
+
+#include <embree3/rtcore.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static void set_v3(float *dst, kpcn_vec3 v) {
+  dst[0] = v.x, dst[1] = v.y, dst[2] = v.z;
+}
+
+static kpcn_status embree_error(RTCDevice dev, const char *what) {
+  return kpcn_fail(KPCN_ERR_INTERNAL, "Embree failed while %s (error %d)", what, (int)rtcGetDeviceError(dev));
+}
+
+static RTCGeometry make_geometry(RTCDevice dev, const kpcn_prim *p) {
+  RTCGeometry g = NULL;
+  switch (p->type) {
+  case KPCN_PRIM_QUAD: {
+    g = rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_QUAD);
+    float *v = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 12, 4);
+    unsigned *q = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, 16, 1);
+    if (!v || !q) break;
+    set_v3(v + 0, p->base);
+    set_v3(v + 3, kv3_add(p->base, p->e0));
+    set_v3(v + 6, kv3_add(kv3_add(p->base, p->e0), p->e1));
+    set_v3(v + 9, kv3_add(p->base, p->e1));
+    q[0] = 0, q[1] = 1, q[2] = 2, q[3] = 3;
+    break;
+  }
+  case KPCN_PRIM_CUBE: {
+    g = rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_QUAD);
+    float *v = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 12, 8);
+    unsigned *q = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, 16, 6);
+    if (!v || !q) break;
+    for (int i = 0; i < 8; i++) {
+      kpcn_vec3 c = p->center;
+      c = kv3_madd(c, p->axis[0], (i & 1) ? p->half.x : -p->half.x);
+      c = kv3_madd(c, p->axis[1], (i & 2) ? p->half.y : -p->half.y);
+      c = kv3_madd(c, p->axis[2], (i & 4) ? p->half.z : -p->half.z);
+      set_v3(v + 3 * i, c);
+    }
+    static const unsigned faces[6][4] = {{0, 2, 6, 4}, {1, 5, 7, 3}, {0, 4, 5, 1},
+                                         {2, 3, 7, 6}, {0, 1, 3, 2}, {4, 6, 7, 5}};
+    memcpy(q, faces, sizeof(faces));
+    break;
+  }
+  case KPCN_PRIM_SPHERE: {
+    g = rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_SPHERE_POINT);
+    float *v = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4, 16, 1);
+    if (!v) break;
+    set_v3(v, p->center);
+    v[3] = p->radius;
+    break;
+  }
+  case KPCN_PRIM_DISK: {
+    g = rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_ORIENTED_DISC_POINT);
+    float *v = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4, 16, 1);
+    float *n = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_NORMAL, 0, RTC_FORMAT_FLOAT3, 12, 1);
+    if (!v || !n) break;
+    set_v3(v, p->center);
+    v[3] = p->radius;
+    set_v3(n, p->n);
+    break;
+  }
+  case KPCN_PRIM_MESH: {
+    const kpcn_mesh *m = &p->mesh;
+    g = rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_TRIANGLE);
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, m->pos, 0, 12,
+                               (size_t)m->nverts);
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, m->idx, 0, 12,
+                               (size_t)m->ntris);
+    break;
+  }
+  case KPCN_PRIM_INFINITE_SPHERE: break;
+  }
+  return g;
+}
+
+kpcn_status kpcn_scene_build_embree(kpcn_scene *s) {
+  RTCDevice dev = rtcNewDevice(NULL);
+  if (!dev) return kpcn_fail(KPCN_ERR_INTERNAL, "cannot create the Embree device (error %d)",
+                             (int)rtcGetDeviceError(NULL));
+  s->rtc_device = dev;
+  RTCScene sc = rtcNewScene(dev);
+  if (!sc) return embree_error(dev, "creating the scene");
+  s->rtc_scene = sc;
+  rtcSetSceneBuildQuality(sc, RTC_BUILD_QUALITY_HIGH);
+  s->geom_to_prim = kpcn_calloc((size_t)s->nprims + 1, sizeof(unsigned), "geometry table");
+  if (!s->geom_to_prim) return KPCN_ERR_OUT_OF_MEMORY;
+  for (int i = 0; i < s->nprims; i++) {
+    kpcn_prim *p = &s->prims[i];
+    if (p->type == KPCN_PRIM_INFINITE_SPHERE) continue;
+    RTCGeometry g = make_geometry(dev, p);
+    if (!g || rtcGetDeviceError(dev) != RTC_ERROR_NONE) {
+      if (g) rtcReleaseGeometry(g);
+      return embree_error(dev, "creating a geometry");
+    }
+    rtcCommitGeometry(g);
+    p->geom_id = rtcAttachGeometry(sc, g);
+    rtcReleaseGeometry(g);
+    s->geom_to_prim[p->geom_id] = (unsigned)i;
+    s->ngeoms = (int)p->geom_id + 1;
+  }
+  rtcCommitScene(sc);
+  if (rtcGetDeviceError(dev) != RTC_ERROR_NONE) return embree_error(dev, "building the BVH");
+  struct RTCBounds b;
+  rtcGetSceneBounds(sc, &b);
+  float r = 1.0f;
+  if (s->ngeoms > 0 && isfinite(b.lower_x) && b.upper_x >= b.lower_x) {
+    float dx = b.upper_x - b.lower_x, dy = b.upper_y - b.lower_y, dz = b.upper_z - b.lower_z;
+    r = 0.5f * sqrtf(dx * dx + dy * dy + dz * dz);
+    float m = fmaxf(fmaxf(fabsf(b.lower_x), fabsf(b.upper_x)), fmaxf(fabsf(b.lower_y), fabsf(b.upper_y)));
+    m = fmaxf(m, fmaxf(fabsf(b.lower_z), fabsf(b.upper_z)));
+    r = fmaxf(r, m);
+  }
+  s->scene_radius = fmaxf(r, 1e-3f);
+  return KPCN_OK;
+}
+
+void kpcn_scene_release_embree(kpcn_scene *s) {
+  if (s->rtc_scene) rtcReleaseScene((RTCScene)s->rtc_scene);
+  if (s->rtc_device) rtcReleaseDevice((RTCDevice)s->rtc_device);
+  s->rtc_scene = s->rtc_device = NULL;
+}

@@ -1,0 +1,559 @@
+/* scene.json loading (Tungsten's format, the subset in docs/renderer.md). Every object's
+ * fields are checked against the list this loader understands, so an unsupported feature is
+ * an error naming its JSON path instead of a silently different image. */
+#include "core/internal.h"
+#include "scene/scene_internal.h"
+
+#include <cjson/cJSON.h>
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define JP 384 /* JSON path buffer */
+
+/* Fails on any member of obj not listed in `known` (NULL-terminated). */
+static kpcn_status check_fields(const cJSON *obj, const char *path, const char *const *known) {
+  for (const cJSON *it = obj->child; it; it = it->next) {
+    int ok = 0;
+    for (const char *const *k = known; *k; k++)
+      if (it->string && strcmp(it->string, *k) == 0) ok = 1;
+    if (!ok)
+      return kpcn_fail(KPCN_ERR_UNSUPPORTED, "%s.%s: unsupported field", path,
+                       it->string ? it->string : "?");
+  }
+  return KPCN_OK;
+}
+
+static kpcn_status get_number(const cJSON *obj, const char *key, const char *path, double *v,
+                              int *found) {
+  const cJSON *it = cJSON_GetObjectItemCaseSensitive(obj, key);
+  if (found) *found = it != NULL;
+  if (!it) return KPCN_OK;
+  if (!cJSON_IsNumber(it)) return kpcn_fail(KPCN_ERR_FORMAT, "%s.%s: expected a number", path, key);
+  if (!isfinite(it->valuedouble))
+    return kpcn_fail(KPCN_ERR_NONFINITE, "%s.%s: non-finite value", path, key);
+  *v = it->valuedouble;
+  return KPCN_OK;
+}
+
+static kpcn_status get_int(const cJSON *obj, const char *key, const char *path, int *v, int lo,
+                           int hi) {
+  double d = *v;
+  int f;
+  KPCN_TRY(get_number(obj, key, path, &d, &f));
+  if (!f) return KPCN_OK;
+  if (d != floor(d) || d < lo || d > hi)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.%s: expected an integer in [%d, %d], got %g", path,
+                     key, lo, hi, d);
+  *v = (int)d;
+  return KPCN_OK;
+}
+
+static kpcn_status get_bool(const cJSON *obj, const char *key, const char *path, int *v) {
+  const cJSON *it = cJSON_GetObjectItemCaseSensitive(obj, key);
+  if (!it) return KPCN_OK;
+  if (!cJSON_IsBool(it)) return kpcn_fail(KPCN_ERR_FORMAT, "%s.%s: expected true or false", path, key);
+  *v = cJSON_IsTrue(it);
+  return KPCN_OK;
+}
+
+/* A field accepted only with the value Tungsten's default behaviour matches. */
+static kpcn_status require_bool(const cJSON *obj, const char *key, const char *path, int want) {
+  int v = want;
+  KPCN_TRY(get_bool(obj, key, path, &v));
+  if (v != want)
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED, "%s.%s: only %s is supported", path, key,
+                     want ? "true" : "false");
+  return KPCN_OK;
+}
+
+static const char *get_string(const cJSON *obj, const char *key) {
+  const cJSON *it = cJSON_GetObjectItemCaseSensitive(obj, key);
+  return cJSON_IsString(it) ? it->valuestring : NULL;
+}
+
+static void join_path(char *out, size_t n, const char *dir, const char *file) {
+  if (file[0] == '/' || !dir || !dir[0])
+    snprintf(out, n, "%s", file);
+  else
+    snprintf(out, n, "%s/%s", dir, file);
+}
+
+/* ---- primitives ---- */
+
+static kpcn_status parse_emission(kpcn_scene *s, kpcn_prim *p, const cJSON *e, const char *path) {
+  if (cJSON_IsNumber(e) || cJSON_IsArray(e)) {
+    float v[3];
+    if (cJSON_IsNumber(e)) {
+      v[0] = v[1] = v[2] = (float)e->valuedouble;
+    } else {
+      if (cJSON_GetArraySize(e) != 3) return kpcn_fail(KPCN_ERR_FORMAT, "%s: expected 3 numbers", path);
+      for (int i = 0; i < 3; i++) {
+        const cJSON *c = cJSON_GetArrayItem(e, i);
+        if (!cJSON_IsNumber(c)) return kpcn_fail(KPCN_ERR_FORMAT, "%s[%d]: expected a number", path, i);
+        v[i] = (float)c->valuedouble;
+      }
+    }
+    for (int i = 0; i < 3; i++)
+      if (!isfinite(v[i]) || v[i] < 0.0f)
+        return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: emission must be finite and >= 0", path);
+    p->emission = kv3(v[0], v[1], v[2]);
+    p->emissive = !kv3_is_zero(p->emission);
+    return KPCN_OK;
+  }
+  if (p->type != KPCN_PRIM_INFINITE_SPHERE)
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                     "%s: textured emission is only supported on infinite_sphere (use a colour)", path);
+  KPCN_TRY(kpcn_texture_parse(s->mats, e, path, 0, &p->emission_tex));
+  p->emissive = 1;
+  return KPCN_OK;
+}
+
+/* Fills the analytic description of p from its transform. */
+static kpcn_status setup_shape(kpcn_prim *p, const kpcn_xform *x, const char *path) {
+  kpcn_vec3 c = kpcn_xform_point(x, kv3s(0));
+  kpcn_vec3 cx = kpcn_xform_column(x, 0), cy = kpcn_xform_column(x, 1), cz = kpcn_xform_column(x, 2);
+  p->center = c;
+  switch (p->type) {
+  case KPCN_PRIM_QUAD: {
+    p->e0 = cx;
+    p->e1 = cz;
+    p->base = kv3_sub(kv3_sub(c, kv3_scale(cx, 0.5f)), kv3_scale(cz, 0.5f));
+    kpcn_vec3 n = kv3_cross(p->e1, p->e0);
+    p->area = kv3_length(n);
+    if (!(p->area > 0.0f)) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.transform: quad has zero area", path);
+    p->n = kv3_scale(n, 1.0f / p->area);
+    p->inv_e0sq = 1.0f / kv3_length2(p->e0);
+    p->inv_e1sq = 1.0f / kv3_length2(p->e1);
+    break;
+  }
+  case KPCN_PRIM_CUBE: {
+    kpcn_vec3 cols[3] = {cx, cy, cz};
+    float h[3];
+    for (int i = 0; i < 3; i++) {
+      h[i] = 0.5f * kv3_length(cols[i]);
+      if (!(h[i] > 0.0f)) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.transform: cube has zero size", path);
+      p->axis[i] = kv3_normalize(cols[i]);
+    }
+    p->half = kv3(h[0], h[1], h[2]);
+    p->face_cdf[0] = 4.0f * h[1] * h[2];
+    p->face_cdf[1] = p->face_cdf[0] + 4.0f * h[2] * h[0];
+    p->face_cdf[2] = p->face_cdf[1] + 4.0f * h[0] * h[1];
+    p->area = 2.0f * p->face_cdf[2];
+    break;
+  }
+  case KPCN_PRIM_SPHERE:
+    p->radius = fmaxf(kv3_length(cx), fmaxf(kv3_length(cy), kv3_length(cz)));
+    if (!(p->radius > 0.0f)) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.transform: sphere has zero radius", path);
+    p->area = 4.0f * KPCN_PI * p->radius * p->radius;
+    p->frame.t = kv3_normalize(cx);
+    p->frame.b = kv3_normalize(cy);
+    p->frame.n = kv3_normalize(cz);
+    break;
+  case KPCN_PRIM_DISK:
+    p->radius = fmaxf(kv3_length(cx), kv3_length(cz));
+    if (!(p->radius > 0.0f)) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.transform: disk has zero radius", path);
+    p->n = kv3_normalize(cy);
+    if (kv3_length2(p->n) == 0.0f) p->n = kpcn_xform_normal(x, kv3(0, 1, 0));
+    p->frame = kpcn_frame_from_normal(p->n);
+    p->area = KPCN_PI * p->radius * p->radius;
+    break;
+  case KPCN_PRIM_MESH: {
+    kpcn_mesh *m = &p->mesh;
+    double area = 0.0;
+    for (int i = 0; i < m->nverts; i++) {
+      kpcn_vec3 v = kpcn_xform_point(x, kv3(m->pos[3 * i], m->pos[3 * i + 1], m->pos[3 * i + 2]));
+      m->pos[3 * i] = v.x, m->pos[3 * i + 1] = v.y, m->pos[3 * i + 2] = v.z;
+      if (m->nrm) {
+        kpcn_vec3 n = kpcn_xform_normal(x, kv3(m->nrm[3 * i], m->nrm[3 * i + 1], m->nrm[3 * i + 2]));
+        m->nrm[3 * i] = n.x, m->nrm[3 * i + 1] = n.y, m->nrm[3 * i + 2] = n.z;
+      }
+    }
+    for (int t = 0; t < m->ntris; t++) {
+      const unsigned *id = m->idx + 3 * t;
+      kpcn_vec3 a = kv3(m->pos[3 * id[0]], m->pos[3 * id[0] + 1], m->pos[3 * id[0] + 2]);
+      kpcn_vec3 b = kv3(m->pos[3 * id[1]], m->pos[3 * id[1] + 1], m->pos[3 * id[1] + 2]);
+      kpcn_vec3 cc = kv3(m->pos[3 * id[2]], m->pos[3 * id[2] + 1], m->pos[3 * id[2] + 2]);
+      area += 0.5 * kv3_length(kv3_cross(kv3_sub(b, a), kv3_sub(cc, a)));
+    }
+    p->area = (float)area;
+    break;
+  }
+  case KPCN_PRIM_INFINITE_SPHERE: break;
+  }
+  return KPCN_OK;
+}
+
+static kpcn_status parse_primitive(kpcn_scene *s, const cJSON *pj, int index) {
+  char path[JP], sub[JP + 64];
+  snprintf(path, sizeof(path), "primitives[%d]", index);
+  if (!cJSON_IsObject(pj)) return kpcn_fail(KPCN_ERR_FORMAT, "%s: expected an object", path);
+  const char *type = get_string(pj, "type");
+  if (!type) return kpcn_fail(KPCN_ERR_FORMAT, "%s.type: missing or not a string", path);
+  kpcn_prim *p = &s->prims[s->nprims];
+  memset(p, 0, sizeof(*p));
+  p->geom_id = ~0u;
+  const char *name = get_string(pj, "name");
+  snprintf(p->name, sizeof(p->name), "%s", name ? name : "");
+  static const char *common[] = {"name", "type", "transform", "bsdf", "emission", "bump_strength",
+                                 "file", "smooth", "backface_culling", "recompute_normals",
+                                 "sample", "cone_angle", NULL};
+  KPCN_TRY(check_fields(pj, path, common));
+  if (strcmp(type, "quad") == 0)
+    p->type = KPCN_PRIM_QUAD;
+  else if (strcmp(type, "cube") == 0)
+    p->type = KPCN_PRIM_CUBE;
+  else if (strcmp(type, "sphere") == 0)
+    p->type = KPCN_PRIM_SPHERE;
+  else if (strcmp(type, "disk") == 0)
+    p->type = KPCN_PRIM_DISK;
+  else if (strcmp(type, "mesh") == 0)
+    p->type = KPCN_PRIM_MESH;
+  else if (strcmp(type, "infinite_sphere") == 0)
+    p->type = KPCN_PRIM_INFINITE_SPHERE;
+  else
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                     "%s.type: unsupported primitive type '%s' (quad, cube, sphere, disk, mesh, "
+                     "infinite_sphere)", path, type);
+  /* type-specific fields present on the wrong type are errors too */
+  const char *mesh_only[] = {"file", "smooth", "backface_culling", "recompute_normals"};
+  for (int i = 0; i < 4; i++)
+    if (p->type != KPCN_PRIM_MESH && cJSON_GetObjectItemCaseSensitive(pj, mesh_only[i]))
+      return kpcn_fail(KPCN_ERR_UNSUPPORTED, "%s.%s: unsupported field for type '%s'", path, mesh_only[i], type);
+  if (p->type != KPCN_PRIM_INFINITE_SPHERE && cJSON_GetObjectItemCaseSensitive(pj, "sample"))
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED, "%s.sample: unsupported field for type '%s'", path, type);
+  if (cJSON_GetObjectItemCaseSensitive(pj, "cone_angle")) {
+    double ca = 90.0;
+    snprintf(sub, sizeof(sub), "%s", path);
+    KPCN_TRY(get_number(pj, "cone_angle", sub, &ca, NULL));
+    if (p->type != KPCN_PRIM_DISK || ca != 90.0)
+      return kpcn_fail(KPCN_ERR_UNSUPPORTED, "%s.cone_angle: only 90 on disks is supported", path);
+  }
+  double bump = 1.0;
+  KPCN_TRY(get_number(pj, "bump_strength", path, &bump, NULL));
+
+  kpcn_xform x;
+  snprintf(sub, sizeof(sub), "%s.transform", path);
+  KPCN_TRY(kpcn_xform_parse(cJSON_GetObjectItemCaseSensitive(pj, "transform"), sub, &x));
+
+  if (p->type == KPCN_PRIM_MESH) {
+    const char *file = get_string(pj, "file");
+    if (!file) return kpcn_fail(KPCN_ERR_FORMAT, "%s.file: missing or not a string", path);
+    char full[2048];
+    join_path(full, sizeof(full), s->base_dir, file);
+    snprintf(sub, sizeof(sub), "%s.file", path);
+    KPCN_TRY(kpcn_mesh_load(full, sub, &p->mesh));
+    p->mesh.smooth = 1;
+    KPCN_TRY(get_bool(pj, "smooth", path, &p->mesh.smooth));
+    KPCN_TRY(require_bool(pj, "backface_culling", path, 0));
+    int recompute = 0;
+    KPCN_TRY(get_bool(pj, "recompute_normals", path, &recompute));
+    if (recompute || !p->mesh.nrm) p->mesh.smooth = p->mesh.smooth && p->mesh.nrm && !recompute;
+    s->ntriangles += p->mesh.ntris;
+  }
+  KPCN_TRY(setup_shape(p, &x, path));
+
+  if (p->type == KPCN_PRIM_INFINITE_SPHERE) {
+    if (s->env_prim >= 0)
+      return kpcn_fail(KPCN_ERR_UNSUPPORTED, "%s: only one infinite_sphere is supported", path);
+    int sample = 1;
+    KPCN_TRY(get_bool(pj, "sample", path, &sample));
+    const cJSON *e = cJSON_GetObjectItemCaseSensitive(pj, "emission");
+    if (!e) return kpcn_fail(KPCN_ERR_FORMAT, "%s.emission: infinite_sphere needs an emission", path);
+    snprintf(sub, sizeof(sub), "%s.emission", path);
+    KPCN_TRY(parse_emission(s, p, e, sub));
+    if (!p->emission_tex) {
+      KPCN_TRY(kpcn_texture_constant(kpcn_material_lib_textures(s->mats), p->emission, &p->emission_tex));
+    }
+    float rot[9];
+    for (int r = 0; r < 3; r++)
+      for (int c = 0; c < 3; c++) rot[3 * r + c] = x.m[r][c];
+    KPCN_TRY(kpcn_envmap_create(p->emission_tex, rot, sample, &s->env));
+    s->env_prim = s->nprims;
+    s->nprims++;
+    return KPCN_OK;
+  }
+
+  const cJSON *bj = cJSON_GetObjectItemCaseSensitive(pj, "bsdf");
+  if (!bj) return kpcn_fail(KPCN_ERR_FORMAT, "%s.bsdf: missing", path);
+  snprintf(sub, sizeof(sub), "%s.bsdf", path);
+  KPCN_TRY(kpcn_bsdf_parse(s->mats, bj, sub, &p->bsdf));
+  const cJSON *e = cJSON_GetObjectItemCaseSensitive(pj, "emission");
+  if (e) {
+    snprintf(sub, sizeof(sub), "%s.emission", path);
+    KPCN_TRY(parse_emission(s, p, e, sub));
+    if (p->emissive && !(p->area > 0.0f) )
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.emission: emitter has zero area", path);
+  }
+  s->nprims++;
+  return KPCN_OK;
+}
+
+/* ---- camera, integrator, renderer ---- */
+
+static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
+  const char *path = "camera";
+  kpcn_camera *c = &s->cam;
+  c->width = 1000, c->height = 563; /* Tungsten's defaults */
+  c->fov_deg = 60.0f;
+  c->filter = KPCN_FILTER_TENT;
+  c->focus_dist = 1.0f;
+  c->aperture = 0.001f;
+  kpcn_vec3 pos = kv3(0, 0, 2), look = kv3(0, 0, -1), up = kv3(0, 1, 0);
+  if (!cj) goto finish;
+  if (!cJSON_IsObject(cj)) return kpcn_fail(KPCN_ERR_FORMAT, "camera: expected an object");
+  static const char *known[] = {"type", "resolution", "fov", "transform", "reconstruction_filter",
+                                "tonemap", "file", "focus_distance", "aperture_size", "cateye",
+                                "position", "lookAt", "up", "spp", NULL};
+  KPCN_TRY(check_fields(cj, path, known));
+  const char *type = get_string(cj, "type");
+  if (!type) return kpcn_fail(KPCN_ERR_FORMAT, "camera.type: missing or not a string");
+  if (strcmp(type, "thinlens") == 0)
+    c->thinlens = 1;
+  else if (strcmp(type, "pinhole") != 0)
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED, "camera.type: unsupported camera '%s' (pinhole, thinlens)", type);
+  if (!c->thinlens && (cJSON_GetObjectItemCaseSensitive(cj, "focus_distance") ||
+                       cJSON_GetObjectItemCaseSensitive(cj, "aperture_size")))
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED, "camera: focus_distance/aperture_size need type thinlens");
+  const cJSON *res = cJSON_GetObjectItemCaseSensitive(cj, "resolution");
+  if (res) {
+    double w, h;
+    if (cJSON_IsNumber(res)) {
+      w = h = res->valuedouble;
+    } else if (cJSON_IsArray(res) && cJSON_GetArraySize(res) == 2 &&
+               cJSON_IsNumber(cJSON_GetArrayItem(res, 0)) && cJSON_IsNumber(cJSON_GetArrayItem(res, 1))) {
+      w = cJSON_GetArrayItem(res, 0)->valuedouble;
+      h = cJSON_GetArrayItem(res, 1)->valuedouble;
+    } else {
+      return kpcn_fail(KPCN_ERR_FORMAT, "camera.resolution: expected a number or [width, height]");
+    }
+    if (!(w >= 1 && h >= 1 && w <= KPCN_MAX_DIM && h <= KPCN_MAX_DIM) || w != floor(w) || h != floor(h))
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera.resolution: invalid size %gx%g", w, h);
+    c->width = (int)w, c->height = (int)h;
+  }
+  double fov = c->fov_deg;
+  KPCN_TRY(get_number(cj, "fov", path, &fov, NULL));
+  if (!(fov > 0.0 && fov < 180.0))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera.fov: %g is outside (0, 180)", fov);
+  c->fov_deg = (float)fov;
+  const char *filt = get_string(cj, "reconstruction_filter");
+  if (cJSON_GetObjectItemCaseSensitive(cj, "reconstruction_filter") && !filt)
+    return kpcn_fail(KPCN_ERR_FORMAT, "camera.reconstruction_filter: expected a string");
+  if (filt) {
+    if (strcmp(filt, "box") == 0)
+      c->filter = KPCN_FILTER_BOX;
+    else if (strcmp(filt, "tent") == 0)
+      c->filter = KPCN_FILTER_TENT;
+    else if (strcmp(filt, "gaussian") == 0)
+      c->filter = KPCN_FILTER_GAUSSIAN;
+    else
+      return kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                       "camera.reconstruction_filter: unsupported filter '%s' (box, tent, gaussian)", filt);
+  }
+  double fd = c->focus_dist, ap = c->aperture, ce = 0.0;
+  KPCN_TRY(get_number(cj, "focus_distance", path, &fd, NULL));
+  KPCN_TRY(get_number(cj, "aperture_size", path, &ap, NULL));
+  KPCN_TRY(get_number(cj, "cateye", path, &ce, NULL));
+  if (ce != 0.0) return kpcn_fail(KPCN_ERR_UNSUPPORTED, "camera.cateye: only 0 is supported");
+  if (!(fd > 0.0) || ap < 0.0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera: focus_distance must be > 0 and aperture_size >= 0");
+  c->focus_dist = (float)fd, c->aperture = (float)ap;
+  const cJSON *tj = cJSON_GetObjectItemCaseSensitive(cj, "transform");
+  if (tj) {
+    kpcn_xform x;
+    KPCN_TRY(kpcn_xform_parse(tj, "camera.transform", &x));
+    pos = kpcn_xform_point(&x, kv3s(0));
+    look = kv3_add(pos, kpcn_xform_column(&x, 2));
+    up = kpcn_xform_column(&x, 1);
+  } else { /* Tungsten's older camera fields */
+    const char *keys[3] = {"position", "lookAt", "up"};
+    kpcn_vec3 *dst[3] = {&pos, &look, &up};
+    for (int k = 0; k < 3; k++) {
+      const cJSON *a = cJSON_GetObjectItemCaseSensitive(cj, keys[k]);
+      if (!a) continue;
+      if (!cJSON_IsArray(a) || cJSON_GetArraySize(a) != 3)
+        return kpcn_fail(KPCN_ERR_FORMAT, "camera.%s: expected 3 numbers", keys[k]);
+      float v[3];
+      for (int i = 0; i < 3; i++) {
+        const cJSON *e = cJSON_GetArrayItem(a, i);
+        if (!cJSON_IsNumber(e) || !isfinite(e->valuedouble))
+          return kpcn_fail(KPCN_ERR_FORMAT, "camera.%s[%d]: expected a finite number", keys[k], i);
+        v[i] = (float)e->valuedouble;
+      }
+      *dst[k] = kv3(v[0], v[1], v[2]);
+    }
+  }
+finish:
+  c->pos = pos;
+  c->fwd = kv3_normalize(kv3_sub(look, pos));
+  c->right = kv3_normalize(kv3_cross(c->fwd, up));
+  if (!(kv3_length2(c->fwd) > 0.5f) || !(kv3_length2(c->right) > 0.5f))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera.transform: degenerate view (look_at/up)");
+  c->up = kv3_normalize(kv3_cross(c->right, c->fwd));
+  c->plane_dist = 1.0f / tanf(c->fov_deg * (KPCN_PI / 180.0f) * 0.5f);
+  return KPCN_OK;
+}
+
+static kpcn_status parse_integrator(kpcn_scene *s, const cJSON *ij) {
+  s->min_bounces = 0, s->max_bounces = 64, s->light_sampling = 1;
+  if (!ij) return KPCN_OK;
+  if (!cJSON_IsObject(ij)) return kpcn_fail(KPCN_ERR_FORMAT, "integrator: expected an object");
+  static const char *known[] = {"type", "min_bounces", "max_bounces", "enable_light_sampling",
+                                "enable_volume_light_sampling", "enable_consistency_checks",
+                                "enable_two_sided_shading", NULL};
+  KPCN_TRY(check_fields(ij, "integrator", known));
+  const char *type = get_string(ij, "type");
+  if (!type || strcmp(type, "path_tracer") != 0)
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED, "integrator.type: unsupported integrator '%s' (path_tracer)",
+                     type ? type : "(missing)");
+  KPCN_TRY(get_int(ij, "min_bounces", "integrator", &s->min_bounces, 0, 100000));
+  KPCN_TRY(get_int(ij, "max_bounces", "integrator", &s->max_bounces, 0, 100000));
+  KPCN_TRY(get_bool(ij, "enable_light_sampling", "integrator", &s->light_sampling));
+  KPCN_TRY(require_bool(ij, "enable_two_sided_shading", "integrator", 1));
+  int dummy = 1;
+  KPCN_TRY(get_bool(ij, "enable_volume_light_sampling", "integrator", &dummy));
+  KPCN_TRY(get_bool(ij, "enable_consistency_checks", "integrator", &dummy));
+  return KPCN_OK;
+}
+
+static kpcn_status parse_renderer(kpcn_scene *s, const cJSON *rj) {
+  s->spp = 64;
+  if (!rj) return KPCN_OK;
+  if (!cJSON_IsObject(rj)) return kpcn_fail(KPCN_ERR_FORMAT, "renderer: expected an object");
+  /* Everything but spp concerns Tungsten's own output/scheduling; accepted, without effect. */
+  static const char *known[] = {"spp", "output_file", "hdr_output_file", "resume_render_file",
+                                "overwrite_output_files", "adaptive_sampling", "enable_resume_render",
+                                "stratified_sampler", "scene_bvh", "spp_step", "checkpoint_interval",
+                                "timeout", "output_buffers", NULL};
+  KPCN_TRY(check_fields(rj, "renderer", known));
+  return get_int(rj, "spp", "renderer", &s->spp, 1, 1 << 24);
+}
+
+static kpcn_status parse_document(kpcn_scene *s, const cJSON *root) {
+  if (!cJSON_IsObject(root)) return kpcn_fail(KPCN_ERR_FORMAT, "(root): expected a JSON object");
+  static const char *known[] = {"media", "bsdfs", "primitives", "camera", "integrator", "renderer", NULL};
+  KPCN_TRY(check_fields(root, "(root)", known));
+  const cJSON *media = cJSON_GetObjectItemCaseSensitive(root, "media");
+  if (media && (!cJSON_IsArray(media) || cJSON_GetArraySize(media) != 0))
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED, "media: participating media are not supported");
+  KPCN_TRY(kpcn_material_lib_create(s->base_dir, &s->mats));
+  const cJSON *bsdfs = cJSON_GetObjectItemCaseSensitive(root, "bsdfs");
+  if (bsdfs && !cJSON_IsArray(bsdfs)) return kpcn_fail(KPCN_ERR_FORMAT, "bsdfs: expected an array");
+  KPCN_TRY(kpcn_material_lib_parse_bsdfs(s->mats, bsdfs, "bsdfs"));
+  const cJSON *prims = cJSON_GetObjectItemCaseSensitive(root, "primitives");
+  if (!cJSON_IsArray(prims)) return kpcn_fail(KPCN_ERR_FORMAT, "primitives: missing or not an array");
+  int n = cJSON_GetArraySize(prims);
+  s->prims = kpcn_calloc((size_t)n + 1, sizeof(kpcn_prim), "primitives");
+  if (!s->prims) return KPCN_ERR_OUT_OF_MEMORY;
+  int i = 0;
+  for (const cJSON *pj = prims->child; pj; pj = pj->next, i++) KPCN_TRY(parse_primitive(s, pj, i));
+  KPCN_TRY(parse_camera(s, cJSON_GetObjectItemCaseSensitive(root, "camera")));
+  KPCN_TRY(parse_integrator(s, cJSON_GetObjectItemCaseSensitive(root, "integrator")));
+  KPCN_TRY(parse_renderer(s, cJSON_GetObjectItemCaseSensitive(root, "renderer")));
+  if (s->nprims - (s->env_prim >= 0) == 0 && s->env_prim < 0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "primitives: the scene is empty");
+  KPCN_TRY(kpcn_scene_build_embree(s));
+  KPCN_TRY(kpcn_scene_build_lights(s));
+  return KPCN_OK;
+}
+
+void kpcn_scene_destroy(kpcn_scene *s) {
+  if (!s) return;
+  kpcn_scene_release_embree(s);
+  for (int i = 0; i < s->nprims; i++) kpcn_mesh_free(&s->prims[i].mesh);
+  free(s->prims);
+  free(s->geom_to_prim);
+  free(s->lights);
+  kpcn_distrib1d_free(&s->light_cdf);
+  if (s->env) kpcn_envmap_destroy(s->env);
+  if (s->mats) kpcn_material_lib_destroy(s->mats);
+  free(s);
+}
+
+kpcn_status kpcn_scene_load_json(const char *text, const char *base_dir, const char *name,
+                                 kpcn_scene **out) {
+  if (!out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_scene_load_json: out is NULL");
+  *out = NULL;
+  if (!text) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_scene_load_json: json_text is NULL");
+  if (!name) name = "<memory>";
+  cJSON *root = cJSON_Parse(text);
+  if (!root) {
+    const char *err = cJSON_GetErrorPtr();
+    long off = err ? (long)(err - text) : -1;
+    int line = 1;
+    for (long k = 0; k < off; k++) line += text[k] == '\n';
+    return kpcn_fail(KPCN_ERR_FORMAT, "scene '%s': invalid JSON near line %d (byte %ld)", name, line, off);
+  }
+  kpcn_scene *s = kpcn_calloc(1, sizeof(*s), "scene");
+  if (!s) {
+    cJSON_Delete(root);
+    return KPCN_ERR_OUT_OF_MEMORY;
+  }
+  s->env_prim = -1;
+  s->env_light = -1;
+  snprintf(s->name, sizeof(s->name), "%s", name);
+  snprintf(s->base_dir, sizeof(s->base_dir), "%s", base_dir ? base_dir : "");
+  kpcn_status st = parse_document(s, root);
+  cJSON_Delete(root);
+  if (st != KPCN_OK) {
+    kpcn_fail_context("scene '%s'", name);
+    kpcn_scene_destroy(s);
+    return st;
+  }
+  *out = s;
+  return KPCN_OK;
+}
+
+kpcn_status kpcn_scene_load(const char *path, kpcn_scene **out) {
+  if (!out || !path) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_scene_load: NULL argument");
+  *out = NULL;
+  FILE *f = fopen(path, "rb");
+  if (!f) return kpcn_fail(KPCN_ERR_IO, "cannot open scene '%s': %s", path, strerror(errno));
+  fseek(f, 0, SEEK_END);
+  long n = ftell(f);
+  fseek(f, 0, SEEK_SET);
+  if (n < 0 || n > (1L << 30)) {
+    fclose(f);
+    return kpcn_fail(KPCN_ERR_IO, "cannot read scene '%s'", path);
+  }
+  char *text = kpcn_alloc((size_t)n + 1, "scene text");
+  if (!text) {
+    fclose(f);
+    return KPCN_ERR_OUT_OF_MEMORY;
+  }
+  size_t got = fread(text, 1, (size_t)n, f);
+  fclose(f);
+  text[got] = 0;
+  char dir[1024];
+  snprintf(dir, sizeof(dir), "%s", path);
+  char *slash = strrchr(dir, '/');
+  if (slash)
+    *slash = 0;
+  else
+    dir[0] = 0;
+  kpcn_status st = kpcn_scene_load_json(text, dir, path, out);
+  free(text);
+  return st;
+}
+
+kpcn_status kpcn_scene_get_info(const kpcn_scene *s, kpcn_scene_info *info) {
+  if (!s || !info) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_scene_get_info: NULL argument");
+  memset(info, 0, sizeof(*info));
+  info->width = s->cam.width;
+  info->height = s->cam.height;
+  info->spp = s->spp;
+  info->min_bounces = s->min_bounces;
+  info->max_bounces = s->max_bounces;
+  info->light_sampling = s->light_sampling;
+  info->nprimitives = s->nprims;
+  info->nlights = s->nlights;
+  info->ntriangles = s->ntriangles;
+  info->fov_deg = s->cam.fov_deg;
+  snprintf(info->camera, sizeof(info->camera), "%s", s->cam.thinlens ? "thinlens" : "pinhole");
+  static const char *fn[] = {"box", "tent", "gaussian"};
+  snprintf(info->filter, sizeof(info->filter), "%s", fn[s->cam.filter]);
+  snprintf(info->name, sizeof(info->name), "%s", s->name);
+  return KPCN_OK;
+}

@@ -1,0 +1,258 @@
+/* Training checkpoints: ONE safetensors file (inspectable with Python's safetensors)
+ * written atomically (temp file + rename), holding
+ *   tensors  "<branch>.conv<l>.weight|bias"            the weights (names as the model file)
+ *            "adam.m.<name>", "adam.v.<name>"           Adam moments, F32, 1-D
+ *   __metadata__ (strings)
+ *            kpcn.format        "kpcn-checkpoint-1"
+ *            kpcn.architecture  kpcn_arch_to_json (must equal the trainer's on load)
+ *            train.iteration, train.rng (hex splitmix64 word), train.adam_steps.<branch>,
+ *            train.elapsed_s, train.seed, train.batch, train.patch, train.stage1_iters,
+ *            train.loss1, train.loss2
+ * Loading checks format, architecture and the settings that change the trajectory (seed,
+ * batch, patch, stage-1 length) and names the first mismatch. */
+#include "core/internal.h"
+#include "train/train_internal.h"
+
+#include <cjson/cJSON.h>
+#include <errno.h>
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define CKPT_FORMAT "kpcn-checkpoint-1"
+
+typedef struct ck_tensor {
+  char name[64];
+  float *data;
+  size_t count;
+} ck_tensor;
+
+/* The tensor list in file order; returns count (tensors may be NULL to count). */
+static int ck_list(kpcn_trainer *t, ck_tensor *ts) {
+  int n = 0;
+  for (int kind = 0; kind < 3; kind++)
+    for (int b = 0; b < KT_NB; b++) {
+      size_t off = 0;
+      for (int i = 0; i < t->nparams[b]; i++) {
+        const kpcn_param *p = &t->params[b][i];
+        if (ts) {
+          static const char *pre[3] = {"", "adam.m.", "adam.v."};
+          snprintf(ts[n].name, sizeof ts[n].name, "%s%s", pre[kind], p->name);
+          ts[n].count = p->count;
+          ts[n].data = kind == 0   ? p->value
+                       : kind == 1 ? kpcn_adam_moment1(t->adam[b]) + off
+                                   : kpcn_adam_moment2(t->adam[b]) + off;
+        }
+        off += p->count;
+        n++;
+      }
+    }
+  return n;
+}
+
+static void meta_i64(cJSON *m, const char *k, int64_t v) {
+  char buf[32];
+  snprintf(buf, sizeof buf, "%" PRId64, v);
+  cJSON_AddStringToObject(m, k, buf);
+}
+
+kpcn_status kt_checkpoint_save(kpcn_trainer *t, const char *path) {
+  int n = ck_list(t, NULL);
+  ck_tensor *ts = kpcn_calloc((size_t)n, sizeof *ts, "checkpoint tensor list");
+  if (!ts) return kpcn_last_status();
+  ck_list(t, ts);
+  cJSON *root = cJSON_CreateObject(), *meta = cJSON_CreateObject();
+  char *arch = kpcn_arch_to_json(&t->arch), buf[64];
+  cJSON_AddStringToObject(meta, "kpcn.format", CKPT_FORMAT);
+  cJSON_AddStringToObject(meta, "kpcn.architecture", arch ? arch : "");
+  free(arch);
+  meta_i64(meta, "train.iteration", t->iter);
+  snprintf(buf, sizeof buf, "%016" PRIx64, t->rng.state);
+  cJSON_AddStringToObject(meta, "train.rng", buf);
+  meta_i64(meta, "train.adam_steps.diffuse", kpcn_adam_steps(t->adam[0]));
+  meta_i64(meta, "train.adam_steps.specular", kpcn_adam_steps(t->adam[1]));
+  snprintf(buf, sizeof buf, "%.17g", t->elapsed_prev);
+  cJSON_AddStringToObject(meta, "train.elapsed_s", buf);
+  snprintf(buf, sizeof buf, "%" PRIu64, t->s.seed);
+  cJSON_AddStringToObject(meta, "train.seed", buf);
+  meta_i64(meta, "train.batch", t->N);
+  meta_i64(meta, "train.patch", t->P);
+  meta_i64(meta, "train.stage1_iters", t->s.stage1_iters);
+  cJSON_AddStringToObject(meta, "train.loss1", kpcn_loss_name(t->s.loss1));
+  cJSON_AddStringToObject(meta, "train.loss2", kpcn_loss_name(t->s.loss2));
+  cJSON_AddItemToObject(root, "__metadata__", meta);
+  uint64_t off = 0;
+  for (int i = 0; i < n; i++) {
+    cJSON *e = cJSON_CreateObject();
+    cJSON_AddStringToObject(e, "dtype", "F32");
+    double shape[1] = {(double)ts[i].count};
+    cJSON_AddItemToObject(e, "shape", cJSON_CreateDoubleArray(shape, 1));
+    double offs[2] = {(double)off, (double)(off + ts[i].count * 4)};
+    cJSON_AddItemToObject(e, "data_offsets", cJSON_CreateDoubleArray(offs, 2));
+    cJSON_AddItemToObject(root, ts[i].name, e);
+    off += ts[i].count * 4;
+  }
+  char *hdr = cJSON_PrintUnformatted(root);
+  cJSON_Delete(root);
+  if (!hdr) {
+    free(ts);
+    return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "checkpoint header");
+  }
+  size_t hl = strlen(hdr), padded = (hl + 7) / 8 * 8;
+  char tmp[4096];
+  kpcn_temp_path(tmp, sizeof tmp, path);
+  FILE *f = fopen(tmp, "wb");
+  kpcn_status st = KPCN_OK;
+  if (!f) {
+    st = kpcn_fail(KPCN_ERR_IO, "cannot write checkpoint '%s': %s", path, strerror(errno));
+  } else {
+    unsigned char len[8];
+    for (int i = 0; i < 8; i++) len[i] = (unsigned char)((uint64_t)padded >> (8 * i));
+    int ok = fwrite(len, 1, 8, f) == 8 && fwrite(hdr, 1, hl, f) == hl;
+    for (size_t i = hl; i < padded && ok; i++) ok = fputc(' ', f) != EOF;
+    for (int i = 0; i < n && ok; i++) /* little-endian host (x86-64) */
+      ok = fwrite(ts[i].data, 4, ts[i].count, f) == ts[i].count;
+    if (fclose(f) != 0) ok = 0;
+    if (!ok) {
+      kpcn_abort_file(tmp);
+      st = kpcn_fail(KPCN_ERR_IO, "writing checkpoint '%s' failed (disk full?)", path);
+    } else {
+      st = kpcn_commit_file(tmp, path);
+    }
+  }
+  free(hdr);
+  free(ts);
+  return st;
+}
+
+static const char *meta_str(cJSON *meta, const char *key) {
+  cJSON *e = cJSON_GetObjectItemCaseSensitive(meta, key);
+  return cJSON_IsString(e) ? e->valuestring : NULL;
+}
+
+static kpcn_status meta_expect(cJSON *meta, const char *key, long long want, const char *path,
+                               long long *got) {
+  const char *s = meta_str(meta, key);
+  char *end = NULL;
+  long long v = s ? strtoll(s, &end, 10) : 0;
+  if (!s || !end || *end)
+    return kpcn_fail(KPCN_ERR_FORMAT, "checkpoint '%s': metadata '%s' missing or malformed",
+                     path, key);
+  if (got) {
+    *got = v;
+    return KPCN_OK;
+  }
+  if (v != want)
+    return kpcn_fail(KPCN_ERR_FORMAT,
+                     "checkpoint '%s' was written with %s = %lld, this run uses %lld", path, key,
+                     v, want);
+  return KPCN_OK;
+}
+
+kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return kpcn_fail(KPCN_ERR_IO, "cannot open checkpoint '%s': %s", path, strerror(errno));
+  kpcn_status st = KPCN_OK;
+  char *hdr = NULL;
+  cJSON *root = NULL;
+  ck_tensor *ts = NULL;
+  unsigned char len8[8];
+  uint64_t hl = 0, fsize;
+  fseek(f, 0, SEEK_END);
+  fsize = (uint64_t)ftell(f);
+  fseek(f, 0, SEEK_SET);
+#define BAD(...)                                                                                   \
+  do {                                                                                             \
+    st = kpcn_fail(KPCN_ERR_FORMAT, __VA_ARGS__);                                                  \
+    goto done;                                                                                     \
+  } while (0)
+  if (fread(len8, 1, 8, f) != 8) BAD("checkpoint '%s' is truncated (no header length)", path);
+  for (int i = 0; i < 8; i++) hl |= (uint64_t)len8[i] << (8 * i);
+  if (hl == 0 || hl > fsize - 8 || hl > (64u << 20))
+    BAD("checkpoint '%s': header length %" PRIu64 " does not fit the %" PRIu64 "-byte file",
+        path, hl, fsize);
+  hdr = kpcn_alloc(hl + 1, "checkpoint header");
+  if (!hdr) {
+    st = kpcn_last_status();
+    goto done;
+  }
+  if (fread(hdr, 1, hl, f) != hl) BAD("checkpoint '%s' is truncated (header)", path);
+  hdr[hl] = 0;
+  root = cJSON_Parse(hdr);
+  if (!root) BAD("checkpoint '%s': header is not JSON", path);
+  cJSON *meta = cJSON_GetObjectItemCaseSensitive(root, "__metadata__");
+  const char *fmt = meta_str(meta, "kpcn.format");
+  if (!fmt || strcmp(fmt, CKPT_FORMAT) != 0)
+    BAD("checkpoint '%s': kpcn.format is '%s', expected '" CKPT_FORMAT "'", path,
+        fmt ? fmt : "(missing)");
+  const char *arch = meta_str(meta, "kpcn.architecture");
+  char *mine = kpcn_arch_to_json(&t->arch);
+  int same = arch && mine && strcmp(arch, mine) == 0;
+  free(mine);
+  if (!same)
+    BAD("checkpoint '%s' holds a different architecture than this run (kpcn.architecture)",
+        path);
+  const char *seed = meta_str(meta, "train.seed");
+  if (!seed || strtoull(seed, NULL, 10) != t->s.seed)
+    BAD("checkpoint '%s' was written with train.seed = %s, this run uses %" PRIu64, path,
+        seed ? seed : "(missing)", t->s.seed);
+  if ((st = meta_expect(meta, "train.batch", t->N, path, NULL)) ||
+      (st = meta_expect(meta, "train.patch", t->P, path, NULL)) ||
+      (st = meta_expect(meta, "train.stage1_iters", t->s.stage1_iters, path, NULL)))
+    goto done;
+  long long iter, steps[2];
+  if ((st = meta_expect(meta, "train.iteration", 0, path, &iter)) ||
+      (st = meta_expect(meta, "train.adam_steps.diffuse", 0, path, &steps[0])) ||
+      (st = meta_expect(meta, "train.adam_steps.specular", 0, path, &steps[1])))
+    goto done;
+  const char *rng = meta_str(meta, "train.rng"), *el = meta_str(meta, "train.elapsed_s");
+  if (!rng || !el) BAD("checkpoint '%s': train.rng or train.elapsed_s missing", path);
+  int n = ck_list(t, NULL);
+  ts = kpcn_calloc((size_t)n, sizeof *ts, "checkpoint tensor list");
+  if (!ts) {
+    st = kpcn_last_status();
+    goto done;
+  }
+  ck_list(t, ts);
+  uint64_t data0 = 8 + hl;
+  for (int i = 0; i < n; i++) {
+    cJSON *e = cJSON_GetObjectItemCaseSensitive(root, ts[i].name);
+    if (!e) BAD("checkpoint '%s' lacks tensor '%s'", path, ts[i].name);
+    cJSON *dt = cJSON_GetObjectItemCaseSensitive(e, "dtype");
+    cJSON *of = cJSON_GetObjectItemCaseSensitive(e, "data_offsets");
+    if (!cJSON_IsString(dt) || strcmp(dt->valuestring, "F32") != 0)
+      BAD("checkpoint '%s': tensor '%s' is not F32", path, ts[i].name);
+    if (!cJSON_IsArray(of) || cJSON_GetArraySize(of) != 2)
+      BAD("checkpoint '%s': tensor '%s' has no data_offsets", path, ts[i].name);
+    double b0 = cJSON_GetArrayItem(of, 0)->valuedouble, b1 = cJSON_GetArrayItem(of, 1)->valuedouble;
+    if (b0 < 0 || b1 - b0 != (double)ts[i].count * 4 || data0 + b1 > (double)fsize)
+      BAD("checkpoint '%s': tensor '%s' offsets [%.0f, %.0f) do not match %zu floats in the "
+          "file", path, ts[i].name, b0, b1, ts[i].count);
+    if (fseek(f, (long)(data0 + (uint64_t)b0), SEEK_SET) != 0 ||
+        fread(ts[i].data, 4, ts[i].count, f) != ts[i].count)
+      BAD("checkpoint '%s' is truncated (tensor '%s')", path, ts[i].name);
+  }
+  t->iter = iter;
+  kpcn_adam_set_steps(t->adam[0], steps[0]);
+  kpcn_adam_set_steps(t->adam[1], steps[1]);
+  t->rng.state = strtoull(rng, NULL, 16);
+  t->elapsed_prev = strtod(el, NULL);
+done:
+#undef BAD
+  fclose(f);
+  cJSON_Delete(root);
+  free(hdr);
+  free(ts);
+  return st;
+}
+
+kpcn_status kpcn_trainer_save_checkpoint(kpcn_trainer *t, const char *path) {
+  if (!t || !path) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "save checkpoint: NULL");
+  return kt_checkpoint_save(t, path);
+}
+
+kpcn_status kpcn_trainer_load_checkpoint(kpcn_trainer *t, const char *path) {
+  if (!t || !path) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "load checkpoint: NULL");
+  return kt_checkpoint_load(t, path);
+}

@@ -1,0 +1,176 @@
+/* The training loop: iterations, CSV log, validation, periodic atomic checkpoints, the time
+ * limit and stop requests, then the final model, checkpoint and plot.
+ *
+ * CSV columns: iter,stage,lr,loss,its_per_s,elapsed_s,val_relmse,val_ssim,val_psnr
+ * (loss = mean training loss since the previous row; validation columns empty when no
+ * validation ran at that iteration). On resume the log is cut back to the rows at or before
+ * the checkpoint's iteration, so it reads as one uninterrupted run. */
+#include "core/internal.h"
+#include "train/train_internal.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define CSV_HEADER "iter,stage,lr,loss,its_per_s,elapsed_s,val_relmse,val_ssim,val_psnr\n"
+
+/* Opens the CSV for appending: fresh (header only) or cut back to rows <= keep_iter. */
+static kpcn_status csv_open(const char *path, int resume, int64_t keep_iter, FILE **out) {
+  *out = NULL;
+  if (!path || !*path) return KPCN_OK;
+  char *kept = NULL;
+  size_t klen = 0;
+  if (resume) {
+    FILE *in = fopen(path, "r");
+    if (in) {
+      char line[1024];
+      size_t cap = 1 << 16;
+      kept = kpcn_alloc(cap, "CSV log");
+      if (!kept) {
+        fclose(in);
+        return kpcn_last_status();
+      }
+      while (fgets(line, sizeof line, in)) {
+        if (strncmp(line, "iter,", 5) == 0) continue;
+        long long it = strtoll(line, NULL, 10);
+        if (it > keep_iter) continue;
+        size_t l = strlen(line);
+        if (klen + l + 1 > cap) {
+          char *nk = realloc(kept, cap * 2 + l);
+          if (!nk) {
+            free(kept);
+            fclose(in);
+            return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "CSV log '%s'", path);
+          }
+          kept = nk, cap = cap * 2 + l;
+        }
+        memcpy(kept + klen, line, l);
+        klen += l;
+      }
+      fclose(in);
+    }
+  }
+  char tmp[4096];
+  kpcn_temp_path(tmp, sizeof tmp, path);
+  FILE *f = fopen(tmp, "w");
+  if (!f) {
+    free(kept);
+    return kpcn_fail(KPCN_ERR_IO, "cannot write CSV log '%s': %s", path, strerror(errno));
+  }
+  fputs(CSV_HEADER, f);
+  if (klen) fwrite(kept, 1, klen, f);
+  free(kept);
+  if (fclose(f) != 0) {
+    kpcn_abort_file(tmp);
+    return kpcn_fail(KPCN_ERR_IO, "cannot write CSV log '%s'", path);
+  }
+  KPCN_TRY(kpcn_commit_file(tmp, path));
+  *out = fopen(path, "a");
+  if (!*out) return kpcn_fail(KPCN_ERR_IO, "cannot append to CSV log '%s'", path);
+  return KPCN_OK;
+}
+
+static kpcn_status save_model(kpcn_trainer *t, double elapsed) {
+  char buf[64];
+  snprintf(buf, sizeof buf, "%lld", (long long)t->iter);
+  KPCN_TRY(kpcn_model_set_meta(t->model, "train.iterations", buf));
+  snprintf(buf, sizeof buf, "%lld", (long long)t->s.stage1_iters);
+  KPCN_TRY(kpcn_model_set_meta(t->model, "train.stage1_iters", buf));
+  snprintf(buf, sizeof buf, "%s/%s", kpcn_loss_name(t->s.loss1), kpcn_loss_name(t->s.loss2));
+  KPCN_TRY(kpcn_model_set_meta(t->model, "train.loss", buf));
+  snprintf(buf, sizeof buf, "%.1f", elapsed);
+  KPCN_TRY(kpcn_model_set_meta(t->model, "train.seconds", buf));
+  snprintf(buf, sizeof buf, "%llu", (unsigned long long)t->s.seed);
+  KPCN_TRY(kpcn_model_set_meta(t->model, "train.seed", buf));
+  snprintf(buf, sizeof buf, "%d x %dx%d", t->N, t->P, t->P);
+  KPCN_TRY(kpcn_model_set_meta(t->model, "train.batch", buf));
+  const char *slash = strrchr(t->store_path, '/');
+  KPCN_TRY(kpcn_model_set_meta(t->model, "train.dataset", slash ? slash + 1 : t->store_path));
+  return kpcn_model_save(t->model, t->out_path);
+}
+
+static kpcn_status checkpoint(kpcn_trainer *t, double elapsed) {
+  double keep = t->elapsed_prev;
+  t->elapsed_prev = elapsed;
+  kpcn_status st = kt_checkpoint_save(t, t->ckpt_path);
+  t->elapsed_prev = keep;
+  if (st == KPCN_OK)
+    kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_INFO, "checkpoint '%s' at iteration %lld",
+             t->ckpt_path, (long long)t->iter);
+  return st;
+}
+
+kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
+  if (!t) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_trainer_run: NULL trainer");
+  if (stopped) *stopped = 0;
+  FILE *csv = NULL;
+  KPCN_TRY(csv_open(t->csv_path, t->s.resume, t->iter, &csv));
+  const double t0 = kt_now();
+  double last_t = t0, acc = 0;
+  int64_t last_it = t->iter, nacc = 0;
+  int stop = 0;
+  kpcn_status st = KPCN_OK;
+  while (t->iter < t->s.iters && st == KPCN_OK) {
+    double elapsed = t->elapsed_prev + (kt_now() - t0);
+    if (t->s.time_limit_s > 0 && kt_now() - t0 >= t->s.time_limit_s) {
+      kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_INFO,
+               "time limit reached at iteration %lld: checkpointing", (long long)t->iter);
+      stop = 1;
+      break;
+    }
+    int stage = t->iter < t->s.stage1_iters ? 1 : 2;
+    double lr = kpcn_adam_lr_at(&t->s.adam, t->iter), loss = 0;
+    if ((st = kpcn_trainer_step(t, &loss)) != KPCN_OK) break;
+    acc += loss, nacc++;
+    int64_t it = t->iter;
+    int do_val = t->nval && ((t->s.val_every > 0 && it % t->s.val_every == 0) ||
+                             it == t->s.iters);
+    int do_log = it % t->s.log_every == 0 || it == t->s.iters || do_val;
+    kpcn_train_progress p;
+    memset(&p, 0, sizeof p);
+    if (do_val) {
+      if ((st = kpcn_trainer_validate(t, &p.val_relmse, &p.val_ssim, &p.val_psnr)) != KPCN_OK)
+        break;
+      p.has_val = 1;
+    }
+    double now = kt_now();
+    elapsed = t->elapsed_prev + (now - t0);
+    p.iter = it;
+    p.total = t->s.iters;
+    p.stage = stage;
+    p.loss = acc / (double)nacc;
+    p.lr = lr;
+    p.its_per_s = (double)(it - last_it) / fmax(now - last_t, 1e-9);
+    p.elapsed_s = elapsed;
+    p.eta_s = (double)(t->s.iters - it) / fmax(p.its_per_s, 1e-9);
+    if (do_log) {
+      if (csv) {
+        fprintf(csv, "%lld,%d,%.6g,%.9g,%.4g,%.2f", (long long)it, stage, lr, p.loss,
+                p.its_per_s, elapsed);
+        if (p.has_val)
+          fprintf(csv, ",%.9g,%.9g,%.6g\n", p.val_relmse, p.val_ssim, p.val_psnr);
+        else
+          fputs(",,,\n", csv);
+        fflush(csv);
+      }
+      acc = 0, nacc = 0, last_it = it, last_t = now;
+    }
+    if (t->s.ckpt_every > 0 && it % t->s.ckpt_every == 0 && it < t->s.iters)
+      if ((st = checkpoint(t, elapsed)) != KPCN_OK) break;
+    if (t->s.progress && t->s.progress(t->s.progress_user, &p)) {
+      stop = 1;
+      break;
+    }
+  }
+  if (csv) fclose(csv);
+  if (st != KPCN_OK) return st;
+  double elapsed = t->elapsed_prev + (kt_now() - t0);
+  KPCN_TRY(checkpoint(t, elapsed));
+  KPCN_TRY(save_model(t, elapsed));
+  if (t->plot_path && *t->plot_path && t->csv_path && *t->csv_path)
+    KPCN_TRY(kpcn_train_plot_csv(t->csv_path, t->plot_path, "kpcn-train"));
+  if (stopped) *stopped = stop;
+  return KPCN_OK;
+}

@@ -1,0 +1,349 @@
+/* The trainer: set-up (store, model, nets, optimizers, validation images), one training
+ * iteration of either stage, and full-image validation. The loop with logging and
+ * checkpoints is in run.c; batches in batch.c; checkpoints in checkpoint.c. */
+#include "core/internal.h"
+#include "kpcn/exr.h"
+#include "kpcn/metrics.h"
+#include "train/train_internal.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+double kt_now(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+void kpcn_train_settings_defaults(kpcn_train_settings *s) {
+  memset(s, 0, sizeof *s);
+  kpcn_arch_preset("cpu", &s->arch);
+  s->loss1 = KPCN_LOSS_L1;
+  s->loss2 = KPCN_LOSS_L1;
+  kpcn_loss_settings_defaults(&s->loss);
+  kpcn_adam_settings_defaults(&s->adam);
+  kpcn_augment_draw_defaults(&s->augment);
+  s->crop_jitter = 1;
+  s->batch = 16;
+  s->patch = 64;
+  s->iters = 1000;
+  s->stage1_iters = -1; /* -> 0.6 * iters */
+  s->seed = 1;
+  s->log_every = 10;
+}
+
+static char *dup_or_null(const char *s) {
+  if (!s) return NULL;
+  size_t n = strlen(s) + 1;
+  char *d = kpcn_alloc(n, "string");
+  if (d) memcpy(d, s, n);
+  return d;
+}
+
+static char *with_suffix(const char *base, const char *suffix) {
+  size_t n = strlen(base) + strlen(suffix) + 1;
+  char *d = kpcn_alloc(n, "path");
+  if (d) snprintf(d, n, "%s%s", base, suffix);
+  return d;
+}
+
+void kpcn_trainer_destroy(kpcn_trainer *t) {
+  if (!t) return;
+  for (int b = 0; b < KT_NB; b++) {
+    kpcn_net_destroy(t->net[b]);
+    kpcn_adam_destroy(t->adam[b]);
+    free(t->params[b]);
+    free(t->blocks[b]);
+    free(t->feat[b]), free(t->noisy[b]), free(t->logits[b]), free(t->out[b]);
+    free(t->target[b]), free(t->grad[b]);
+  }
+  kpcn_model_destroy(t->model);
+  if (t->ps) kpcn_patchstore_close(t->ps);
+  free(t->albedo), free(t->refc), free(t->comb), free(t->gcomb), free(t->lossbuf);
+  free(t->scratch), free(t->batch_idx), free(t->batch_ox), free(t->batch_oy), free(t->train_idx);
+  for (int i = 0; i < t->nval; i++) {
+    kpcn_aov_destroy(t->val_aov ? t->val_aov[i] : NULL);
+    free(t->val_ref ? t->val_ref[i] : NULL);
+  }
+  free(t->val_aov), free(t->val_ref);
+  free(t->store_path), free(t->out_path), free(t->ckpt_path), free(t->csv_path);
+  free(t->plot_path), free(t->init_model);
+  free(t);
+}
+
+static kpcn_status check_inputs(const kpcn_trainer *t, const kpcn_arch *a, const char *what) {
+  const char *names[KPCN_NN_MAX_INPUTS];
+  int n = kpcn_features_channel_names(KPCN_BRANCH_DIFFUSE, names, KPCN_NN_MAX_INPUTS);
+  if (a->n_inputs != n)
+    return kpcn_fail(KPCN_ERR_FORMAT,
+                     "%s has %d input channels but the feature builder (version %d) makes %d",
+                     what, a->n_inputs, KPCN_FEATURES_VERSION, n);
+  for (int i = 0; i < n; i++)
+    if (strcmp(a->inputs[i], names[i]) != 0)
+      return kpcn_fail(KPCN_ERR_FORMAT,
+                       "%s input channel %d is '%s', the feature builder makes '%s' there", what,
+                       i, a->inputs[i], names[i]);
+  (void)t;
+  return KPCN_OK;
+}
+
+static kpcn_status load_validation(kpcn_trainer *t) {
+  t->nval = t->s.nval;
+  if (!t->nval) return KPCN_OK;
+  t->val_aov = kpcn_calloc((size_t)t->nval, sizeof *t->val_aov, "validation images");
+  t->val_ref = kpcn_calloc((size_t)t->nval, sizeof *t->val_ref, "validation references");
+  if (!t->val_aov || !t->val_ref) return kpcn_last_status();
+  for (int i = 0; i < t->nval; i++) {
+    kpcn_aov_set *ref = NULL;
+    KPCN_TRY(kpcn_exr_read_aov(t->s.val_noisy[i], &t->val_aov[i]));
+    KPCN_TRY(kpcn_exr_read_aov(t->s.val_ref[i], &ref));
+    kpcn_status st = kpcn_aov_require(ref, KPCN_BUF_COLOR, 0, t->s.val_ref[i]);
+    if (st == KPCN_OK && (ref->width != t->val_aov[i]->width ||
+                          ref->height != t->val_aov[i]->height))
+      st = kpcn_fail(KPCN_ERR_SIZE_MISMATCH, "validation pair '%s' (%dx%d) / '%s' (%dx%d)",
+                     t->s.val_noisy[i], t->val_aov[i]->width, t->val_aov[i]->height,
+                     t->s.val_ref[i], ref->width, ref->height);
+    if (st == KPCN_OK) {
+      size_t n = 3 * kpcn_aov_plane_size(ref);
+      t->val_ref[i] = kpcn_alloc(n * sizeof(float), "validation reference");
+      if (t->val_ref[i])
+        memcpy(t->val_ref[i], ref->buf[KPCN_BUF_COLOR], n * sizeof(float));
+      else
+        st = kpcn_last_status();
+    }
+    kpcn_aov_destroy(ref);
+    KPCN_TRY(st);
+  }
+  return KPCN_OK;
+}
+
+static float *talloc(size_t n, kpcn_status *st) {
+  float *p = kpcn_alloc(n * sizeof(float), "training tensor");
+  if (!p) *st = kpcn_last_status();
+  return p;
+}
+
+static kpcn_status setup_nets(kpcn_trainer *t) {
+  kpcn_net_options no;
+  kpcn_net_options_defaults(&no);
+  no.batch = t->N;
+  no.height = no.width = t->P;
+  no.training = 1;
+  no.nthreads = t->nt;
+  for (int b = 0; b < KT_NB; b++) {
+    KPCN_TRY(kpcn_net_create(t->model, (kpcn_branch)b, &no, &t->net[b]));
+    int np = kpcn_net_param_count(t->net[b]);
+    t->params[b] = kpcn_calloc((size_t)np, sizeof(kpcn_param), "parameter list");
+    t->blocks[b] = kpcn_calloc((size_t)np, sizeof(kpcn_param_block), "parameter blocks");
+    if (!t->params[b] || !t->blocks[b]) return kpcn_last_status();
+    KPCN_TRY(kpcn_net_params(t->net[b], t->params[b], np));
+    size_t total = 0;
+    for (int i = 0; i < np; i++) {
+      t->blocks[b][i].param = t->params[b][i].value;
+      t->blocks[b][i].grad = t->params[b][i].grad;
+      t->blocks[b][i].count = t->params[b][i].count;
+      total += t->params[b][i].count;
+    }
+    t->nparams[b] = np;
+    KPCN_TRY(kpcn_adam_create(&t->adam[b], &t->s.adam, total));
+  }
+  return KPCN_OK;
+}
+
+kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s) {
+  if (!out || !s) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_trainer_create: NULL");
+  *out = NULL;
+  if (!s->store_path) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "no patch store given");
+  if (!s->out_path) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "no output model path given");
+  if (s->batch < 1 || s->batch > 256)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "batch %d out of range 1..256", s->batch);
+  if (s->patch < 8 || s->patch > 1024)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch %d out of range 8..1024", s->patch);
+  if (s->iters < 0) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "iters %lld < 0", (long long)s->iters);
+  if (s->loss_margin < 0 || 2 * s->loss_margin >= s->patch)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "loss margin %d too large for patch %d",
+                     s->loss_margin, s->patch);
+  if (s->nval < 0 || (s->nval && (!s->val_noisy || !s->val_ref)))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "validation list is inconsistent");
+  kpcn_trainer *t = kpcn_calloc(1, sizeof *t, "trainer");
+  if (!t) return kpcn_last_status();
+  t->s = *s;
+  if (t->s.stage1_iters < 0) t->s.stage1_iters = (int64_t)llround(0.6 * (double)s->iters);
+  if (t->s.log_every < 1) t->s.log_every = 1;
+  t->store_path = dup_or_null(s->store_path);
+  t->out_path = dup_or_null(s->out_path);
+  t->ckpt_path = s->ckpt_path ? dup_or_null(s->ckpt_path) : with_suffix(s->out_path, ".ckpt");
+  t->csv_path = s->csv_path ? dup_or_null(s->csv_path) : with_suffix(s->out_path, ".csv");
+  t->plot_path = s->plot_path ? dup_or_null(s->plot_path) : with_suffix(s->out_path, ".png");
+  t->init_model = dup_or_null(s->init_model);
+  t->s.store_path = t->store_path, t->s.out_path = t->out_path, t->s.ckpt_path = t->ckpt_path;
+  t->s.csv_path = t->csv_path, t->s.plot_path = t->plot_path, t->s.init_model = t->init_model;
+  t->nt = kpcn_resolve_threads(s->nthreads);
+  t->N = s->batch;
+  t->P = s->patch;
+  kpcn_status st = KPCN_OK;
+#define GO(x)                                                                                      \
+  do {                                                                                             \
+    if ((st = (x)) != KPCN_OK) goto fail;                                                          \
+  } while (0)
+  if (!t->store_path || !t->out_path || !t->ckpt_path || !t->csv_path || !t->plot_path)
+    GO(KPCN_ERR_OUT_OF_MEMORY);
+  /* architecture with the feature builder's inputs */
+  t->arch = s->arch;
+  {
+    const char *names[KPCN_NN_MAX_INPUTS];
+    int n = kpcn_features_channel_names(KPCN_BRANCH_DIFFUSE, names, KPCN_NN_MAX_INPUTS);
+    GO(kpcn_arch_set_inputs(&t->arch, n, names));
+  }
+  if (t->init_model) {
+    GO(kpcn_model_load(t->init_model, &t->model));
+    t->arch = *kpcn_model_arch(t->model);
+    char what[600];
+    snprintf(what, sizeof what, "model '%s'", t->init_model);
+    GO(check_inputs(t, &t->arch, what));
+  } else {
+    GO(kpcn_arch_validate(&t->arch));
+    GO(kpcn_model_create(&t->arch, s->seed, &t->model));
+  }
+  t->nfeat = t->arch.n_inputs;
+  t->K2 = t->arch.kernel_size * t->arch.kernel_size;
+  GO(kpcn_patchstore_open(&t->ps, t->store_path, NULL, 0));
+  GO(kt_batch_setup(t));
+  GO(load_validation(t));
+  GO(setup_nets(t));
+  {
+    size_t pp = (size_t)t->P * t->P, N = (size_t)t->N;
+    for (int b = 0; b < KT_NB; b++) {
+      t->feat[b] = talloc(N * t->nfeat * pp, &st);
+      t->noisy[b] = talloc(N * 3 * pp, &st);
+      t->logits[b] = talloc(N * t->K2 * pp, &st);
+      t->out[b] = talloc(N * 3 * pp, &st);
+      t->target[b] = talloc(N * 3 * pp, &st);
+      t->grad[b] = talloc(N * 3 * pp, &st);
+    }
+    t->albedo = talloc(N * 3 * pp, &st);
+    t->refc = talloc(N * 3 * pp, &st);
+    t->comb = talloc(N * 3 * pp, &st);
+    t->gcomb = talloc(N * 3 * pp, &st);
+    t->lossbuf = talloc(3 * N * 3 * pp, &st);
+    t->scratch_per_thread = kt_scratch_floats(t->S, t->P, t->nch);
+    t->scratch = talloc((size_t)t->nt * t->scratch_per_thread, &st);
+    t->batch_idx = kpcn_calloc(N, sizeof(uint64_t), "batch");
+    t->batch_ox = kpcn_calloc(N, sizeof(int), "batch");
+    t->batch_oy = kpcn_calloc(N, sizeof(int), "batch");
+    if (!t->batch_idx || !t->batch_ox || !t->batch_oy) st = KPCN_ERR_OUT_OF_MEMORY;
+    GO(st);
+  }
+  kpcn_rng_seed(&t->rng, s->seed);
+  if (s->resume) GO(kt_checkpoint_load(t, t->ckpt_path));
+  *out = t;
+  return KPCN_OK;
+fail:
+  kpcn_trainer_destroy(t);
+  return st;
+#undef GO
+}
+
+int64_t kpcn_trainer_iteration(const kpcn_trainer *t) { return t->iter; }
+kpcn_model *kpcn_trainer_model(kpcn_trainer *t) { return t->model; }
+
+double kpcn_trainer_flops_per_iter(const kpcn_trainer *t) {
+  /* forward F + backward-weights F + backward-data F minus the first layer's (no input
+   * gradient is needed), per pixel of each branch */
+  const kpcn_arch *a = &t->arch;
+  double f = 0, first = 0;
+  for (int l = 0; l < kpcn_arch_n_layers(a); l++) {
+    double k = a->conv_size[l];
+    double fl = 2.0 * kpcn_arch_layer_in(a, l) * kpcn_arch_layer_out(a, l) * k * k;
+    f += fl;
+    if (l == 0) first = fl;
+  }
+  return KT_NB * (double)t->N * t->P * t->P * (3 * f - first);
+}
+
+/* forward of one branch: logits -> softmax weights in place -> out */
+static kpcn_status branch_forward(kpcn_trainer *t, int b) {
+  KPCN_TRY(kpcn_net_forward(t->net[b], t->feat[b], t->logits[b]));
+  return kpcn_kpa_forward(t->arch.kernel_size, t->N, 3, t->P, t->P, t->logits[b], t->noisy[b],
+                          t->out[b], t->logits[b], t->nt);
+}
+
+/* backward of one branch from dL/dout in t->grad[b], then its Adam step */
+static kpcn_status branch_backward_step(kpcn_trainer *t, int b) {
+  KPCN_TRY(kpcn_kpa_backward(t->arch.kernel_size, t->N, 3, t->P, t->P, t->logits[b],
+                             t->noisy[b], t->grad[b], t->logits[b], NULL, t->nt));
+  KPCN_TRY(kpcn_net_backward(t->net[b], t->logits[b], NULL));
+  return kpcn_adam_step(t->adam[b], t->blocks[b], t->nparams[b], t->nt, NULL);
+}
+
+kpcn_status kpcn_trainer_step(kpcn_trainer *t, double *loss) {
+  if (!t) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_trainer_step: NULL trainer");
+  KPCN_TRY(kt_batch_assemble(t));
+  double total = 0;
+  if (t->iter < t->s.stage1_iters) {
+    for (int b = 0; b < KT_NB; b++) {
+      double v;
+      KPCN_TRY(branch_forward(t, b));
+      KPCN_TRY(kt_loss(t, t->s.loss1, t->out[b], t->target[b], t->grad[b], &v));
+      KPCN_TRY(branch_backward_step(t, b));
+      total += v;
+    }
+  } else {
+    size_t n = (size_t)t->N * 3 * t->P * t->P;
+    for (int b = 0; b < KT_NB; b++) KPCN_TRY(branch_forward(t, b));
+    kpcn_recombine(t->out[0], t->out[1], t->albedo, t->arch.eps, n, t->comb);
+    KPCN_TRY(kt_loss(t, t->s.loss2, t->comb, t->refc, t->gcomb, &total));
+    kpcn_recombine_backward(t->gcomb, t->out[1], t->albedo, t->arch.eps, n, t->grad[0],
+                            t->grad[1]);
+    for (int b = 0; b < KT_NB; b++) KPCN_TRY(branch_backward_step(t, b));
+  }
+  if (!isfinite(total))
+    return kpcn_fail(KPCN_ERR_NONFINITE, "training loss is %g at iteration %lld", total,
+                     (long long)t->iter);
+  t->iter++;
+  if (loss) *loss = total;
+  return KPCN_OK;
+}
+
+kpcn_status kpcn_trainer_validate(kpcn_trainer *t, double *relmse, double *ssim, double *psnr) {
+  if (!t->nval) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "no validation images given");
+  kpcn_denoiser_options o;
+  kpcn_denoiser_options_defaults(&o);
+  o.method = KPCN_DENOISE_KPCN;
+  o.nthreads = t->nt;
+  kpcn_denoiser *d = NULL;
+  KPCN_TRY(kpcn_denoiser_create_with_model(&d, t->model, &o));
+  kpcn_metric_options mo;
+  kpcn_metric_options_defaults(&mo);
+  mo.nthreads = t->nt;
+  double acc[3] = {0, 0, 0};
+  kpcn_status st = KPCN_OK;
+  for (int i = 0; i < t->nval && st == KPCN_OK; i++) {
+    const kpcn_aov_set *a = t->val_aov[i];
+    float *den = kpcn_alloc(3 * kpcn_aov_plane_size(a) * sizeof(float), "validation output");
+    if (!den) {
+      st = kpcn_last_status();
+      break;
+    }
+    st = kpcn_denoiser_execute_aov(d, a, den);
+    static const kpcn_metric ms[3] = {KPCN_METRIC_RELMSE, KPCN_METRIC_SSIM, KPCN_METRIC_PSNR};
+    for (int m = 0; m < 3 && st == KPCN_OK; m++) {
+      kpcn_metric_result r;
+      st = kpcn_metric_planar(ms[m], den, t->val_ref[i], a->width, a->height, 3, &mo, &r, NULL);
+      acc[m] += r.value;
+    }
+    free(den);
+    if (st != KPCN_OK) kpcn_fail_context("validating on '%s'", t->s.val_noisy[i]);
+  }
+  kpcn_denoiser_destroy(d);
+  KPCN_TRY(st);
+  for (int m = 0; m < 3; m++) t->last_val[m] = acc[m] / t->nval;
+  t->have_val = 1;
+  if (relmse) *relmse = t->last_val[0];
+  if (ssim) *ssim = t->last_val[1];
+  if (psnr) *psnr = t->last_val[2];
+  return KPCN_OK;
+}

@@ -1,0 +1,35 @@
+// kpcn/ops_denoise.h — ImageBufAlgo-style denoise op (DESIGN.md §8) over the C denoiser in
+// kpcn/denoise.h. The source ImageBuf is a multi-channel AOV image (canonical channel names
+// or aliases, see kpcn/image.h); the result is a 3-channel float RGB image (R, G, B).
+#pragma once
+
+#include <OpenImageIO/imagebuf.h>
+
+#include <string>
+
+#include "kpcn/denoise.h"
+
+namespace kpcn {
+namespace ops {
+
+struct DenoiseOptions {
+  // "kpcn" (needs model), "bilateral" or "nlmeans".
+  std::string method = "kpcn";
+  std::string model; // safetensors model file (method "kpcn")
+  bool bf16 = false; // bf16 convolutions
+  int tile = 0;      // KPCN tile size in output pixels per side, 0 = automatic/untiled
+  // Baseline parameters; defaults of kpcn_denoiser_options_defaults when left alone.
+  kpcn_denoiser_options c_options() const;
+};
+
+// Denoises the AOV image `aovs` into dst (3 channels R,G,B, float). The whole image is
+// denoised (per-image normalisation needs it); roi (default: all) selects which part of
+// the result is stored in dst. Errors (missing buffer named, bad model ...) are reported
+// with dst.errorfmt and a false return.
+bool denoise(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptions &opt,
+             OIIO::ROI roi = {}, int nthreads = 0);
+OIIO::ImageBuf denoise(const OIIO::ImageBuf &aovs, const DenoiseOptions &opt, OIIO::ROI roi = {},
+                       int nthreads = 0);
+
+} // namespace ops
+} // namespace kpcn

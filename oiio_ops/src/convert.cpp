@@ -1,0 +1,197 @@
+// ImageBuf <-> kpcn_image / kpcn_aov_set conversions (see kpcn/oiio_convert.h).
+#include "kpcn/oiio_convert.h"
+
+#include <OpenImageIO/imagebufalgo.h>
+
+#include <cstring>
+#include <limits>
+
+using namespace OIIO;
+
+namespace kpcn {
+namespace ops {
+
+std::vector<std::string> split_names(const std::string &list, char sep) {
+  std::vector<std::string> out;
+  size_t start = 0;
+  while (start <= list.size()) {
+    size_t e = list.find(sep, start);
+    if (e == std::string::npos) e = list.size();
+    if (e > start) out.push_back(list.substr(start, e - start));
+    start = e + 1;
+  }
+  return out;
+}
+
+int channel_index(const ImageSpec &spec, const std::string &name) {
+  return spec.channelindex(name);
+}
+
+// Reads channel `ch` of `src` over `roi` (one channel) into a planar float plane.
+static bool read_plane(const ImageBuf &src, ROI roi, int ch, float *dst, std::string &err) {
+  roi.chbegin = ch;
+  roi.chend = ch + 1;
+  if (!src.get_pixels(roi, TypeDesc::FLOAT, dst)) {
+    err = "cannot read pixels of '" + std::string(src.name()) + "': " + src.geterror();
+    return false;
+  }
+  return true;
+}
+
+static bool check_source(const ImageBuf &src, ROI &roi, std::string &err) {
+  if (!src.initialized()) {
+    err = "image '" + std::string(src.name()) + "' is not initialized";
+    return false;
+  }
+  // A file-backed ImageBuf reads lazily; unreadable / truncated files surface in get_pixels
+  // (read_plane names the file).
+  if (!roi.defined()) roi = src.roi();
+  if (roi.width() <= 0 || roi.height() <= 0 || roi.depth() != 1) {
+    err = "image '" + std::string(src.name()) + "' has an unsupported size " + std::to_string(roi.width()) +
+          "x" + std::to_string(roi.height()) + "x" + std::to_string(roi.depth());
+    return false;
+  }
+  return true;
+}
+
+static ImagePtr make_image(int w, int h, const std::vector<std::string> &names,
+                           std::string &err) {
+  std::vector<const char *> cn;
+  for (auto &n : names) cn.push_back(n.c_str());
+  kpcn_image *img = nullptr;
+  if (kpcn_image_create(&img, w, h, (int)cn.size(), cn.data()) != KPCN_OK) {
+    err = kpcn_last_error();
+    return nullptr;
+  }
+  return ImagePtr(img);
+}
+
+ImagePtr to_kpcn_image(const ImageBuf &src, std::string &err, ROI roi) {
+  bool whole_channels = !roi.defined();
+  if (!check_source(src, roi, err)) return nullptr;
+  const ImageSpec &spec = src.spec();
+  if (whole_channels) {
+    roi.chbegin = 0;
+    roi.chend = spec.nchannels;
+  }
+  roi.chend = std::min(roi.chend, spec.nchannels);
+  std::vector<std::string> names;
+  for (int c = roi.chbegin; c < roi.chend; ++c)
+    names.push_back(std::string(spec.channel_name(c)).empty() ? std::to_string(c) : std::string(spec.channel_name(c)));
+  if (names.empty()) {
+    err = "image '" + std::string(src.name()) + "' has no channels in the requested range";
+    return nullptr;
+  }
+  ImagePtr img = make_image(roi.width(), roi.height(), names, err);
+  if (!img) return nullptr;
+  for (int c = roi.chbegin; c < roi.chend; ++c)
+    if (!read_plane(src, roi, c, kpcn_image_plane(img.get(), c - roi.chbegin), err))
+      return nullptr;
+  return img;
+}
+
+ImagePtr to_kpcn_image(const ImageBuf &src, const std::vector<std::string> &channels,
+                       std::string &err, ROI roi) {
+  if (!check_source(src, roi, err)) return nullptr;
+  std::vector<int> idx;
+  for (auto &n : channels) {
+    int i = src.spec().channelindex(n);
+    if (i < 0) {
+      err = "image '" + std::string(src.name()) + "' has no channel '" + n + "'";
+      return nullptr;
+    }
+    idx.push_back(i);
+  }
+  if (idx.empty()) {
+    err = "empty channel list for image '" + std::string(src.name()) + "'";
+    return nullptr;
+  }
+  ImagePtr img = make_image(roi.width(), roi.height(), channels, err);
+  if (!img) return nullptr;
+  for (size_t k = 0; k < idx.size(); ++k)
+    if (!read_plane(src, roi, idx[k], kpcn_image_plane(img.get(), (int)k), err)) return nullptr;
+  return img;
+}
+
+bool from_kpcn_image(ImageBuf &dst, const kpcn_image &img) {
+  ImageSpec spec(img.width, img.height, img.nchannels, TypeDesc::FLOAT);
+  spec.channelnames.clear();
+  for (int c = 0; c < img.nchannels; ++c)
+    spec.channelnames.emplace_back(img.names && img.names[c] ? img.names[c]
+                                                             : std::to_string(c).c_str());
+  dst.reset(spec);
+  size_t plane = (size_t)img.width * img.height;
+  // Planar -> interleaved via strides: one channel at a time.
+  for (int c = 0; c < img.nchannels; ++c) {
+    ROI r(0, img.width, 0, img.height, 0, 1, c, c + 1);
+    if (!dst.set_pixels(r, TypeDesc::FLOAT, img.data + (size_t)c * plane)) {
+      dst.errorfmt("cannot store channel {}: {}", c, dst.geterror());
+      return false;
+    }
+  }
+  return true;
+}
+
+ImageBuf from_kpcn_image(const kpcn_image &img) {
+  ImageBuf dst;
+  from_kpcn_image(dst, img);
+  return dst;
+}
+
+AovPtr to_aov_set(const ImageBuf &src, std::string &err) {
+  ImagePtr img = to_kpcn_image(src, err);
+  if (!img) return nullptr;
+  kpcn_aov_set *set = nullptr;
+  if (kpcn_aov_from_image(&set, img.get()) != KPCN_OK) {
+    err = "'" + std::string(src.name()) + "': " + kpcn_last_error();
+    return nullptr;
+  }
+  AovPtr out(set);
+  const ImageSpec &spec = src.spec();
+  out->spp = spec.get_int_attribute("kpcn:spp", -1);
+  // The seed may exceed an int: accept int attributes and decimal strings.
+  const ParamValue *p = spec.find_attribute("kpcn:seed");
+  if (p) {
+    if (p->type() == TypeDesc::STRING)
+      out->seed = std::strtoll(p->get_string().c_str(), nullptr, 10);
+    else
+      out->seed = p->get_int(-1);
+  } else {
+    out->seed = -1;
+  }
+  std::string scene = spec.get_string_attribute("kpcn:scene");
+  std::string version = spec.get_string_attribute("kpcn:version");
+  std::snprintf(out->scene, sizeof out->scene, "%s", scene.c_str());
+  std::snprintf(out->version, sizeof out->version, "%s", version.c_str());
+  return out;
+}
+
+bool from_aov_set(ImageBuf &dst, const kpcn_aov_set &set) {
+  kpcn_image *img = nullptr;
+  if (kpcn_aov_to_image(&img, &set) != KPCN_OK) {
+    dst.errorfmt("{}", kpcn_last_error());
+    return false;
+  }
+  ImagePtr guard(img);
+  if (!from_kpcn_image(dst, *img)) return false;
+  ImageSpec &spec = dst.specmod();
+  if (set.spp >= 0) spec.attribute("kpcn:spp", set.spp);
+  if (set.seed >= 0) {
+    if (set.seed <= std::numeric_limits<int>::max())
+      spec.attribute("kpcn:seed", (int)set.seed);
+    else
+      spec.attribute("kpcn:seed", std::to_string(set.seed));
+  }
+  if (set.scene[0]) spec.attribute("kpcn:scene", set.scene);
+  if (set.version[0]) spec.attribute("kpcn:version", set.version);
+  return true;
+}
+
+ImageBuf from_aov_set(const kpcn_aov_set &set) {
+  ImageBuf dst;
+  from_aov_set(dst, set);
+  return dst;
+}
+
+} // namespace ops
+} // namespace kpcn

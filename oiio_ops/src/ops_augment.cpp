@@ -1,0 +1,234 @@
+// ImageBuf adapters over libkpcn's augment module (kpcn/ops_augment.h).
+#include "kpcn/ops_augment.h"
+
+#include "kpcn/dataset.h"
+#include "kpcn/exr.h"
+#include "kpcn/oiio_convert.h"
+
+#include <OpenImageIO/imagebufalgo.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <sys/stat.h>
+
+namespace kpcn {
+namespace ops {
+
+namespace {
+
+// Copies header attributes (kpcn:spp ...) that the planar round trip does not carry.
+void copy_metadata(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src) {
+  for (const auto &p : src.spec().extra_attribs) dst.specmod().attribute(p.name().string(), p.type(), p.data());
+}
+
+template <class F> bool apply(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, F &&f) {
+  std::string err;
+  ImagePtr in = to_kpcn_image(src, err);
+  if (!in) {
+    dst.errorfmt("{}", err);
+    return false;
+  }
+  kpcn_image *out = nullptr;
+  if (f(&out, in.get()) != KPCN_OK) {
+    dst.errorfmt("{}", kpcn_last_error());
+    return false;
+  }
+  ImagePtr o(out);
+  if (!from_kpcn_image(dst, *o)) {
+    if (!dst.has_error()) dst.errorfmt("cannot convert the augmented image");
+    return false;
+  }
+  copy_metadata(dst, src);
+  return true;
+}
+
+// Arbitrary-angle rotation of a kpcn_image (same size).
+kpcn_status rotate_any_image(kpcn_image **out, const kpcn_image *in, double deg, int nthreads) {
+  kpcn_image *o = nullptr;
+  kpcn_status s = kpcn_image_create(&o, in->width, in->height, in->nchannels,
+                                    (const char *const *)in->names);
+  if (s != KPCN_OK) return s;
+  s = kpcn_augment_rotate_any_planes(o->data, in->data, in->nchannels,
+                                     (const char *const *)in->names, in->width, in->height, deg,
+                                     nthreads);
+  if (s != KPCN_OK) {
+    kpcn_image_destroy(o);
+    return s;
+  }
+  *out = o;
+  return KPCN_OK;
+}
+
+} // namespace
+
+bool augment(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, const kpcn_augment_xform &x,
+             int nthreads) {
+  return apply(dst, src, [&](kpcn_image **o, const kpcn_image *i) {
+    return kpcn_augment_image(o, i, &x, nthreads);
+  });
+}
+OIIO::ImageBuf augment(const OIIO::ImageBuf &src, const kpcn_augment_xform &x, int nthreads) {
+  OIIO::ImageBuf d;
+  augment(d, src, x, nthreads);
+  return d;
+}
+
+bool mirror(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, bool vertical, int nthreads) {
+  kpcn_augment_xform x;
+  kpcn_augment_identity(&x);
+  (vertical ? x.mirror_v : x.mirror_h) = 1;
+  return augment(dst, src, x, nthreads);
+}
+OIIO::ImageBuf mirror(const OIIO::ImageBuf &src, bool vertical, int nthreads) {
+  OIIO::ImageBuf d;
+  mirror(d, src, vertical, nthreads);
+  return d;
+}
+
+bool rotate(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, double degrees, int nthreads) {
+  if (!std::isfinite(degrees)) {
+    dst.errorfmt("rotate: angle {} is not finite", degrees);
+    return false;
+  }
+  double q = degrees / 90.0;
+  if (std::fabs(q - std::round(q)) < 1e-12) {
+    kpcn_augment_xform x;
+    kpcn_augment_identity(&x);
+    x.rot90 = (int)(((long long)std::llround(q) % 4 + 4) % 4);
+    return augment(dst, src, x, nthreads);
+  }
+  return apply(dst, src, [&](kpcn_image **o, const kpcn_image *i) {
+    return rotate_any_image(o, i, degrees, nthreads);
+  });
+}
+OIIO::ImageBuf rotate(const OIIO::ImageBuf &src, double degrees, int nthreads) {
+  OIIO::ImageBuf d;
+  rotate(d, src, degrees, nthreads);
+  return d;
+}
+
+bool colorswap(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, const std::string &perm,
+               int nthreads) {
+  kpcn_augment_xform x;
+  kpcn_augment_identity(&x);
+  if (kpcn_augment_parse_perm(perm.c_str(), x.perm) != KPCN_OK) {
+    dst.errorfmt("{}", kpcn_last_error());
+    return false;
+  }
+  return augment(dst, src, x, nthreads);
+}
+OIIO::ImageBuf colorswap(const OIIO::ImageBuf &src, const std::string &perm, int nthreads) {
+  OIIO::ImageBuf d;
+  colorswap(d, src, perm, nthreads);
+  return d;
+}
+
+bool shift(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, int dx, int dy, int nthreads) {
+  kpcn_augment_xform x;
+  kpcn_augment_identity(&x);
+  x.dx = dx;
+  x.dy = dy;
+  return augment(dst, src, x, nthreads);
+}
+OIIO::ImageBuf shift(const OIIO::ImageBuf &src, int dx, int dy, int nthreads) {
+  OIIO::ImageBuf d;
+  shift(d, src, dx, dy, nthreads);
+  return d;
+}
+
+bool select_patches(const OIIO::ImageBuf &noisy, const OIIO::ImageBuf &ref,
+                    const kpcn_patch_settings &s, std::vector<kpcn_patch_origin> &out,
+                    kpcn_patch_stats &stats, std::string &err) {
+  AovPtr n = to_aov_set(noisy, err);
+  if (!n) return false;
+  AovPtr r;
+  if (ref.initialized()) {
+    r = to_aov_set(ref, err);
+    if (!r) return false;
+  }
+  kpcn_patch_origin *o = nullptr;
+  int cnt = 0;
+  if (kpcn_patches_select(&o, &cnt, &stats, n.get(), r.get(), &s) != KPCN_OK) {
+    err = kpcn_last_error();
+    return false;
+  }
+  out.assign(o, o + cnt);
+  std::free(o);
+  return true;
+}
+
+bool write_patches(const std::string &out, const OIIO::ImageBuf &noisy, const OIIO::ImageBuf &ref,
+                   const std::vector<kpcn_patch_origin> &origins, int size, std::string &err) {
+  AovPtr n = to_aov_set(noisy, err);
+  if (!n) return false;
+  AovPtr r;
+  if (ref.initialized()) {
+    r = to_aov_set(ref, err);
+    if (!r) return false;
+  }
+  bool kps = out.size() > 4 && out.compare(out.size() - 4, 4, ".kps") == 0;
+  if (kps) {
+    kpcn_patchstore_settings ss;
+    kpcn_patchstore_settings_defaults(&ss);
+    ss.patch_size = size;
+    kpcn_patchstore_writer *w = nullptr;
+    if (kpcn_patchstore_create(&w, out.c_str(), &ss) != KPCN_OK) {
+      err = kpcn_last_error();
+      return false;
+    }
+    kpcn_patch_source src;
+    std::memset(&src, 0, sizeof src);
+    std::snprintf(src.scene, sizeof src.scene, "%s", n->scene);
+    std::snprintf(src.noisy, sizeof src.noisy, "%s", noisy.name().c_str());
+    std::snprintf(src.reference, sizeof src.reference, "%s", ref.name().c_str());
+    src.spp = n->spp;
+    src.ref_spp = r ? r->spp : -1;
+    uint32_t sid = 0;
+    if (kpcn_patch_source_depth_stats(&src, n.get()) != KPCN_OK ||
+        kpcn_patchstore_add_source(w, &src, &sid) != KPCN_OK) {
+      err = kpcn_last_error();
+      kpcn_patchstore_abort(w);
+      return false;
+    }
+    for (const auto &o : origins) {
+      kpcn_patch_record rec = {sid, o.x, o.y, 0, o.flat_frac, o.weight, 0};
+      if (kpcn_patchstore_append_aov(w, &rec, n.get(), r.get()) != KPCN_OK) {
+        err = kpcn_last_error();
+        kpcn_patchstore_abort(w);
+        return false;
+      }
+    }
+    if (kpcn_patchstore_finish(w) != KPCN_OK) {
+      err = kpcn_last_error();
+      return false;
+    }
+    return true;
+  }
+  if (mkdir(out.c_str(), 0777) != 0 && errno != EEXIST) {
+    err = "cannot create directory '" + out + "': " + std::strerror(errno);
+    return false;
+  }
+  for (size_t i = 0; i < origins.size(); i++) {
+    for (int k = 0; k < (r ? 2 : 1); k++) {
+      kpcn_aov_set *c = nullptr;
+      const kpcn_aov_set *s = k ? r.get() : n.get();
+      if (kpcn_augment_crop_aov(&c, s, origins[i].x, origins[i].y, size, size) != KPCN_OK) {
+        err = kpcn_last_error();
+        return false;
+      }
+      AovPtr cp(c);
+      char name[64];
+      std::snprintf(name, sizeof name, "/%s_%04zu.exr", k ? "ref" : "noisy", i);
+      if (kpcn_exr_write_aov((out + name).c_str(), c, nullptr) != KPCN_OK) {
+        err = kpcn_last_error();
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
+} // namespace ops
+} // namespace kpcn

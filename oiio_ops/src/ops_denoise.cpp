@@ -1,0 +1,73 @@
+// ImageBuf adapter for the denoiser: ImageBuf -> kpcn_aov_set -> kpcn_denoise_aov -> ImageBuf.
+#include "kpcn/ops_denoise.h"
+
+#include <OpenImageIO/imagebufalgo.h>
+
+#include "kpcn/oiio_convert.h"
+
+namespace kpcn {
+namespace ops {
+
+kpcn_denoiser_options DenoiseOptions::c_options() const {
+  kpcn_denoiser_options o;
+  kpcn_denoiser_options_defaults(&o);
+  o.method = method == "bilateral" ? KPCN_DENOISE_BILATERAL
+             : method == "nlmeans" ? KPCN_DENOISE_NLMEANS
+                                   : KPCN_DENOISE_KPCN;
+  o.model_path = model.empty() ? nullptr : model.c_str();
+  o.bf16 = bf16 ? 1 : 0;
+  o.tile = tile;
+  return o;
+}
+
+bool denoise(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptions &opt,
+             OIIO::ROI roi, int nthreads) {
+  if (opt.method != "kpcn" && opt.method != "bilateral" && opt.method != "nlmeans") {
+    dst.errorfmt("denoise: unknown method '{}' (kpcn, bilateral, nlmeans)", opt.method);
+    return false;
+  }
+  if (opt.method == "kpcn" && opt.model.empty()) {
+    dst.errorfmt("denoise: method kpcn needs a model file (model=...)");
+    return false;
+  }
+  std::string err;
+  AovPtr set = to_aov_set(aovs, err);
+  if (!set) {
+    dst.errorfmt("denoise: {}", err);
+    return false;
+  }
+  kpcn_denoiser_options o = opt.c_options();
+  o.nthreads = nthreads;
+  kpcn_image *rgb = nullptr;
+  if (kpcn_denoise_aov(set.get(), &o, &rgb) != KPCN_OK) {
+    dst.errorfmt("denoise: {}", kpcn_last_error());
+    return false;
+  }
+  ImagePtr out(rgb);
+  OIIO::ImageBuf full = from_kpcn_image(*out);
+  if (full.has_error()) {
+    dst.errorfmt("denoise: {}", full.geterror());
+    return false;
+  }
+  // The AOV image's data window may not start at 0,0: put the result where the input was.
+  const OIIO::ImageSpec &ss = aovs.spec();
+  full.set_origin(ss.x, ss.y);
+  full.set_full(ss.full_x, ss.full_y, ss.full_z, ss.full_width, ss.full_height, ss.full_depth);
+  if (!roi.defined()) {
+    dst = std::move(full);
+    return true;
+  }
+  roi.chbegin = 0;
+  roi.chend = 3;
+  return OIIO::ImageBufAlgo::cut(dst, full, roi);
+}
+
+OIIO::ImageBuf denoise(const OIIO::ImageBuf &aovs, const DenoiseOptions &opt, OIIO::ROI roi,
+                       int nthreads) {
+  OIIO::ImageBuf dst;
+  denoise(dst, aovs, opt, roi, nthreads);
+  return dst;
+}
+
+} // namespace ops
+} // namespace kpcn

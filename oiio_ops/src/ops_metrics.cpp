@@ -1,0 +1,104 @@
+// Metrics over ImageBufs (kpcn/ops_metrics.h): convert, call libkpcn, convert back.
+#include "kpcn/ops_metrics.h"
+
+#include "kpcn/metrics.h"
+#include "kpcn/oiio_convert.h"
+
+using namespace OIIO;
+
+namespace kpcn {
+namespace ops {
+
+const char *metric_name(Metric m) { return kpcn_metric_name((kpcn_metric)m); }
+
+bool metric_from_name(const std::string &name, Metric &m) {
+  int i = kpcn_metric_from_name(name.c_str());
+  if (i < 0) return false;
+  m = (Metric)i;
+  return true;
+}
+
+static std::string size_str(const ROI &r) {
+  return std::to_string(r.width()) + "x" + std::to_string(r.height());
+}
+
+// Shared body of compare() and errormap(): map != nullptr requests the error image.
+static MetricResult run(const ImageBuf &x, const ImageBuf &ref, Metric m,
+                        const CompareOptions &opt, ROI roi, int nthreads, ImagePtr *map) {
+  MetricResult r;
+  const char *what = metric_name(m);
+  if ((int)m < 0 || (int)m >= KPCN_METRIC_COUNT) {
+    r.error = "unknown metric id " + std::to_string((int)m);
+    return r;
+  }
+  ROI rx = roi.defined() ? roi : x.roi(), ry = roi.defined() ? roi : ref.roi();
+  if (rx.width() != ry.width() || rx.height() != ry.height()) {
+    r.error = std::string(what) + ": image sizes differ ('" + std::string(x.name()) + "' is " + size_str(rx) +
+              ", '" + std::string(ref.name()) + "' is " + size_str(ry) + ")";
+    return r;
+  }
+  std::string err;
+  ImagePtr ix = opt.channels.empty() ? to_kpcn_image(x, err, rx)
+                                     : to_kpcn_image(x, opt.channels, err, rx);
+  if (!ix) {
+    r.error = std::string(what) + ": " + err;
+    return r;
+  }
+  ImagePtr iy = opt.channels.empty() ? to_kpcn_image(ref, err, ry)
+                                     : to_kpcn_image(ref, opt.channels, err, ry);
+  if (!iy) {
+    r.error = std::string(what) + ": " + err;
+    return r;
+  }
+  kpcn_metric_options o;
+  kpcn_metric_options_defaults(&o);
+  o.display = opt.display_srgb ? KPCN_DISPLAY_SRGB : KPCN_DISPLAY_LINEAR;
+  o.data_range = opt.data_range;
+  o.eps = opt.eps;
+  o.nthreads = nthreads;
+  kpcn_metric_result res;
+  kpcn_image *em = nullptr;
+  kpcn_status s = kpcn_metric_image((kpcn_metric)m, ix.get(), iy.get(), nullptr, 0, &o, &res,
+                                    map ? &em : nullptr);
+  if (s != KPCN_OK) {
+    r.error = kpcn_last_error();
+    r.nonfinite = res.nonfinite;
+    return r;
+  }
+  if (map) map->reset(em);
+  r.ok = true;
+  r.value = res.value;
+  r.npixels = res.npixels;
+  r.nonfinite = res.nonfinite;
+  r.nchannels = res.nchannels;
+  // Compared channels: the reference's (matched by name in kpcn_metric_image).
+  for (int c = 0; c < iy->nchannels; ++c) r.channel_names.push_back(iy->names[c]);
+  return r;
+}
+
+MetricResult compare(const ImageBuf &x, const ImageBuf &ref, Metric m, const CompareOptions &opt,
+                     ROI roi, int nthreads) {
+  return run(x, ref, m, opt, roi, nthreads, nullptr);
+}
+
+bool errormap(ImageBuf &dst, const ImageBuf &x, const ImageBuf &ref, Metric m,
+              const CompareOptions &opt, ROI roi, int nthreads, MetricResult *result) {
+  ImagePtr map;
+  MetricResult r = run(x, ref, m, opt, roi, nthreads, &map);
+  if (result) *result = r;
+  if (!r.ok) {
+    dst.errorfmt("{}", r.error);
+    return false;
+  }
+  return from_kpcn_image(dst, *map);
+}
+
+ImageBuf errormap(const ImageBuf &x, const ImageBuf &ref, Metric m, const CompareOptions &opt,
+                  ROI roi, int nthreads) {
+  ImageBuf dst;
+  errormap(dst, x, ref, m, opt, roi, nthreads);
+  return dst;
+}
+
+} // namespace ops
+} // namespace kpcn

@@ -1,0 +1,346 @@
+/* Exact augmentation ops: inverses, compositions, explicit per-pixel definitions, and
+ * the camera-space sign convention checked against a geometric normal field. */
+#include "kpcn/augment.h"
+#include "testutil.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+static unsigned g_rng = 12345;
+
+/* A full AOV set with random content (all buffers and variances). */
+static kpcn_aov_set *random_set(int w, int h) {
+  kpcn_aov_set *s = NULL;
+  if (kpcn_aov_create(&s, w, h) != KPCN_OK) return NULL;
+  for (int b = 0; b < KPCN_BUF_COUNT; b++) {
+    kpcn_aov_add(s, (kpcn_buffer)b, 1);
+    size_t n = kpcn_aov_plane_size(s) * (size_t)kpcn_buffer_channels((kpcn_buffer)b);
+    for (size_t i = 0; i < n; i++) s->buf[b][i] = kt_randf(&g_rng) * 2 - 0.5f;
+    for (size_t i = 0; i < kpcn_aov_plane_size(s); i++) s->var[b][i] = kt_randf(&g_rng);
+  }
+  s->spp = 16;
+  return s;
+}
+
+static int sets_equal(const kpcn_aov_set *a, const kpcn_aov_set *b) {
+  if (a->width != b->width || a->height != b->height) return 0;
+  size_t np = kpcn_aov_plane_size(a);
+  for (int k = 0; k < KPCN_BUF_COUNT; k++) {
+    size_t n = np * (size_t)kpcn_buffer_channels((kpcn_buffer)k);
+    if ((a->buf[k] == NULL) != (b->buf[k] == NULL)) return 0;
+    if (a->buf[k] && memcmp(a->buf[k], b->buf[k], n * sizeof(float))) return 0;
+    if ((a->var[k] == NULL) != (b->var[k] == NULL)) return 0;
+    if (a->var[k] && memcmp(a->var[k], b->var[k], np * sizeof(float))) return 0;
+  }
+  return 1;
+}
+
+/* Applies a sequence of transforms. */
+static kpcn_aov_set *apply(const kpcn_aov_set *in, const kpcn_augment_xform *x) {
+  kpcn_aov_set *o = NULL;
+  kpcn_status s = kpcn_augment_aov(&o, in, x, 0);
+  CHECK(s == KPCN_OK);
+  return o;
+}
+
+static float px(const kpcn_aov_set *s, kpcn_buffer b, int c, int x, int y) {
+  return s->buf[b][(size_t)c * kpcn_aov_plane_size(s) + (size_t)y * s->width + x];
+}
+
+static void test_mirror_twice(void) {
+  kpcn_aov_set *a = random_set(7, 5);
+  for (int v = 0; v < 2; v++) {
+    kpcn_augment_xform m;
+    kpcn_augment_identity(&m);
+    if (v) m.mirror_v = 1;
+    else m.mirror_h = 1;
+    kpcn_aov_set *b = apply(a, &m), *c = apply(b, &m);
+    CHECK(!sets_equal(a, b));
+    CHECK(sets_equal(a, c));
+    /* Explicit definition: pixel and normal sign. */
+    int ok = 1;
+    for (int y = 0; y < 5; y++)
+      for (int x = 0; x < 7; x++) {
+        int sx = v ? x : 6 - x, sy = v ? 4 - y : y;
+        ok &= px(b, KPCN_BUF_COLOR, 1, x, y) == px(a, KPCN_BUF_COLOR, 1, sx, sy);
+        ok &= px(b, KPCN_BUF_NORMAL, 0, x, y) == (v ? 1 : -1) * px(a, KPCN_BUF_NORMAL, 0, sx, sy);
+        ok &= px(b, KPCN_BUF_NORMAL, 1, x, y) == (v ? -1 : 1) * px(a, KPCN_BUF_NORMAL, 1, sx, sy);
+        ok &= px(b, KPCN_BUF_NORMAL, 2, x, y) == px(a, KPCN_BUF_NORMAL, 2, sx, sy);
+        ok &= b->var[KPCN_BUF_DEPTH][y * 7 + x] == a->var[KPCN_BUF_DEPTH][sy * 7 + sx];
+      }
+    CHECK(ok);
+    kpcn_aov_destroy(b);
+    kpcn_aov_destroy(c);
+  }
+  kpcn_aov_destroy(a);
+}
+
+static void test_rotations(void) {
+  kpcn_aov_set *a = random_set(7, 5);
+  kpcn_augment_xform r;
+  kpcn_augment_identity(&r);
+  r.rot90 = 1;
+  kpcn_aov_set *cur = apply(a, &r);
+  CHECK(cur->width == 5 && cur->height == 7);
+  /* Definition of one CCW turn: (x, y) -> (y, W-1-x), (nx, ny) -> (-ny, nx). */
+  int ok = 1;
+  for (int y = 0; y < 5; y++)
+    for (int x = 0; x < 7; x++) {
+      int ox = y, oy = 6 - x;
+      ok &= px(cur, KPCN_BUF_ALBEDO, 2, ox, oy) == px(a, KPCN_BUF_ALBEDO, 2, x, y);
+      ok &= px(cur, KPCN_BUF_NORMAL, 0, ox, oy) == -px(a, KPCN_BUF_NORMAL, 1, x, y);
+      ok &= px(cur, KPCN_BUF_NORMAL, 1, ox, oy) == px(a, KPCN_BUF_NORMAL, 0, x, y);
+      ok &= px(cur, KPCN_BUF_NORMAL, 2, ox, oy) == px(a, KPCN_BUF_NORMAL, 2, x, y);
+    }
+  CHECK(ok);
+  for (int t = 1; t < 4; t++) {
+    kpcn_aov_set *n = apply(cur, &r);
+    kpcn_aov_destroy(cur);
+    cur = n;
+    CHECK(sets_equal(cur, a) == (t == 3));
+  }
+  kpcn_aov_destroy(cur);
+  /* rot90 = 3 equals three single turns; rot 180 = mirror H + mirror V. */
+  kpcn_augment_xform r180, hv;
+  kpcn_augment_identity(&r180);
+  r180.rot90 = 2;
+  kpcn_augment_identity(&hv);
+  hv.mirror_h = hv.mirror_v = 1;
+  kpcn_aov_set *p = apply(a, &r180), *q = apply(a, &hv);
+  CHECK(sets_equal(p, q));
+  kpcn_augment_xform h, v;
+  kpcn_augment_identity(&h);
+  h.mirror_h = 1;
+  kpcn_augment_identity(&v);
+  v.mirror_v = 1;
+  kpcn_aov_set *q1 = apply(a, &h), *q2 = apply(q1, &v);
+  CHECK(sets_equal(p, q2));
+  kpcn_aov_destroy(p);
+  kpcn_aov_destroy(q);
+  kpcn_aov_destroy(q1);
+  kpcn_aov_destroy(q2);
+  kpcn_aov_destroy(a);
+}
+
+static void test_colorswap(void) {
+  kpcn_aov_set *a = random_set(6, 4);
+  kpcn_augment_xform p, pi;
+  kpcn_augment_identity(&p);
+  CHECK(kpcn_augment_parse_perm("BRG", p.perm) == KPCN_OK);
+  CHECK(p.perm[0] == 2 && p.perm[1] == 0 && p.perm[2] == 1);
+  kpcn_augment_identity(&pi);
+  CHECK(kpcn_augment_parse_perm("gbr", pi.perm) == KPCN_OK); /* inverse of BRG */
+  kpcn_aov_set *b = apply(a, &p), *c = apply(b, &pi);
+  CHECK(sets_equal(a, c));
+  int ok = 1;
+  for (int y = 0; y < 4; y++)
+    for (int x = 0; x < 6; x++) {
+      for (int k = KPCN_BUF_COLOR; k <= KPCN_BUF_ALBEDO; k++) {
+        ok &= px(b, (kpcn_buffer)k, 0, x, y) == px(a, (kpcn_buffer)k, 2, x, y); /* new R = old B */
+        ok &= px(b, (kpcn_buffer)k, 1, x, y) == px(a, (kpcn_buffer)k, 0, x, y);
+        ok &= px(b, (kpcn_buffer)k, 2, x, y) == px(a, (kpcn_buffer)k, 1, x, y);
+      }
+      for (int c3 = 0; c3 < 3; c3++)
+        ok &= px(b, KPCN_BUF_NORMAL, c3, x, y) == px(a, KPCN_BUF_NORMAL, c3, x, y);
+      ok &= px(b, KPCN_BUF_DEPTH, 0, x, y) == px(a, KPCN_BUF_DEPTH, 0, x, y);
+      for (int k = 0; k < KPCN_BUF_COUNT; k++) ok &= b->var[k][y * 6 + x] == a->var[k][y * 6 + x];
+    }
+  CHECK(ok);
+  int bad[3];
+  CHECK(kpcn_augment_parse_perm("RRB", bad) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "RRB") != NULL);
+  CHECK(kpcn_augment_parse_perm("RGBA", bad) == KPCN_ERR_INVALID_ARGUMENT);
+  kpcn_augment_xform broken = p;
+  broken.perm[1] = 2;
+  kpcn_aov_set *z = NULL;
+  CHECK(kpcn_augment_aov(&z, a, &broken, 0) == KPCN_ERR_INVALID_ARGUMENT && z == NULL);
+  kpcn_aov_destroy(b);
+  kpcn_aov_destroy(c);
+  kpcn_aov_destroy(a);
+}
+
+static void test_shift_and_inverse(void) {
+  kpcn_aov_set *a = random_set(9, 6);
+  kpcn_augment_xform s, si;
+  kpcn_augment_identity(&s);
+  s.dx = 4;
+  s.dy = -7; /* more than the height: reduced modulo 6 */
+  kpcn_aov_set *b = apply(a, &s);
+  int ok = 1;
+  for (int y = 0; y < 6; y++)
+    for (int x = 0; x < 9; x++)
+      ok &= px(b, KPCN_BUF_SPECULAR, 1, (x + 4) % 9, ((y - 7) % 6 + 6) % 6) ==
+            px(a, KPCN_BUF_SPECULAR, 1, x, y);
+  CHECK(ok);
+  kpcn_augment_identity(&si);
+  si.dx = -4;
+  si.dy = 7;
+  kpcn_aov_set *c = apply(b, &si);
+  CHECK(sets_equal(a, c));
+  kpcn_aov_destroy(b);
+  kpcn_aov_destroy(c);
+  /* Random full transforms undone by kpcn_augment_inverse. */
+  kpcn_augment_draw_settings ds;
+  kpcn_augment_draw_defaults(&ds);
+  ds.mirror_v = 1;
+  ds.max_shift = 5;
+  int all = 1;
+  for (uint64_t i = 0; i < 40; i++) {
+    kpcn_augment_xform x, inv;
+    kpcn_augment_draw(&x, &ds, 99, i);
+    kpcn_augment_inverse(&inv, &x, 9, 6);
+    kpcn_aov_set *f = apply(a, &x), *g = apply(f, &inv);
+    all &= sets_equal(a, g);
+    kpcn_aov_destroy(f);
+    kpcn_aov_destroy(g);
+  }
+  CHECK(all);
+  kpcn_aov_destroy(a);
+}
+
+/* A hemisphere bulging toward the camera: its camera-space normal at image pixel (x, y)
+ * is (u, v, sqrt(1-u^2-v^2)) with u = (x-cx)/R to the right and v = -(y-cy)/R UP. Any
+ * exact geometric transform of the image must give the same formula in the new image,
+ * which checks the sign convention of mirrors and rotations independently. */
+static void dome(kpcn_aov_set *s) {
+  int w = s->width, h = s->height;
+  double cx = 0.5 * (w - 1), cy = 0.5 * (h - 1), R = 0.75 * (w > h ? w : h);
+  size_t np = kpcn_aov_plane_size(s);
+  for (int y = 0; y < h; y++)
+    for (int x = 0; x < w; x++) {
+      double u = (x - cx) / R, v = -(y - cy) / R;
+      s->buf[KPCN_BUF_NORMAL][(size_t)y * w + x] = (float)u;
+      s->buf[KPCN_BUF_NORMAL][np + (size_t)y * w + x] = (float)v;
+      s->buf[KPCN_BUF_NORMAL][2 * np + (size_t)y * w + x] = (float)sqrt(1 - u * u - v * v);
+    }
+}
+
+static void test_normal_convention(void) {
+  kpcn_aov_set *a = NULL, *expect = NULL;
+  kpcn_aov_create(&a, 8, 6);
+  kpcn_aov_add(a, KPCN_BUF_NORMAL, 0);
+  dome(a);
+  for (int k = 0; k < 16; k++) {
+    kpcn_augment_xform x;
+    kpcn_augment_identity(&x);
+    x.mirror_h = k & 1;
+    x.mirror_v = (k >> 1) & 1;
+    x.rot90 = k >> 2;
+    kpcn_aov_set *b = apply(a, &x);
+    kpcn_aov_create(&expect, b->width, b->height);
+    kpcn_aov_add(expect, KPCN_BUF_NORMAL, 0);
+    dome(expect);
+    size_t n = 3 * kpcn_aov_plane_size(b);
+    double maxd = 0;
+    for (size_t i = 0; i < n; i++) {
+      double d = fabs(b->buf[KPCN_BUF_NORMAL][i] - expect->buf[KPCN_BUF_NORMAL][i]);
+      maxd = d > maxd ? d : maxd;
+    }
+    CHECK_NEAR(maxd, 0, 1e-6);
+    kpcn_aov_destroy(b);
+    kpcn_aov_destroy(expect);
+  }
+  kpcn_aov_destroy(a);
+}
+
+/* A pair whose reference is a pixelwise function of the noisy set stays one after any
+ * transform applied to both with the same draw. */
+static void test_pair_alignment(void) {
+  kpcn_aov_set *n = random_set(10, 7), *r = NULL;
+  kpcn_aov_create(&r, 10, 7);
+  kpcn_aov_add(r, KPCN_BUF_COLOR, 0);
+  kpcn_aov_add(r, KPCN_BUF_DIFFUSE, 0);
+  size_t np = kpcn_aov_plane_size(n);
+  for (size_t i = 0; i < 3 * np; i++) {
+    r->buf[KPCN_BUF_COLOR][i] = 2 * n->buf[KPCN_BUF_COLOR][i] + 1;
+    r->buf[KPCN_BUF_DIFFUSE][i] = n->buf[KPCN_BUF_DIFFUSE][i] - 3;
+  }
+  kpcn_augment_draw_settings ds;
+  kpcn_augment_draw_defaults(&ds);
+  ds.max_shift = 4;
+  int ok = 1;
+  for (uint64_t i = 0; i < 20; i++) {
+    kpcn_augment_xform x;
+    kpcn_augment_draw(&x, &ds, 7, i);
+    kpcn_aov_set *n2 = apply(n, &x), *r2 = apply(r, &x);
+    for (size_t k = 0; k < 3 * np; k++) {
+      ok &= r2->buf[KPCN_BUF_COLOR][k] == 2 * n2->buf[KPCN_BUF_COLOR][k] + 1;
+      ok &= r2->buf[KPCN_BUF_DIFFUSE][k] == n2->buf[KPCN_BUF_DIFFUSE][k] - 3;
+    }
+    kpcn_aov_destroy(n2);
+    kpcn_aov_destroy(r2);
+  }
+  CHECK(ok);
+  kpcn_aov_destroy(n);
+  kpcn_aov_destroy(r);
+}
+
+static void test_draw(void) {
+  kpcn_augment_draw_settings ds;
+  kpcn_augment_draw_defaults(&ds);
+  int perms[6] = {0}, rots[4] = {0}, mir[2] = {0};
+  for (uint64_t i = 0; i < 600; i++) {
+    kpcn_augment_xform x, y;
+    kpcn_augment_draw(&x, &ds, 5, i);
+    kpcn_augment_draw(&y, &ds, 5, i);
+    CHECK(memcmp(&x, &y, sizeof x) == 0);
+    perms[x.perm[0] * 2 + (x.perm[1] > x.perm[2])]++;
+    rots[x.rot90]++;
+    mir[x.mirror_h]++;
+  }
+  for (int i = 0; i < 6; i++) CHECK(perms[i] > 60);
+  for (int i = 0; i < 4; i++) CHECK(rots[i] > 100);
+  CHECK(mir[0] > 240 && mir[1] > 240);
+  /* ONE_OF: exactly one op differs from identity. */
+  ds.mode = KPCN_AUGMENT_ONE_OF;
+  ds.max_shift = 3;
+  int ok = 1;
+  for (uint64_t i = 0; i < 200; i++) {
+    kpcn_augment_xform x;
+    kpcn_augment_draw(&x, &ds, 11, i);
+    int nops = (x.perm[0] != 0 || x.perm[1] != 1) + x.mirror_h + x.mirror_v + (x.rot90 != 0) +
+               (x.dx != 0 || x.dy != 0);
+    ok &= nops == 1;
+  }
+  CHECK(ok);
+}
+
+/* Arbitrary angle: 90 degrees matches the exact turn on a square image; 45 degrees of a
+ * constant-variance field lowers the propagated variance (sum of w^2 < 1). */
+static void test_rotate_any(void) {
+  kpcn_aov_set *a = random_set(9, 9), *b = NULL, *e = NULL;
+  CHECK(kpcn_augment_rotate_any_aov(&b, a, 90.0, 0) == KPCN_OK);
+  kpcn_augment_xform r;
+  kpcn_augment_identity(&r);
+  r.rot90 = 1;
+  e = apply(a, &r);
+  double maxd = 0;
+  size_t np = kpcn_aov_plane_size(a);
+  for (size_t i = 0; i < 3 * np; i++) {
+    double d = fabs(b->buf[KPCN_BUF_COLOR][i] - e->buf[KPCN_BUF_COLOR][i]);
+    maxd = d > maxd ? d : maxd;
+  }
+  CHECK_NEAR(maxd, 0, 1e-5);
+  kpcn_aov_destroy(b);
+  for (size_t i = 0; i < np; i++) a->var[KPCN_BUF_COLOR][i] = 1.0f;
+  CHECK(kpcn_augment_rotate_any_aov(&b, a, 45.0, 0) == KPCN_OK);
+  /* Centre pixel maps onto itself (weight 1); an off-centre one splits over 4 taps. */
+  CHECK_NEAR(b->var[KPCN_BUF_COLOR][4 * 9 + 4], 1.0, 1e-6);
+  CHECK(b->var[KPCN_BUF_COLOR][4 * 9 + 5] < 0.9f);
+  kpcn_aov_destroy(a);
+  kpcn_aov_destroy(b);
+  kpcn_aov_destroy(e);
+}
+
+int main(void) {
+  test_mirror_twice();
+  test_rotations();
+  test_colorswap();
+  test_shift_and_inverse();
+  test_normal_convention();
+  test_pair_alignment();
+  test_draw();
+  test_rotate_any();
+  return kt_summary("augment_ops");
+}

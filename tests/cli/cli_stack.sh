@@ -1,0 +1,50 @@
+# kpcntool stack commands: -o, --ch, --info, --errormap, --mosaic, --help.
+. "$(dirname "$0")/lib.sh"
+# --help lists every registered command (metrics, core; others' when built in).
+run_ok --help
+for c in --ssim --relmse --l1 --mse --rell1 --psnr --errormap --info --ch --ociodisplay --mosaic -o --json --threads; do
+  grep -qE -- "^  $c( |$)" out.txt || fail "--help lacks $c"
+done
+pass "--help lists the commands"
+# --info: AOV buffers under canonical names, kpcn:* attributes, size.
+run_ok "$NOISY" --info
+for s in "256x256" "16 channels" "buffer color: R,G,B  variance: color.var" "buffer albedo" \
+  "buffer normal: N.X,N.Y,N.Z" "buffer depth: Z" "buffer visibility" "kpcn:spp: 16"; do
+  grep -qF "$s" out.txt || fail "--info lacks '$s': $(cat out.txt)"
+done
+pass "--info text"
+run_ok "$NOISY" --info --json
+python3 -c 'import json,sys; d=json.load(open(sys.argv[1]))["info"]
+assert d["width"]==256 and d["height"]==256 and d["kpcn:spp"]==16, d
+assert set(d["buffers"])=={"color","albedo","normal","depth","visibility"}, d["buffers"]' out.txt \
+  && pass "--info json" || fail "--info json: $(cat out.txt)"
+# --ch selects (and renames) channels; -o writes float EXR; reading it back gives the same metric.
+run_ok "$NOISY" --ch R,G,B -o rgb.exr
+run_ok rgb.exr --info
+grep -qF "3 channels (R,G,B), float" out.txt && pass "-o wrote RGB float" || fail "rgb.exr: $(cat out.txt)"
+run_ok rgb.exr "$REF" --relmse --json
+grep -q '"relmse": 0.01062301168178' out.txt && pass "round trip keeps values" || fail "$(cat out.txt)"
+run_ok "$NOISY" --ch R=albedo.R,G=albedo.G,B=albedo.B,A=1 -o alb.exr
+run_ok alb.exr --info
+grep -qF "4 channels (R,G,B,A)" out.txt && pass "--ch rename + constant" || fail "alb: $(cat out.txt)"
+run_ok "$NOISY" --ch albedo.R,albedo.G,albedo.B alb.exr --l1:channels=R,G,B --json
+# (names differ: albedo.* vs R,G,B -> error; covered in cli_errors) -- here compare renamed:
+run_ok "$NOISY" --ch R=albedo.R,G=albedo.G,B=albedo.B alb.exr --l1 --json
+grep -q '"l1": 0}' out.txt && pass "renamed channels hold the source values" || fail "$(cat out.txt)"
+# --errormap pops two, pushes the per-pixel map; its mean is the metric.
+run_ok "$NOISY" "$REF" --errormap:metric=relmse -o map.exr
+oiiotool --pattern constant:color=0,0,0 256x256 3 -o zero.exr
+run_ok map.exr zero.exr --l1 --json
+grep -q '"l1": 0.01062301168' out.txt && pass "errormap mean == relmse" || fail "errormap: $(cat out.txt)"
+run_ok "$NOISY" "$REF" --errormap:metric=ssim:display=srgb --info
+grep -qF "3 channels (R,G,B)" out.txt && pass "ssim errormap on stack" || fail "$(cat out.txt)"
+# -o twice in one chain: both written; --ociodisplay + PNG gives 8 bit.
+run_ok "$NOISY" --ch R,G,B -o a.exr --ociodisplay -o a.png
+oiiotool --info a.png | grep -q "uint8" && [ -f a.exr ] && pass "png is 8 bit" || fail "png: $(oiiotool --info a.png)"
+# --mosaic pastes n images side by side (labels need a font; a missing one only warns).
+run_ok "$NOISY" --ch R,G,B "$REF" "$REF" --mosaic:labels=noisy,ref,ref2 -o mosaic.exr
+run_ok mosaic.exr --info
+grep -qF "768x256, 3 channels" out.txt && pass "mosaic size" || fail "mosaic: $(cat out.txt)"
+run_ok "$NOISY" --ch R,G,B "$REF" --mosaic:n=2 --info
+grep -qF "512x256" out.txt && pass "mosaic n=2" || fail "$(cat out.txt)"
+finish

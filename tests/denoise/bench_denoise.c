@@ -1,0 +1,171 @@
+/* bench_denoise — speed and memory of the denoisers (not a test; prints figures).
+ *
+ *   bench_denoise                 baselines + cpu + paper presets (fp32, bf16) at 1024x1024
+ *   bench_denoise --size WxH      another frame size
+ *   bench_denoise --4k            paper preset, tiled, on a 3840x2160 frame: time + peak RSS
+ *                                 (run alone so the process's peak RSS is this frame's)
+ *   --threads N  --tile N  --preset NAME (only that preset)  --no-baselines
+ *   --max-tiles N                 stop (through the progress callback) after N tiles of the
+ *                                 diffuse pass: peak memory is reached by the first full tile
+ *                                 (buffers are sized once), so --4k --max-tiles 2 measures the
+ *                                 4K peak RSS in a fraction of the full run's time
+ *
+ * Models are randomly initialised (timing does not depend on the weights). Inputs are a
+ * synthetic AOV set with every buffer. ms/Mpx counts everything after the AOV set exists:
+ * feature building, both networks, kernel apply, recombination. GFLOP/s: "conv" = conv
+ * FLOPs executed / time inside oneDNN convolutions; "e2e" = FLOPs of the untiled frame
+ * (2 branches x flops/pixel x pixels) / total time, so tile overlap counts as overhead. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+
+#include "kpcn/denoise.h"
+#include "synth.h"
+#include "testutil.h"
+
+static double peak_rss_mib(void) {
+  struct rusage ru;
+  getrusage(RUSAGE_SELF, &ru);
+  return (double)ru.ru_maxrss / 1024.0;
+}
+
+static int g_max_tiles = 0, g_calls = 0;
+static int stop_after(void *user, double f) {
+  (void)user;
+  (void)f;
+  return g_max_tiles > 0 && g_calls++ >= g_max_tiles;
+}
+
+static kpcn_aov_set *bench_aov(int W, int H) { return synth_aov(W, H, 12345); }
+
+static void bench_baseline(kpcn_aov_set *a, int method, int nthreads) {
+  kpcn_denoiser_options o;
+  kpcn_denoiser_options_defaults(&o);
+  o.method = method;
+  o.nthreads = nthreads;
+  kpcn_denoiser *d = NULL;
+  float *out = malloc(sizeof(float) * 3 * kpcn_aov_plane_size(a));
+  if (kpcn_denoiser_create(&d, &o) != KPCN_OK || kpcn_denoiser_execute_aov(d, a, out) != KPCN_OK) {
+    printf("%s failed: %s\n", method == 1 ? "bilateral" : "nlmeans", kpcn_last_error());
+    return;
+  }
+  kpcn_denoise_stats st;
+  kpcn_denoiser_get_stats(d, &st);
+  double mpx = (double)kpcn_aov_plane_size(a) * 1e-6;
+  printf("%-22s %9.1f ms/Mpx   (%.2f s for %.2f Mpx)\n",
+         method == 1 ? "bilateral r=7" : "nlmeans r=7 f=3", st.total_s * 1e3 / mpx, st.total_s,
+         mpx);
+  kpcn_denoiser_destroy(d);
+  free(out);
+}
+
+static void bench_kpcn(kpcn_aov_set *a, const char *preset, int bf16, int tile, int nthreads) {
+  kpcn_arch arch;
+  kpcn_model *m = NULL;
+  if (kpcn_arch_preset(preset, &arch) != KPCN_OK || kpcn_features_set_arch(&arch) != KPCN_OK ||
+      kpcn_model_create(&arch, 1, &m) != KPCN_OK) {
+    printf("preset %s: %s\n", preset, kpcn_last_error());
+    return;
+  }
+  kpcn_denoiser_options o;
+  kpcn_denoiser_options_defaults(&o);
+  o.bf16 = bf16;
+  o.tile = tile;
+  o.nthreads = nthreads;
+  kpcn_denoiser *d = NULL;
+  float *out = malloc(sizeof(float) * 3 * kpcn_aov_plane_size(a));
+  kpcn_status es = kpcn_denoiser_create_with_model(&d, m, &o);
+  if (es == KPCN_OK) {
+    g_calls = 0;
+    kpcn_denoiser_set_progress(d, stop_after, NULL);
+    es = kpcn_denoiser_execute_aov(d, a, out);
+  }
+  if (es == KPCN_ERR_CANCELLED) {
+    kpcn_denoise_stats st;
+    kpcn_denoiser_get_stats(d, &st);
+    int T = tile > 0 ? tile : 512; /* KPCN_DEFAULT_TILE */
+    int nt = ((a->width + T - 1) / T) * ((a->height + T - 1) / T);
+    double per = st.tiles ? st.total_s / st.tiles : 0.0;
+    printf("kpcn %-6s %-4s tile %d: stopped after %d of %d tiles (diffuse pass) in %.1f s, "
+           "%.1f s/tile -> full frame ~%.0f s (2 branches); peak RSS %.0f MiB\n",
+           preset, bf16 ? "bf16" : "fp32", T, st.tiles, nt, st.total_s, per, per * 2 * nt,
+           peak_rss_mib());
+  } else if (es != KPCN_OK) {
+    printf("kpcn %s failed: %s\n", preset, kpcn_last_error());
+  }
+  if (es != KPCN_OK) {
+    kpcn_denoiser_destroy(d);
+    kpcn_model_destroy(m);
+    free(out);
+    return;
+  }
+  kpcn_denoise_stats st;
+  kpcn_denoiser_get_stats(d, &st);
+  double px = (double)kpcn_aov_plane_size(a), mpx = px * 1e-6;
+  double useful = 2.0 * kpcn_arch_flops_per_pixel(&arch) * px;
+  printf("kpcn %-6s %-4s tile %-5d %9.1f ms/Mpx  conv %6.1f GFLOP/s  e2e %6.1f GFLOP/s  "
+         "outside convs %4.1f%% (features %.1f%%, kpa %.1f%%, net non-conv %.1f%%, other %.1f%%)"
+         "  tiles %d  peak RSS %.0f MiB\n",
+         preset, bf16 ? "bf16" : "fp32", tile, st.total_s * 1e3 / mpx,
+         st.conv_s > 0 ? st.conv_flops / st.conv_s * 1e-9 : 0.0, useful / st.total_s * 1e-9,
+         100.0 * (1.0 - st.conv_s / st.total_s), 100.0 * st.features_s / st.total_s,
+         100.0 * st.kpa_s / st.total_s, 100.0 * (st.net_s - st.conv_s) / st.total_s,
+         100.0 * st.other_s / st.total_s, st.tiles, peak_rss_mib());
+  fflush(stdout);
+  kpcn_denoiser_destroy(d);
+  kpcn_model_destroy(m);
+  free(out);
+}
+
+int main(int argc, char **argv) {
+  int W = 1024, H = 1024, nthreads = 0, tile = 0, k4 = 0, baselines = 1;
+  const char *only = NULL;
+  for (int i = 1; i < argc; i++) {
+    if (!strcmp(argv[i], "--size") && i + 1 < argc) {
+      if (sscanf(argv[++i], "%dx%d", &W, &H) != 2) return fprintf(stderr, "bad --size\n"), 2;
+    } else if (!strcmp(argv[i], "--threads") && i + 1 < argc) {
+      nthreads = atoi(argv[++i]);
+    } else if (!strcmp(argv[i], "--tile") && i + 1 < argc) {
+      tile = atoi(argv[++i]);
+    } else if (!strcmp(argv[i], "--preset") && i + 1 < argc) {
+      only = argv[++i];
+    } else if (!strcmp(argv[i], "--max-tiles") && i + 1 < argc) {
+      g_max_tiles = atoi(argv[++i]);
+    } else if (!strcmp(argv[i], "--no-baselines")) {
+      baselines = 0;
+    } else if (!strcmp(argv[i], "--4k")) {
+      k4 = 1;
+    } else {
+      fprintf(stderr, "usage: bench_denoise [--size WxH] [--4k] [--threads N] [--tile N] "
+                      "[--preset NAME] [--no-baselines] [--max-tiles N]\n");
+      return 2;
+    }
+  }
+  if (k4) {
+    W = 3840;
+    H = 2160;
+  }
+  kpcn_aov_set *a = bench_aov(W, H);
+  if (!a) return fprintf(stderr, "cannot build the synthetic AOV set: %s\n", kpcn_last_error()), 1;
+  printf("bench_denoise: %dx%d, %d threads, AOV set built (peak RSS so far %.0f MiB)\n", W, H,
+         kpcn_resolve_threads(nthreads), peak_rss_mib());
+  if (k4) {
+    bench_kpcn(a, only ? only : "paper", 0, tile, nthreads);
+    printf("4K frame peak RSS: %.0f MiB (target <= 4096)\n", peak_rss_mib());
+    kpcn_aov_destroy(a);
+    return 0;
+  }
+  if (baselines && !only) {
+    bench_baseline(a, KPCN_DENOISE_BILATERAL, nthreads);
+    bench_baseline(a, KPCN_DENOISE_NLMEANS, nthreads);
+  }
+  const char *presets[] = {"cpu", "paper"};
+  for (int p = 0; p < 2; p++) {
+    if (only && strcmp(only, presets[p])) continue;
+    for (int b = 0; b < 2; b++)
+      bench_kpcn(a, presets[p], b, tile, nthreads);
+  }
+  kpcn_aov_destroy(a);
+  return 0;
+}

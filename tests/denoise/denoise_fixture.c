@@ -1,0 +1,31 @@
+/* Writes the inputs of test_denoise_cli.sh into a folder: aov.exr (synthetic AOV set with
+ * every buffer), aov_nodiffuse.exr (the same without diffuse.*), model.safetensors (tiny
+ * random model with the feature list). */
+#include <stdlib.h>
+
+#include "kpcn/denoise.h"
+#include "kpcn/exr.h"
+#include "synth.h"
+
+int main(int argc, char **argv) {
+  if (argc != 2) return fprintf(stderr, "usage: denoise_fixture DIR\n"), 2;
+  char p[1024];
+  kpcn_aov_set *a = synth_aov(48, 36, 4);
+  kpcn_arch arch;
+  kpcn_model *m = NULL;
+  if (!a || kpcn_arch_preset("tiny", &arch) || kpcn_features_set_arch(&arch) ||
+      kpcn_model_create(&arch, 3, &m))
+    return fprintf(stderr, "fixture: %s\n", kpcn_last_error()), 1;
+  snprintf(p, sizeof p, "%s/aov.exr", argv[1]);
+  if (kpcn_exr_write_aov(p, a, NULL)) return fprintf(stderr, "%s\n", kpcn_last_error()), 1;
+  snprintf(p, sizeof p, "%s/model.safetensors", argv[1]);
+  if (kpcn_model_save(m, p)) return fprintf(stderr, "%s\n", kpcn_last_error()), 1;
+  free(a->buf[KPCN_BUF_DIFFUSE]);
+  free(a->var[KPCN_BUF_DIFFUSE]);
+  a->buf[KPCN_BUF_DIFFUSE] = a->var[KPCN_BUF_DIFFUSE] = NULL;
+  snprintf(p, sizeof p, "%s/aov_nodiffuse.exr", argv[1]);
+  if (kpcn_exr_write_aov(p, a, NULL)) return fprintf(stderr, "%s\n", kpcn_last_error()), 1;
+  kpcn_model_destroy(m);
+  kpcn_aov_destroy(a);
+  return 0;
+}

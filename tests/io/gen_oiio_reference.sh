@@ -1,0 +1,30 @@
+#!/bin/sh
+# Regenerates testdata/io/ from the Tungsten render with OpenImageIO's tools (an EXR reader
+# independent of kpcn's): recorded pixel values/statistics, plus small tiled, offset-window
+# and half files written by OIIO. Run from the repository root:  sh tests/io/gen_oiio_reference.sh
+set -eu
+SRC=${1:-../shared/testdata/tungsten-cornell/noisy_16spp.exr}
+OUT=testdata/io
+mkdir -p "$OUT"
+REC="$OUT/cornell_noisy_oiio.txt"
+{
+  echo "# Recorded with OpenImageIO $(oiiotool --version 2>/dev/null | head -1) from $SRC"
+  echo "# commands:"
+  echo "#   iinfo -v $SRC"
+  echo "#   oiiotool $SRC --cut 3x2+100+120 -o crop.exr && oiiotool --dumpdata crop.exr   (pixel x,y relative to 100,120)"
+  echo "#   oiiotool $SRC --cut 2x2+0+0 ... --dumpdata ; --cut 2x2+254+254 ..."
+  echo "#   oiiotool --stats $SRC"
+  iinfo -v "$SRC"
+  for g in 3x2+100+120 2x2+0+0 2x2+254+254; do
+    oiiotool "$SRC" --cut $g -o /tmp/kpcn_gen_crop.exr
+    echo "crop $g"
+    oiiotool --dumpdata /tmp/kpcn_gen_crop.exr | grep Pixel
+  done
+  oiiotool --stats "$SRC" | grep Stats
+} > "$REC"
+rm -f /tmp/kpcn_gen_crop.exr
+# 37x23 region at (100,120): tiled 16x16, scanline with data window at (+3,+7), half.
+oiiotool "$SRC" --cut 37x23+100+120 --tile 16 16 --compression zip -o "$OUT/crop_tiled.exr"
+oiiotool "$SRC" --cut 37x23+100+120 --origin +3+7 --fullsize 50x40+0+0 --compression piz -o "$OUT/crop_offset.exr"
+oiiotool "$SRC" --cut 37x23+100+120 -d half --compression zip -o "$OUT/crop_half.exr"
+echo "wrote $REC and $OUT/crop_*.exr"

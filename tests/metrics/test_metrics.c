@@ -1,0 +1,394 @@
+/* Metrics unit tests: every metric against (1) values recorded from numpy / scikit-image
+ * (testdata/metrics/reference.json, made by make_reference.py) and (2) naive double loops
+ * written here independently of libkpcn/src/metrics (2-D SSIM window, no separability).
+ * Also: non-finite policy, channel selection, thread-count determinism, error cases. */
+#include "kpcn/exr.h"
+#include "kpcn/metrics.h"
+#include "testutil.h"
+
+#include <cjson/cJSON.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ---- the synthetic generator of make_reference.py, bit-exact ---- */
+static uint32_t hash32(uint32_t x) {
+  x ^= x >> 16;
+  x *= 0x7feb352du;
+  x ^= x >> 15;
+  x *= 0x846ca68bu;
+  x ^= x >> 16;
+  return x;
+}
+
+static void synthetic(int w, int h, int nch, uint32_t seed, float scale, float *x, float *y) {
+  for (int c = 0; c < nch; ++c)
+    for (int j = 0; j < h; ++j)
+      for (int i = 0; i < w; ++i) {
+        uint32_t k = (uint32_t)((c * h + j) * w + i) + seed * 0x9E3779B9u;
+        float u1 = (float)(hash32(k) >> 8) * 0x1p-24f;
+        float u2 = (float)(hash32(k ^ 0x5bd1e995u) >> 8) * 0x1p-24f;
+        volatile float ramp = (float)((3 * i + 5 * j + 7 * c) % 64) / 64.0f;
+        volatile float r = ramp + (u1 * 0.5f - 0.25f);
+        volatile float t = r + (u2 * 0.25f - 0.125f);
+        size_t o = ((size_t)c * h + j) * w + i;
+        y[o] = r * scale;
+        x[o] = t * scale;
+      }
+}
+
+/* ---- naive references (double, straightforward) ---- */
+static double enc(double v, int srgb) {
+  if (!srgb) return v;
+  v = v < 0 ? 0 : v > 1 ? 1 : v;
+  return v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1 / 2.4) - 0.055;
+}
+
+static int valid_px(const float *x, const float *y, size_t n, int nch, size_t i) {
+  for (int c = 0; c < nch; ++c)
+    if (!isfinite(x[c * n + i]) || !isfinite(y[c * n + i])) return 0;
+  return 1;
+}
+
+static double naive_pointwise(kpcn_metric m, const float *x, const float *y, int w, int h,
+                              int nch, int srgb, double range) {
+  size_t n = (size_t)w * h;
+  double s = 0;
+  long cnt = 0;
+  for (size_t i = 0; i < n; ++i) {
+    if (!valid_px(x, y, n, nch, i)) continue;
+    for (int c = 0; c < nch; ++c) {
+      double a = enc(x[c * n + i], srgb), b = enc(y[c * n + i], srgb), d = a - b;
+      switch (m) {
+      case KPCN_METRIC_L1: s += fabs(d); break;
+      case KPCN_METRIC_RELMSE: s += d * d / (b * b + 0.01); break;
+      case KPCN_METRIC_RELL1: s += fabs(d) / (fabs(b) + 0.01); break;
+      default: s += d * d;
+      }
+      cnt++;
+    }
+  }
+  double mean = s / cnt;
+  return m == KPCN_METRIC_PSNR ? 10 * log10(range * range / mean) : mean;
+}
+
+static int refl(int i, int n) { return i < 0 ? -i - 1 : i >= n ? 2 * n - 1 - i : i; }
+
+/* Direct 11x11 window; non-finite values zeroed, pixels excluded (the documented policy).
+ * map (optional) gets the per-pixel SSIM of every channel. */
+static double naive_ssim(const float *x, const float *y, int w, int h, int nch, int srgb,
+                         double R, double *map) {
+  size_t n = (size_t)w * h;
+  double g[11], gs = 0;
+  for (int k = 0; k < 11; ++k) gs += g[k] = exp(-0.5 * (k - 5) * (k - 5) / 2.25);
+  for (int k = 0; k < 11; ++k) g[k] /= gs;
+  double C1 = 0.0001 * R * R, C2 = 0.0009 * R * R, total = 0;
+  for (int c = 0; c < nch; ++c) {
+    double s = 0;
+    long cnt = 0;
+    for (int py = 0; py < h; ++py)
+      for (int px = 0; px < w; ++px) {
+        double mx = 0, my = 0, mxx = 0, myy = 0, mxy = 0;
+        for (int b = -5; b <= 5; ++b)
+          for (int a = -5; a <= 5; ++a) {
+            size_t i = (size_t)refl(py + b, h) * w + refl(px + a, w);
+            int ok = valid_px(x, y, n, nch, i);
+            double p = ok ? enc(x[c * n + i], srgb) : 0, q = ok ? enc(y[c * n + i], srgb) : 0;
+            double wt = g[a + 5] * g[b + 5];
+            mx += wt * p, my += wt * q, mxx += wt * p * p, myy += wt * q * q, mxy += wt * p * q;
+          }
+        double vx = mxx - mx * mx, vy = myy - my * my, vxy = mxy - mx * my;
+        double S = (2 * mx * my + C1) * (2 * vxy + C2) / ((mx * mx + my * my + C1) * (vx + vy + C2));
+        size_t i = (size_t)py * w + px;
+        int ok = valid_px(x, y, n, nch, i);
+        if (map) map[c * n + i] = ok ? S : NAN;
+        if (ok && px >= 5 && px < w - 5 && py >= 5 && py < h - 5) s += S, cnt++;
+      }
+    total += s / cnt;
+  }
+  return total / nch;
+}
+
+static double naive(kpcn_metric m, const float *x, const float *y, int w, int h, int nch,
+                    int srgb, double range) {
+  return m == KPCN_METRIC_SSIM ? naive_ssim(x, y, w, h, nch, srgb, range, NULL)
+                               : naive_pointwise(m, x, y, w, h, nch, srgb, range);
+}
+
+static double run(kpcn_metric m, const float *x, const float *y, int w, int h, int nch,
+                  int srgb, double range, int nthreads, kpcn_metric_result *res, float *map) {
+  kpcn_metric_options o;
+  kpcn_metric_options_defaults(&o);
+  o.display = srgb ? KPCN_DISPLAY_SRGB : KPCN_DISPLAY_LINEAR;
+  o.data_range = range;
+  o.nthreads = nthreads;
+  kpcn_metric_result r;
+  kpcn_status s = kpcn_metric_planar(m, x, y, w, h, nch, &o, &r, map);
+  CHECK(s == KPCN_OK);
+  if (s != KPCN_OK) fprintf(stderr, "  %s\n", kpcn_last_error());
+  if (res) *res = r;
+  return r.value;
+}
+
+static char *slurp(const char *path) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return NULL;
+  fseek(f, 0, SEEK_END);
+  long n = ftell(f);
+  fseek(f, 0, SEEK_SET);
+  char *buf = malloc((size_t)n + 1);
+  size_t got = fread(buf, 1, (size_t)n, f);
+  buf[got] = 0;
+  fclose(f);
+  return buf;
+}
+
+/* Checks every metric of one reference case on planar x/y. */
+static void check_case(const cJSON *cs, const float *x, const float *y, int w, int h, int nch) {
+  const char *name = cJSON_GetObjectItem(cs, "name")->valuestring;
+  int srgb = strcmp(cJSON_GetObjectItem(cs, "display")->valuestring, "srgb") == 0;
+  double range = cJSON_GetObjectItem(cs, "data_range")->valuedouble;
+  const cJSON *vals = cJSON_GetObjectItem(cs, "values");
+  for (int m = 0; m < KPCN_METRIC_COUNT; ++m) {
+    const cJSON *v = cJSON_GetObjectItem(vals, kpcn_metric_name((kpcn_metric)m));
+    CHECK(v != NULL);
+    if (!v) continue;
+    double got = run((kpcn_metric)m, x, y, w, h, nch, srgb, range, 0, NULL, NULL);
+    double ref = v->valuedouble, nv = naive((kpcn_metric)m, x, y, w, h, nch, srgb, range);
+    CHECK_NEAR(got, ref, 1e-5);
+    CHECK_CLOSE(got, nv, 1e-7, 1e-9);
+    if (fabs(got - ref) > 1e-5 || fabs(got - nv) > 1e-7 * fabs(nv) + 1e-9)
+      fprintf(stderr, "  case %s metric %s: got %.12g ref %.12g naive %.12g\n", name,
+              kpcn_metric_name((kpcn_metric)m), got, ref, nv);
+  }
+}
+
+static void test_reference(void) {
+  char path[1024];
+  snprintf(path, sizeof path, "%s/metrics/reference.json", KPCN_TESTDATA);
+  char *txt = slurp(path);
+  CHECK(txt != NULL);
+  if (!txt) return;
+  cJSON *root = cJSON_Parse(txt);
+  free(txt);
+  CHECK(root != NULL);
+  if (!root) return;
+  int ncases = 0;
+  const cJSON *cs;
+  cJSON_ArrayForEach(cs, cJSON_GetObjectItem(root, "cases")) {
+    const cJSON *syn = cJSON_GetObjectItem(cs, "synthetic");
+    if (syn) {
+      int w = cJSON_GetObjectItem(syn, "w")->valueint, h = cJSON_GetObjectItem(syn, "h")->valueint;
+      int nch = cJSON_GetObjectItem(syn, "nch")->valueint;
+      uint32_t seed = (uint32_t)cJSON_GetObjectItem(syn, "seed")->valueint;
+      float scale = (float)cJSON_GetObjectItem(syn, "scale")->valuedouble;
+      size_t n = (size_t)w * h;
+      float *x = malloc(sizeof(float) * n * nch), *y = malloc(sizeof(float) * n * nch);
+      synthetic(w, h, nch, seed, scale, x, y);
+      const cJSON *p;
+      cJSON_ArrayForEach(p, cJSON_GetObjectItem(cs, "pixels")) { /* generator is bit-exact */
+        int c = cJSON_GetArrayItem(p, 0)->valueint, i = cJSON_GetArrayItem(p, 1)->valueint,
+            j = cJSON_GetArrayItem(p, 2)->valueint;
+        CHECK(x[c * n + (size_t)j * w + i] == (float)cJSON_GetArrayItem(p, 3)->valuedouble);
+        CHECK(y[c * n + (size_t)j * w + i] == (float)cJSON_GetArrayItem(p, 4)->valuedouble);
+      }
+      check_case(cs, x, y, w, h, nch);
+      /* SSIM map entries recorded from skimage (full=True), borders included. */
+      float *map = malloc(sizeof(float) * n * nch);
+      int srgb = strcmp(cJSON_GetObjectItem(cs, "display")->valuestring, "srgb") == 0;
+      run(KPCN_METRIC_SSIM, x, y, w, h, nch, srgb,
+          cJSON_GetObjectItem(cs, "data_range")->valuedouble, 0, NULL, map);
+      cJSON_ArrayForEach(p, cJSON_GetObjectItem(cs, "ssim_map")) {
+        int c = cJSON_GetArrayItem(p, 0)->valueint, i = cJSON_GetArrayItem(p, 1)->valueint,
+            j = cJSON_GetArrayItem(p, 2)->valueint;
+        CHECK_NEAR(map[c * n + (size_t)j * w + i], cJSON_GetArrayItem(p, 3)->valuedouble, 1e-5);
+      }
+      free(map);
+      free(x);
+      free(y);
+    } else {
+      char f0[1024], f1[1024];
+      const cJSON *files = cJSON_GetObjectItem(cs, "files");
+      snprintf(f0, sizeof f0, "%s/%s", KPCN_TESTDATA, cJSON_GetArrayItem(files, 0)->valuestring);
+      snprintf(f1, sizeof f1, "%s/%s", KPCN_TESTDATA, cJSON_GetArrayItem(files, 1)->valuestring);
+      kpcn_image *a = NULL, *b = NULL;
+      CHECK(kpcn_exr_read_image(f0, &a) == KPCN_OK);
+      CHECK(kpcn_exr_read_image(f1, &b) == KPCN_OK);
+      if (a && b) {
+        int srgb = strcmp(cJSON_GetObjectItem(cs, "display")->valuestring, "srgb") == 0;
+        const char *rgb[3] = {"R", "G", "B"};
+        kpcn_metric_options o;
+        kpcn_metric_options_defaults(&o);
+        o.display = srgb ? KPCN_DISPLAY_SRGB : KPCN_DISPLAY_LINEAR;
+        const cJSON *vals = cJSON_GetObjectItem(cs, "values");
+        for (int m = 0; m < KPCN_METRIC_COUNT; ++m) {
+          kpcn_metric_result r;
+          CHECK(kpcn_metric_image((kpcn_metric)m, a, b, rgb, 3, &o, &r, NULL) == KPCN_OK);
+          double ref = cJSON_GetObjectItem(vals, kpcn_metric_name((kpcn_metric)m))->valuedouble;
+          CHECK_NEAR(r.value, ref, 1e-5);
+          CHECK(r.nonfinite == 0 && r.nchannels == 3);
+          /* default channel list = the reference's (R,G,B), matched by name in the AOV file */
+          kpcn_metric_result r2;
+          CHECK(kpcn_metric_image((kpcn_metric)m, a, b, NULL, 0, &o, &r2, NULL) == KPCN_OK);
+          CHECK_CLOSE(r2.value, r.value, 1e-12, 0); /* file order B,G,R: other sum order */
+        }
+      }
+      if (a) kpcn_image_destroy(a);
+      if (b) kpcn_image_destroy(b);
+    }
+    ncases++;
+  }
+  CHECK(ncases >= 6);
+  cJSON_Delete(root);
+}
+
+/* Error maps equal the naive per-pixel terms; SSIM's equals the naive 2-D window map. */
+static void test_errormaps(void) {
+  int w = 19, h = 14, nch = 2;
+  size_t n = (size_t)w * h;
+  float *x = malloc(sizeof(float) * n * nch), *y = malloc(sizeof(float) * n * nch);
+  float *map = malloc(sizeof(float) * n * nch);
+  double *nmap = malloc(sizeof(double) * n * nch);
+  synthetic(w, h, nch, 11, 1.0f, x, y);
+  for (int m = 0; m < KPCN_METRIC_COUNT; ++m) {
+    run((kpcn_metric)m, x, y, w, h, nch, 0, 1.0, 0, NULL, map);
+    if (m == KPCN_METRIC_SSIM) naive_ssim(x, y, w, h, nch, 0, 1.0, nmap);
+    double maxerr = 0;
+    for (size_t i = 0; i < n * nch; ++i) {
+      double d = (double)x[i] - y[i], t;
+      switch ((kpcn_metric)m) {
+      case KPCN_METRIC_L1: t = fabs(d); break;
+      case KPCN_METRIC_RELMSE: t = d * d / ((double)y[i] * y[i] + 0.01); break;
+      case KPCN_METRIC_RELL1: t = fabs(d) / (fabs(y[i]) + 0.01); break;
+      case KPCN_METRIC_SSIM: t = nmap[i]; break;
+      default: t = d * d;
+      }
+      maxerr = fmax(maxerr, fabs(map[i] - t) / fmax(1.0, fabs(t)));
+    }
+    CHECK(maxerr < 1e-6);
+  }
+  free(x), free(y), free(map), free(nmap);
+}
+
+/* NaN/Inf pixels are excluded and counted; maps hold NaN there; all-bad fails. */
+static void test_nonfinite(void) {
+  int w = 24, h = 20, nch = 3;
+  size_t n = (size_t)w * h;
+  float *x = malloc(sizeof(float) * n * nch), *y = malloc(sizeof(float) * n * nch);
+  float *map = malloc(sizeof(float) * n * nch);
+  synthetic(w, h, nch, 5, 1.0f, x, y);
+  x[0 * n + 3] = NAN;             /* pixel 3 */
+  y[2 * n + 50] = INFINITY;       /* pixel 50 */
+  x[1 * n + 200] = -INFINITY;     /* pixel 200 */
+  y[1 * n + 200] = NAN;           /* same pixel: counted once */
+  x[0 * n + 12 * w + 12] = NAN;   /* interior pixel, matters for SSIM */
+  for (int m = 0; m < KPCN_METRIC_COUNT; ++m) {
+    kpcn_metric_result r;
+    double v = run((kpcn_metric)m, x, y, w, h, nch, m == KPCN_METRIC_RELL1, 1.0, 0, &r, map);
+    CHECK(r.nonfinite == 4);
+    CHECK(isfinite(v));
+    CHECK_CLOSE(v, naive((kpcn_metric)m, x, y, w, h, nch, m == KPCN_METRIC_RELL1, 1.0), 1e-7,
+                1e-9);
+    CHECK(isnan(map[3]) && isnan(map[2 * n + 50]) && isnan(map[n + 200]));
+    CHECK(!isnan(map[4]));
+    if (m != KPCN_METRIC_SSIM) CHECK(r.npixels == (int64_t)n - 4);
+    else CHECK(r.npixels == (int64_t)(w - 10) * (h - 10) - 2); /* pixels 200 and 12*w+12 */
+  }
+  for (size_t i = 0; i < n; ++i) x[i] = NAN;
+  kpcn_metric_options o;
+  kpcn_metric_options_defaults(&o);
+  kpcn_metric_result r;
+  CHECK(kpcn_metric_planar(KPCN_METRIC_L1, x, y, w, h, nch, &o, &r, NULL) == KPCN_ERR_NONFINITE);
+  CHECK(kpcn_metric_planar(KPCN_METRIC_SSIM, x, y, w, h, nch, &o, &r, NULL) == KPCN_ERR_NONFINITE);
+  free(x), free(y), free(map);
+}
+
+/* Same bits for 1, 2, 3 and 7 threads (fixed-order reductions). */
+static void test_determinism(void) {
+  int w = 97, h = 131, nch = 3;
+  size_t n = (size_t)w * h;
+  float *x = malloc(sizeof(float) * n * nch), *y = malloc(sizeof(float) * n * nch);
+  synthetic(w, h, nch, 9, 2.0f, x, y);
+  for (int m = 0; m < KPCN_METRIC_COUNT; ++m) {
+    double v1 = run((kpcn_metric)m, x, y, w, h, nch, 1, 2.0, 1, NULL, NULL);
+    for (int t = 2; t <= 7; t += (t == 3 ? 4 : 1))
+      CHECK(run((kpcn_metric)m, x, y, w, h, nch, 1, 2.0, t, NULL, NULL) == v1);
+  }
+  /* identical images: SSIM 1, errors 0, PSNR +inf */
+  CHECK_NEAR(run(KPCN_METRIC_SSIM, x, x, w, h, nch, 0, 1.0, 0, NULL, NULL), 1.0, 1e-12);
+  CHECK(run(KPCN_METRIC_RELMSE, x, x, w, h, nch, 0, 1.0, 0, NULL, NULL) == 0.0);
+  CHECK(isinf(run(KPCN_METRIC_PSNR, x, x, w, h, nch, 0, 1.0, 0, NULL, NULL)));
+  free(x), free(y);
+}
+
+static void test_image_form_and_errors(void) {
+  const char *na[4] = {"R", "G", "B", "Z"}, *nb[3] = {"B", "G", "R"};
+  kpcn_image *a = NULL, *b = NULL, *small = NULL, *other = NULL;
+  CHECK(kpcn_image_create(&a, 16, 12, 4, na) == KPCN_OK);
+  CHECK(kpcn_image_create(&b, 16, 12, 3, nb) == KPCN_OK);
+  CHECK(kpcn_image_create(&small, 15, 12, 3, nb) == KPCN_OK);
+  CHECK(kpcn_image_create(&other, 16, 12, 2, NULL) == KPCN_OK);
+  if (!a || !b || !small || !other) return;
+  size_t n = 16 * 12;
+  unsigned st = 7;
+  for (size_t i = 0; i < 4 * n; ++i) a->data[i] = kt_randf(&st);
+  for (size_t i = 0; i < 3 * n; ++i) b->data[i] = kt_randf(&st);
+  kpcn_metric_options o;
+  kpcn_metric_options_defaults(&o);
+  kpcn_metric_result r;
+  kpcn_image *map = NULL;
+  /* by name: b's channel order is B,G,R; a's G is plane 1, b's G plane 1; a's R 0, b's R 2 */
+  const char *g[1] = {"G"};
+  CHECK(kpcn_metric_image(KPCN_METRIC_MSE, a, b, g, 1, &o, &r, &map) == KPCN_OK);
+  CHECK_CLOSE(r.value, naive_pointwise(KPCN_METRIC_MSE, a->data + n, b->data + n, 16, 12, 1, 0, 1),
+              1e-12, 0);
+  CHECK(map && map->nchannels == 1 && strcmp(map->names[0], "G") == 0);
+  if (map) kpcn_image_destroy(map);
+  CHECK(kpcn_metric_image(KPCN_METRIC_L1, a, b, NULL, 0, &o, &r, NULL) == KPCN_OK);
+  double s = 0;
+  for (size_t i = 0; i < n; ++i)
+    s += fabs(a->data[i] - b->data[2 * n + i]) + fabs(a->data[n + i] - b->data[n + i]) +
+         fabs(a->data[2 * n + i] - b->data[i]);
+  CHECK_CLOSE(r.value, s / (3.0 * n), 1e-12, 0);
+  CHECK(r.nchannels == 3);
+  /* errors name the problem */
+  CHECK(kpcn_metric_image(KPCN_METRIC_L1, a, small, NULL, 0, &o, &r, NULL) ==
+        KPCN_ERR_SIZE_MISMATCH);
+  CHECK(strstr(kpcn_last_error(), "16x12") && strstr(kpcn_last_error(), "15x12"));
+  const char *zz[1] = {"Q"};
+  CHECK(kpcn_metric_image(KPCN_METRIC_L1, a, b, zz, 1, &o, &r, NULL) == KPCN_ERR_MISSING_CHANNEL);
+  CHECK(strstr(kpcn_last_error(), "'Q'") != NULL);
+  CHECK(kpcn_metric_image(KPCN_METRIC_L1, b, a, NULL, 0, &o, &r, NULL) ==
+        KPCN_ERR_SIZE_MISMATCH); /* reference has Z, test image 3 channels */
+  CHECK(strstr(kpcn_last_error(), "'Z'") != NULL);
+  CHECK(kpcn_metric_image(KPCN_METRIC_L1, other, b, NULL, 0, &o, &r, NULL) != KPCN_OK);
+  CHECK(kpcn_metric_planar(KPCN_METRIC_SSIM, a->data, a->data, 10, 12, 1, &o, &r, NULL) ==
+        KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "10x12") != NULL);
+  CHECK(kpcn_metric_planar(KPCN_METRIC_L1, a->data, NULL, 16, 12, 1, &o, &r, NULL) ==
+        KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_metric_planar(KPCN_METRIC_L1, a->data, a->data, 0, 12, 1, &o, &r, NULL) != KPCN_OK);
+  CHECK(kpcn_metric_planar(KPCN_METRIC_L1, a->data, a->data, 100000, 100000, 1, &o, &r, NULL) !=
+        KPCN_OK);
+  o.data_range = 0;
+  CHECK(kpcn_metric_planar(KPCN_METRIC_PSNR, a->data, a->data, 16, 12, 1, &o, &r, NULL) ==
+        KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_metric_from_name("SSIM") == KPCN_METRIC_SSIM);
+  CHECK(kpcn_metric_from_name("relmse") == KPCN_METRIC_RELMSE);
+  CHECK(kpcn_metric_from_name("ssimx") == -1);
+  /* sRGB curve: analytic values */
+  CHECK_NEAR(kpcn_srgb_encode(0.5), 1.055 * pow(0.5, 1 / 2.4) - 0.055, 1e-15);
+  CHECK_NEAR(kpcn_srgb_encode(0.002), 12.92 * 0.002, 1e-15);
+  CHECK(kpcn_srgb_encode(-1) == 0.0 && kpcn_srgb_encode(7) == 1.0);
+  kpcn_image_destroy(a), kpcn_image_destroy(b), kpcn_image_destroy(small);
+  kpcn_image_destroy(other);
+}
+
+int main(void) {
+  test_reference();
+  test_errormaps();
+  test_nonfinite();
+  test_determinism();
+  test_image_form_and_errors();
+  return kt_summary("test_metrics");
+}

@@ -1,0 +1,244 @@
+/* The oneDNN branch net vs the naive double reference (nn_ref.c): forward (conv + bias +
+ * fused ReLU, linear last layer), backward-data, backward-weights, backward-bias, for
+ * several sizes, paddings, dilations and batches; finite differences validate the
+ * reference's backward; bf16 inference vs fp32 stays within a bounded difference. */
+#include "kpcn/nn.h"
+#include "nn_ref.h"
+#include "testutil.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct cfg {
+  int n_in, n_hidden, ch, K, N, H, W;
+  int size[4], dil[4];
+} cfg;
+
+static void make_arch(const cfg *c, kpcn_arch *a) {
+  kpcn_arch_preset("tiny", a);
+  a->n_hidden = c->n_hidden;
+  a->channels = c->ch;
+  a->kernel_size = c->K;
+  for (int l = 0; l <= c->n_hidden; l++) a->conv_size[l] = c->size[l], a->dilation[l] = c->dil[l];
+  char nm[KPCN_NN_MAX_INPUTS][16];
+  const char *names[KPCN_NN_MAX_INPUTS];
+  for (int i = 0; i < c->n_in; i++) snprintf(nm[i], sizeof nm[i], "in%d", i), names[i] = nm[i];
+  kpcn_arch_set_inputs(a, c->n_in, names);
+}
+
+/* random biases (Xavier init leaves them at zero) so the ReLU mask is non-trivial */
+static void randomize_bias(kpcn_model *m, unsigned *rs) {
+  const kpcn_arch *a = kpcn_model_arch(m);
+  for (int b = 0; b < KPCN_N_BRANCHES; b++)
+    for (int l = 0; l <= a->n_hidden; l++) {
+      kpcn_layer_view v;
+      kpcn_model_layer(m, (kpcn_branch)b, l, &v);
+      for (int i = 0; i < v.out_ch; i++) v.bias[i] = 0.2f * (kt_randf(rs) - 0.5f);
+    }
+}
+
+static void fill(float *p, size_t n, unsigned *rs, float scale) {
+  for (size_t i = 0; i < n; i++) p[i] = scale * (2.f * kt_randf(rs) - 1.f);
+}
+
+/* max |got - ref| <= rtol * max |ref| (normwise relative error) */
+static double rel_err(const float *got, const double *ref, size_t n) {
+  double mx = 0, e = 0;
+  for (size_t i = 0; i < n; i++) {
+    double r = ref[i], d = fabs((double)got[i] - r);
+    if (fabs(r) > mx) mx = fabs(r);
+    if (d > e || d != d) e = d;
+  }
+  return mx > 0 ? e / mx : e;
+}
+
+static void check_vs_ref(const cfg *c, int seed) {
+  kpcn_arch a;
+  make_arch(c, &a);
+  kpcn_model *m = NULL;
+  CHECK(kpcn_model_create(&a, (uint64_t)seed, &m) == KPCN_OK);
+  if (!m) return;
+  unsigned rs = 1234u + (unsigned)seed;
+  randomize_bias(m, &rs);
+  const int K2 = c->K * c->K;
+  size_t px = (size_t)c->N * c->H * c->W, nin = px * c->n_in, nout = px * K2;
+  float *in = malloc(nin * 4), *lg = malloc(nout * 4), *dl = malloc(nout * 4),
+        *din = malloc(nin * 4), *lg2 = malloc(nout * 4);
+  fill(in, nin, &rs, 1.f);
+  fill(dl, nout, &rs, 1.f);
+  kpcn_branch br = seed & 1 ? KPCN_BRANCH_SPECULAR : KPCN_BRANCH_DIFFUSE;
+  nn_ref ref;
+  nn_ref_init(&ref, m, br, c->N, c->H, c->W);
+  const double *rl = nn_ref_forward(&ref, in);
+  nn_ref_backward(&ref, dl);
+
+  kpcn_net_options o;
+  kpcn_net_options_defaults(&o);
+  o.batch = c->N, o.height = c->H, o.width = c->W, o.training = 1, o.input_grad = 1;
+  kpcn_net *net = NULL;
+  kpcn_status s = kpcn_net_create(m, br, &o, &net);
+  if (s != KPCN_OK) fprintf(stderr, "net create: %s\n", kpcn_last_error());
+  CHECK(s == KPCN_OK);
+  if (net) {
+    CHECK(kpcn_net_forward(net, in, lg) == KPCN_OK);
+    double e = rel_err(lg, rl, nout);
+    printf("cfg in=%d L=%d C=%d K=%d N=%d %dx%d: fwd %.2e", c->n_in, c->n_hidden, c->ch, c->K,
+           c->N, c->H, c->W, e);
+    CHECK(e <= 1e-5);
+    CHECK(kpcn_net_backward(net, dl, din) == KPCN_OK);
+    kpcn_param P[2 * KPCN_NN_MAX_LAYERS];
+    CHECK(kpcn_net_params(net, P, 2 * KPCN_NN_MAX_LAYERS) == KPCN_OK);
+    double ew = 0, eb = 0;
+    for (int l = 0; l <= c->n_hidden; l++) {
+      double e1 = rel_err(P[2 * l].grad, ref.gw[l], P[2 * l].count);
+      double e2 = rel_err(P[2 * l + 1].grad, ref.gb[l], P[2 * l + 1].count);
+      ew = e1 > ew ? e1 : ew, eb = e2 > eb ? e2 : eb;
+      CHECK(e1 <= 1e-5);
+      CHECK(e2 <= 1e-5);
+    }
+    double ed = rel_err(din, ref.dinput, nin);
+    printf(" | dW %.2e db %.2e dX %.2e | %s\n", ew, eb, ed, kpcn_net_impl_name(net, 1));
+    CHECK(ed <= 1e-5);
+    /* same thread count -> bit-identical */
+    CHECK(kpcn_net_forward(net, in, lg2) == KPCN_OK);
+    CHECK(memcmp(lg, lg2, nout * 4) == 0);
+    kpcn_net_destroy(net);
+  }
+  /* inference path (ping-pong buffers) gives the same logits */
+  o.training = 0;
+  CHECK(kpcn_net_create(m, br, &o, &net) == KPCN_OK);
+  if (net) {
+    CHECK(kpcn_net_forward(net, in, lg2) == KPCN_OK);
+    CHECK(rel_err(lg2, rl, nout) <= 1e-5);
+    CHECK(kpcn_net_backward(net, dl, NULL) == KPCN_ERR_INVALID_ARGUMENT);
+    kpcn_net_destroy(net);
+  }
+  nn_ref_free(&ref);
+  kpcn_model_destroy(m);
+  free(in), free(lg), free(dl), free(din), free(lg2);
+}
+
+/* Central differences in double on the reference validate its analytic backward. */
+static void fd_reference(void) {
+  cfg c = {4, 2, 6, 3, 2, 7, 6, {3, 5, 3}, {1, 1, 2}};
+  kpcn_arch a;
+  make_arch(&c, &a);
+  kpcn_model *m = NULL;
+  kpcn_model_create(&a, 7, &m);
+  unsigned rs = 99;
+  randomize_bias(m, &rs);
+  size_t px = (size_t)c.N * c.H * c.W, nin = px * c.n_in, nout = px * c.K * c.K;
+  float *in = malloc(nin * 4), *dl = malloc(nout * 4);
+  fill(in, nin, &rs, 1.f);
+  fill(dl, nout, &rs, 1.f);
+  nn_ref r;
+  nn_ref_init(&r, m, KPCN_BRANCH_DIFFUSE, c.N, c.H, c.W);
+  nn_ref_forward(&r, in);
+  nn_ref_backward(&r, dl);
+  int bad = 0, n = 0;
+  for (int t = 0; t < 60; t++) {
+    int l = (int)(kt_randf(&rs) * (c.n_hidden + 1)) % (c.n_hidden + 1), isb = t % 4 == 0;
+    int co = kpcn_arch_layer_out(&a, l), ci = kpcn_arch_layer_in(&a, l), k = a.conv_size[l];
+    size_t cnt = isb ? (size_t)co : (size_t)co * ci * k * k;
+    size_t i = (size_t)(kt_randf(&rs) * cnt) % cnt;
+    double v = nn_ref_get_param(&r, l, isb, i), h = 1e-6, L[2];
+    for (int sgn = 0; sgn < 2; sgn++) {
+      nn_ref_set_param(&r, l, isb, i, v + (sgn ? -h : h));
+      const double *o = nn_ref_forward(&r, in);
+      L[sgn] = 0;
+      for (size_t j = 0; j < nout; j++) L[sgn] += dl[j] * o[j];
+    }
+    nn_ref_set_param(&r, l, isb, i, v);
+    double fd = (L[0] - L[1]) / (2 * h), an = isb ? r.gb[l][i] : r.gw[l][i];
+    n++;
+    if (fabs(fd - an) > 1e-5 * (1 + fabs(an))) {
+      bad++;
+      fprintf(stderr, "fd l=%d b=%d i=%zu: fd %.9g analytic %.9g\n", l, isb, i, fd, an);
+    }
+  }
+  /* and the input gradient */
+  for (int t = 0; t < 20; t++) {
+    size_t i = (size_t)(kt_randf(&rs) * nin) % nin;
+    float v = in[i];
+    double L[2], h = 1e-3; /* input is float: perturb by an exactly representable step */
+    for (int sgn = 0; sgn < 2; sgn++) {
+      in[i] = v + (float)(sgn ? -h : h);
+      const double *o = nn_ref_forward(&r, in);
+      L[sgn] = 0;
+      for (size_t j = 0; j < nout; j++) L[sgn] += dl[j] * o[j];
+    }
+    in[i] = v;
+    double fd = (L[0] - L[1]) / (2 * h);
+    n++;
+    if (fabs(fd - r.dinput[i]) > 1e-4 * (1 + fabs(r.dinput[i]))) bad++;
+  }
+  printf("finite differences on the reference: %d/%d bad\n", bad, n);
+  CHECK(bad <= 1); /* a ReLU kink inside [v-h, v+h] may flip one sample */
+  nn_ref_free(&r);
+  kpcn_model_destroy(m);
+  free(in), free(dl);
+}
+
+/* bf16 inference vs fp32 on the cpu preset: bounded difference. */
+static void bf16_vs_f32(void) {
+  kpcn_arch a;
+  kpcn_arch_preset("cpu", &a);
+  char nm[27][16];
+  const char *names[27];
+  for (int i = 0; i < 27; i++) snprintf(nm[i], 16, "f%d", i), names[i] = nm[i];
+  kpcn_arch_set_inputs(&a, 27, names);
+  kpcn_model *m = NULL;
+  kpcn_model_create(&a, 3, &m);
+  const int H = 40, W = 48, K2 = a.kernel_size * a.kernel_size;
+  size_t nin = (size_t)27 * H * W, nout = (size_t)K2 * H * W;
+  float *in = malloc(nin * 4), *l32 = malloc(nout * 4), *l16 = malloc(nout * 4);
+  unsigned rs = 5;
+  fill(in, nin, &rs, 1.f);
+  kpcn_net_options o;
+  kpcn_net_options_defaults(&o);
+  o.height = H, o.width = W;
+  kpcn_net *n32 = NULL, *n16 = NULL;
+  CHECK(kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &n32) == KPCN_OK);
+  o.precision = KPCN_PREC_BF16;
+  kpcn_status s = kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &n16);
+  if (s != KPCN_OK) fprintf(stderr, "bf16 net: %s\n", kpcn_last_error());
+  CHECK(s == KPCN_OK);
+  o.training = 1;
+  CHECK(kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &(kpcn_net *){NULL}) == KPCN_ERR_UNSUPPORTED);
+  if (n32 && n16) {
+    CHECK(kpcn_net_forward(n32, in, l32) == KPCN_OK);
+    CHECK(kpcn_net_forward(n16, in, l16) == KPCN_OK);
+    double mx = 0, e = 0, se = 0, s2 = 0;
+    for (size_t i = 0; i < nout; i++) {
+      double d = fabs((double)l16[i] - l32[i]);
+      mx = fabs(l32[i]) > mx ? fabs(l32[i]) : mx;
+      e = d > e ? d : e;
+      se += d * d, s2 += (double)l32[i] * l32[i];
+    }
+    double rms_rel = sqrt(se / s2);
+    printf("bf16 vs f32 logits: max abs %.3g (max |logit| %.3g), rms rel %.3g, impl %s\n", e, mx,
+           rms_rel, kpcn_net_impl_name(n16, 1));
+    /* bf16 keeps 8 significant bits (rel. rounding 2^-9 ~ 0.2 %) on 7 layers of inputs
+     * and weights: a few 0.1 % rms; 3 % of the largest logit is a generous ceiling. */
+    CHECK(rms_rel < 0.02);
+    CHECK(e < 0.03 * mx);
+  }
+  kpcn_net_destroy(n32);
+  kpcn_net_destroy(n16);
+  kpcn_model_destroy(m);
+  free(in), free(l32), free(l16);
+}
+
+int main(void) {
+  const cfg cs[] = {
+      {3, 1, 16, 3, 2, 12, 10, {3, 3}, {1, 1}},
+      {7, 2, 20, 5, 3, 13, 17, {5, 3, 1}, {1, 2, 1}},
+      {27, 2, 32, 5, 1, 20, 9, {3, 3, 3}, {2, 4, 1}},
+      {5, 0, 0, 3, 2, 8, 8, {5}, {3}},
+      {27, 3, 48, 7, 2, 16, 16, {3, 3, 3, 3}, {1, 2, 4, 1}},
+  };
+  for (size_t i = 0; i < sizeof cs / sizeof cs[0]; i++) check_vs_ref(&cs[i], (int)i + 1);
+  fd_reference();
+  bf16_vs_f32();
+  return kt_summary("test_nn_conv");
+}

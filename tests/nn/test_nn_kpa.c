@@ -1,0 +1,152 @@
+/* Kernel-prediction layer: forward vs a naive per-pixel double loop (softmax + clamped
+ * K x K weighted sum), backward (dlogits, dnoisy) vs central finite differences, thread-count
+ * independence, in-place use and argument checks. */
+#include "kpcn/nn.h"
+#include "testutil.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+static int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
+
+/* Naive reference: out[b][c][y][x] = sum_t softmax(l)[t] * noisy[clamp(y+dy-r)][clamp(x+dx-r)] */
+static double ref_pixel(int K, int nc, int h, int w, const float *lg, const float *nz, int b,
+                        int c, int y, int x) {
+  const int K2 = K * K, r = K / 2;
+  const size_t pl = (size_t)h * w;
+  double mx = -1e300, s = 0, o = 0;
+  for (int t = 0; t < K2; t++) {
+    double v = lg[((size_t)b * K2 + t) * pl + (size_t)y * w + x];
+    mx = v > mx ? v : mx;
+  }
+  for (int t = 0; t < K2; t++) s += exp(lg[((size_t)b * K2 + t) * pl + (size_t)y * w + x] - mx);
+  for (int dy = 0; dy < K; dy++)
+    for (int dx = 0; dx < K; dx++) {
+      int t = dy * K + dx;
+      double wt = exp(lg[((size_t)b * K2 + t) * pl + (size_t)y * w + x] - mx) / s;
+      int yy = clampi(y + dy - r, 0, h - 1), xx = clampi(x + dx - r, 0, w - 1);
+      o += wt * nz[((size_t)b * nc + c) * pl + (size_t)yy * w + xx];
+    }
+  return o;
+}
+
+static void fill(float *p, size_t n, unsigned *rs, float lo, float hi) {
+  for (size_t i = 0; i < n; i++) p[i] = lo + (hi - lo) * kt_randf(rs);
+}
+
+static void forward_vs_naive(int K, int n, int nc, int h, int w, float scale) {
+  const int K2 = K * K;
+  size_t pl = (size_t)h * w, nl = (size_t)n * K2 * pl, nn = (size_t)n * nc * pl;
+  float *lg = malloc(nl * 4), *nz = malloc(nn * 4), *out = malloc(nn * 4), *wt = malloc(nl * 4);
+  unsigned rs = (unsigned)(K * 131 + h * 7 + w);
+  fill(lg, nl, &rs, -scale, scale);
+  fill(nz, nn, &rs, 0.f, 2.f);
+  CHECK(kpcn_kpa_forward(K, n, nc, h, w, lg, nz, out, wt, 2) == KPCN_OK);
+  double e = 0;
+  for (int b = 0; b < n; b++)
+    for (int c = 0; c < nc; c++)
+      for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+          double r = ref_pixel(K, nc, h, w, lg, nz, b, c, y, x);
+          double d = fabs(out[((size_t)b * nc + c) * pl + (size_t)y * w + x] - r) / (fabs(r) + 1e-3);
+          e = d > e ? d : e;
+        }
+  /* softmax weights sum to 1 per pixel */
+  double es = 0;
+  for (int b = 0; b < n; b++)
+    for (size_t p = 0; p < pl; p++) {
+      double s = 0;
+      for (int t = 0; t < K2; t++) s += wt[((size_t)b * K2 + t) * pl + p];
+      es = fabs(s - 1) > es ? fabs(s - 1) : es;
+    }
+  printf("kpa fwd K=%d n=%d nc=%d %dx%d logit scale %g: rel err %.2e, |sum w - 1| %.2e\n", K, n,
+         nc, h, w, (double)scale, e, es);
+  CHECK(e <= 1e-5);
+  CHECK(es <= 1e-5);
+  /* in place (weights aliasing logits) and other thread counts: bit-identical */
+  float *out2 = malloc(nn * 4), *lg2 = malloc(nl * 4);
+  memcpy(lg2, lg, nl * 4);
+  CHECK(kpcn_kpa_forward(K, n, nc, h, w, lg2, nz, out2, lg2, 1) == KPCN_OK);
+  CHECK(memcmp(out, out2, nn * 4) == 0);
+  CHECK(memcmp(wt, lg2, nl * 4) == 0);
+  free(lg), free(nz), free(out), free(wt), free(out2), free(lg2);
+}
+
+/* L = sum r * out; dL/dlogits and dL/dnoisy vs central differences. Unaffected outputs are
+ * bit-identical between the +h and -h evaluations, so summing in double cancels them. */
+static void backward_fd(int K, int n, int nc, int h, int w) {
+  const int K2 = K * K;
+  size_t pl = (size_t)h * w, nl = (size_t)n * K2 * pl, nn = (size_t)n * nc * pl;
+  float *lg = malloc(nl * 4), *nz = malloc(nn * 4), *out = malloc(nn * 4), *wt = malloc(nl * 4);
+  float *r = malloc(nn * 4), *dl = malloc(nl * 4), *dn = malloc(nn * 4);
+  unsigned rs = 77u + (unsigned)K;
+  fill(lg, nl, &rs, -2.f, 2.f);
+  fill(nz, nn, &rs, 0.f, 1.f);
+  fill(r, nn, &rs, -1.f, 1.f);
+  CHECK(kpcn_kpa_forward(K, n, nc, h, w, lg, nz, out, wt, 0) == KPCN_OK);
+  CHECK(kpcn_kpa_backward(K, n, nc, h, w, wt, nz, r, dl, dn, 0) == KPCN_OK);
+  int bad = 0, tot = 0;
+  double emax = 0;
+  for (int t = 0; t < 400; t++) {
+    int wrt_noisy = t & 1;
+    float *p = wrt_noisy ? nz : lg;
+    size_t cnt = wrt_noisy ? nn : nl;
+    /* half the noisy samples on the border rows/columns, where clamped reads accumulate */
+    size_t i = (size_t)(kt_randf(&rs) * cnt) % cnt;
+    if (wrt_noisy && (t & 2)) i = (i / pl) * pl + (size_t)((t & 4) ? 0 : (h - 1) * w) + i % w;
+    float v = p[i];
+    const float hh = 1e-2f;
+    double L[2];
+    for (int s = 0; s < 2; s++) {
+      p[i] = v + (s ? -hh : hh);
+      kpcn_kpa_forward(K, n, nc, h, w, lg, nz, out, NULL, 1);
+      L[s] = 0;
+      for (size_t j = 0; j < nn; j++) L[s] += (double)r[j] * out[j];
+    }
+    p[i] = v;
+    double step = (double)(float)(v + hh) - (double)(float)(v - hh); /* the float step taken */
+    double fd = (L[0] - L[1]) / step;
+    double an = wrt_noisy ? dn[i] : dl[i];
+    double err = fabs(fd - an);
+    emax = err > emax ? err : emax;
+    tot++;
+    if (err > 2e-4 + 2e-3 * fabs(an)) {
+      bad++;
+      if (bad < 5) fprintf(stderr, "kpa fd %s[%zu]: fd %.7g analytic %.7g\n",
+                           wrt_noisy ? "noisy" : "logits", i, fd, an);
+    }
+  }
+  printf("kpa bwd K=%d n=%d nc=%d %dx%d: %d/%d finite-difference mismatches, max abs err %.2e\n",
+         K, n, nc, h, w, bad, tot, emax);
+  CHECK(bad == 0);
+  /* dnoisy: sum over all pixels equals sum over outputs of dout (weights sum to 1) */
+  for (int b = 0; b < n; b++)
+    for (int c = 0; c < nc; c++) {
+      double s1 = 0, s2 = 0;
+      for (size_t q = 0; q < pl; q++)
+        s1 += dn[((size_t)b * nc + c) * pl + q], s2 += r[((size_t)b * nc + c) * pl + q];
+      CHECK_NEAR(s1, s2, 1e-4 * (1 + fabs(s2)));
+    }
+  /* threads: bit-identical; dlogits may alias the weights */
+  float *dl2 = malloc(nl * 4), *dn2 = malloc(nn * 4);
+  memcpy(dl2, wt, nl * 4);
+  CHECK(kpcn_kpa_backward(K, n, nc, h, w, dl2, nz, r, dl2, dn2, 1) == KPCN_OK);
+  CHECK(memcmp(dl, dl2, nl * 4) == 0);
+  CHECK(memcmp(dn, dn2, nn * 4) == 0);
+  free(lg), free(nz), free(out), free(wt), free(r), free(dl), free(dn), free(dl2), free(dn2);
+}
+
+int main(void) {
+  forward_vs_naive(3, 1, 3, 5, 4, 2.f);
+  forward_vs_naive(5, 2, 3, 9, 13, 4.f);
+  forward_vs_naive(11, 1, 3, 16, 7, 3.f);  /* K larger than the image height: clamping */
+  forward_vs_naive(21, 1, 1, 30, 33, 50.f); /* large logits: the stable softmax path */
+  backward_fd(3, 2, 3, 6, 5);
+  backward_fd(5, 1, 3, 7, 9);
+  backward_fd(7, 1, 2, 4, 11);
+  float x = 0;
+  CHECK(kpcn_kpa_forward(4, 1, 3, 4, 4, &x, &x, &x, NULL, 1) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_kpa_forward(3, 1, 3, 0, 4, &x, &x, &x, NULL, 1) != KPCN_OK);
+  CHECK(kpcn_kpa_backward(3, 1, 3, 4, 4, NULL, &x, &x, &x, NULL, 1) == KPCN_ERR_INVALID_ARGUMENT);
+  return kt_summary("test_nn_kpa");
+}

@@ -1,0 +1,338 @@
+/* Architecture presets/JSON, model init, safetensors round trip (bit-exact), and rejection
+ * of malformed model files: every mutation must fail with KPCN_ERR_FORMAT and a message
+ * naming the tensor or field, never crash or leak a half-built model. */
+#include "kpcn/nn.h"
+#include "testutil.h"
+
+#include <cjson/cJSON.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct blob {
+  unsigned char *p;
+  size_t n;
+} blob;
+
+static blob slurp(const char *path) {
+  blob b = {0, 0};
+  FILE *f = fopen(path, "rb");
+  if (!f) return b;
+  fseek(f, 0, SEEK_END);
+  b.n = (size_t)ftell(f);
+  rewind(f);
+  b.p = malloc(b.n ? b.n : 1);
+  if (fread(b.p, 1, b.n, f) != b.n) b.n = 0;
+  fclose(f);
+  return b;
+}
+
+static void spit(const char *path, const void *p, size_t n) {
+  FILE *f = fopen(path, "wb");
+  fwrite(p, 1, n, f);
+  fclose(f);
+}
+
+/* Writes header json (with an explicit declared length) followed by data bytes. */
+static void write_st(const char *path, uint64_t declared, const char *json, const void *data,
+                     size_t dn) {
+  FILE *f = fopen(path, "wb");
+  unsigned char l8[8];
+  for (int i = 0; i < 8; i++) l8[i] = (unsigned char)(declared >> (8 * i));
+  fwrite(l8, 1, 8, f);
+  fwrite(json, 1, strlen(json), f);
+  fwrite(data, 1, dn, f);
+  fclose(f);
+}
+
+static uint64_t hlen(const blob *b) {
+  uint64_t h = 0;
+  for (int i = 0; i < 8; i++) h |= (uint64_t)b->p[i] << (8 * i);
+  return h;
+}
+
+/* Loads `path`, expects KPCN_ERR_FORMAT whose message contains `needle`. */
+static void expect_reject(const char *what, const char *path, const char *needle) {
+  kpcn_model *m = (kpcn_model *)(uintptr_t)1;
+  kpcn_status s = kpcn_model_load(path, &m);
+  const char *msg = kpcn_last_error();
+  int named = needle == NULL || strstr(msg, needle) != NULL;
+  printf("%-28s -> %s: %s\n", what, kpcn_status_string(s), msg);
+  CHECK(s == KPCN_ERR_FORMAT);
+  CHECK(m == NULL);
+  CHECK(named);
+}
+
+typedef void (*mutate_fn)(cJSON *h);
+static void m_dtype(cJSON *h) {
+  cJSON *t = cJSON_GetObjectItem(h, "specular.conv1.weight");
+  cJSON_ReplaceItemInObject(t, "dtype", cJSON_CreateString("F16"));
+}
+static void m_shape(cJSON *h) {
+  cJSON *t = cJSON_GetObjectItem(h, "diffuse.conv0.weight");
+  int sh[4] = {8, 4, 3, 5};
+  cJSON_ReplaceItemInObject(t, "shape", cJSON_CreateIntArray(sh, 4));
+}
+static void m_missing(cJSON *h) { cJSON_DeleteItemFromObject(h, "diffuse.conv2.bias"); }
+static void m_extra(cJSON *h) {
+  cJSON *t = cJSON_Duplicate(cJSON_GetObjectItem(h, "diffuse.conv2.bias"), 1);
+  cJSON_AddItemToObject(h, "diffuse.conv9.bias", t);
+}
+static void set_offsets(cJSON *h, const char *name, double b, double e) {
+  cJSON *t = cJSON_GetObjectItem(h, name);
+  cJSON *o = cJSON_CreateArray();
+  cJSON_AddItemToArray(o, cJSON_CreateNumber(b));
+  cJSON_AddItemToArray(o, cJSON_CreateNumber(e));
+  cJSON_ReplaceItemInObject(t, "data_offsets", o);
+}
+static double off0(cJSON *h, const char *name, int i) {
+  return cJSON_GetArrayItem(cJSON_GetObjectItem(cJSON_GetObjectItem(h, name), "data_offsets"), i)
+      ->valuedouble;
+}
+static void m_overlap(cJSON *h) { /* bias of conv0 points into the weight before it */
+  double e = off0(h, "diffuse.conv0.bias", 1), b = off0(h, "diffuse.conv0.bias", 0);
+  set_offsets(h, "diffuse.conv0.bias", b - 8, e - 8);
+}
+static void m_outofrange(cJSON *h) {
+  double n = off0(h, "specular.conv2.bias", 1) - off0(h, "specular.conv2.bias", 0);
+  set_offsets(h, "specular.conv2.bias", 1e12, 1e12 + n);
+}
+static void m_negative(cJSON *h) { set_offsets(h, "specular.conv0.bias", -32, 0); }
+static void m_span(cJSON *h) { /* end before begin */
+  set_offsets(h, "specular.conv0.bias", off0(h, "specular.conv0.bias", 1),
+              off0(h, "specular.conv0.bias", 0));
+}
+static void m_arch_channels(cJSON *h) {
+  cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
+  cJSON *a = cJSON_Parse(cJSON_GetObjectItem(meta, "kpcn.architecture")->valuestring);
+  cJSON_ReplaceItemInObject(a, "channels", cJSON_CreateNumber(9));
+  char *s = cJSON_PrintUnformatted(a);
+  cJSON_ReplaceItemInObject(meta, "kpcn.architecture", cJSON_CreateString(s));
+  free(s);
+  cJSON_Delete(a);
+}
+static void m_arch_bad(cJSON *h) {
+  cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
+  cJSON_ReplaceItemInObject(meta, "kpcn.architecture", cJSON_CreateString("{\"n_hidden\": [}"));
+}
+static void m_arch_k(cJSON *h) {
+  cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
+  cJSON *a = cJSON_Parse(cJSON_GetObjectItem(meta, "kpcn.architecture")->valuestring);
+  cJSON_ReplaceItemInObject(a, "kernel_size", cJSON_CreateNumber(4));
+  char *s = cJSON_PrintUnformatted(a);
+  cJSON_ReplaceItemInObject(meta, "kpcn.architecture", cJSON_CreateString(s));
+  free(s);
+  cJSON_Delete(a);
+}
+static void m_inputs(cJSON *h) {
+  cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
+  cJSON_ReplaceItemInObject(meta, "kpcn.inputs", cJSON_CreateString("[\"R\",\"G\"]"));
+}
+static void m_nometa(cJSON *h) { cJSON_DeleteItemFromObject(h, "__metadata__"); }
+static void m_format(cJSON *h) {
+  cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
+  cJSON_ReplaceItemInObject(meta, "kpcn.format", cJSON_CreateString("kpcn-model-999"));
+}
+static void m_meta_number(cJSON *h) {
+  cJSON_AddNumberToObject(cJSON_GetObjectItem(h, "__metadata__"), "user", 3);
+}
+
+static void mutated(const blob *good, const char *what, mutate_fn fn, const char *needle) {
+  uint64_t hl = hlen(good);
+  char *txt = malloc(hl + 1);
+  memcpy(txt, good->p + 8, hl);
+  txt[hl] = 0;
+  cJSON *h = cJSON_Parse(txt);
+  free(txt);
+  fn(h);
+  char *js = cJSON_PrintUnformatted(h);
+  cJSON_Delete(h);
+  const char *path = kt_tmpfile("mut.safetensors");
+  write_st(path, strlen(js), js, good->p + 8 + hl, good->n - 8 - hl);
+  free(js);
+  expect_reject(what, path, needle);
+}
+
+static kpcn_model *tiny_model(uint64_t seed) {
+  kpcn_arch a;
+  kpcn_arch_preset("tiny", &a);
+  const char *names[4] = {"color.R", "color.G", "color.B", "color.var"};
+  kpcn_arch_set_inputs(&a, 4, names);
+  kpcn_model *m = NULL;
+  CHECK(kpcn_model_create(&a, seed, &m) == KPCN_OK);
+  return m;
+}
+
+static void test_arch(void) {
+  kpcn_arch a, b;
+  CHECK(kpcn_arch_preset("paper", &a) == KPCN_OK);
+  CHECK(a.n_hidden == 9 && a.channels == 100 && a.conv_size[0] == 5 && a.kernel_size == 21);
+  CHECK(kpcn_arch_conv_radius(&a) == 20);
+  const char *names[3] = {"a", "b", "c"};
+  CHECK(kpcn_arch_validate(&a) == KPCN_ERR_INVALID_ARGUMENT); /* no inputs yet */
+  CHECK(strstr(kpcn_last_error(), "n_inputs") != NULL);
+  CHECK(kpcn_arch_set_inputs(&a, 3, names) == KPCN_OK);
+  CHECK(kpcn_arch_validate(&a) == KPCN_OK);
+  /* paper FLOPs per pixel per branch: 2*(3*100*25 + 8*100*100*25 + 100*441*25) */
+  CHECK_NEAR(kpcn_arch_flops_per_pixel(&a), 2.0 * (3 * 2500 + 8 * 250000 + 100 * 441 * 25), 0.5);
+  CHECK(kpcn_arch_param_count(&a) ==
+        (size_t)(3 * 100 * 25 + 100) + 8 * (100 * 100 * 25 + 100) + (100 * 441 * 25 + 441));
+  char *js = kpcn_arch_to_json(&a);
+  CHECK(js && kpcn_arch_from_json(js, &b) == KPCN_OK);
+  CHECK(memcmp(&a, &b, sizeof a) == 0);
+  free(js);
+  CHECK(kpcn_arch_preset("cpu", &a) == KPCN_OK);
+  CHECK(kpcn_arch_conv_radius(&a) == 22);
+  a.conv_size[2] = 4;
+  kpcn_arch_set_inputs(&a, 3, names);
+  CHECK(kpcn_arch_validate(&a) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "conv_size[2]") != NULL);
+  const char *dup[2] = {"x", "x"};
+  kpcn_arch_preset("cpu", &a);
+  kpcn_arch_set_inputs(&a, 2, dup);
+  CHECK(kpcn_arch_validate(&a) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_arch_preset("huge", &a) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_arch_from_json("{}", &a) == KPCN_ERR_FORMAT);
+  CHECK(kpcn_arch_from_json("nope", &a) == KPCN_ERR_FORMAT);
+}
+
+static void test_init(void) {
+  kpcn_model *m1 = tiny_model(42), *m2 = tiny_model(42), *m3 = tiny_model(43);
+  kpcn_layer_view v1, v2, v3;
+  kpcn_model_layer(m1, KPCN_BRANCH_SPECULAR, 1, &v1);
+  kpcn_model_layer(m2, KPCN_BRANCH_SPECULAR, 1, &v2);
+  kpcn_model_layer(m3, KPCN_BRANCH_SPECULAR, 1, &v3);
+  size_t n = (size_t)v1.out_ch * v1.in_ch * v1.size * v1.size;
+  CHECK(memcmp(v1.weight, v2.weight, n * 4) == 0);
+  CHECK(memcmp(v1.weight, v3.weight, n * 4) != 0);
+  /* Glorot uniform: |w| <= sqrt(6/(fan_in+fan_out)), variance lim²/3 */
+  double lim = sqrt(6.0 / ((v1.in_ch + v1.out_ch) * 9.0)), s2 = 0, mx = 0;
+  for (size_t i = 0; i < n; i++) {
+    s2 += (double)v1.weight[i] * v1.weight[i];
+    mx = fabs(v1.weight[i]) > mx ? fabs(v1.weight[i]) : mx;
+  }
+  CHECK(mx <= lim);
+  CHECK_CLOSE(s2 / n, lim * lim / 3, 0.35, 0);
+  CHECK(kpcn_model_layer(m1, KPCN_BRANCH_DIFFUSE, 3, &v1) == KPCN_ERR_INVALID_ARGUMENT);
+  kpcn_model_destroy(m1), kpcn_model_destroy(m2), kpcn_model_destroy(m3);
+}
+
+static void test_roundtrip(blob *good) {
+  kpcn_model *m = tiny_model(7);
+  kpcn_arch a = *kpcn_model_arch(m);
+  /* non-trivial biases so they are part of the bit-exact comparison */
+  for (int b = 0; b < 2; b++)
+    for (int l = 0; l <= a.n_hidden; l++) {
+      kpcn_layer_view v;
+      kpcn_model_layer(m, (kpcn_branch)b, l, &v);
+      for (int i = 0; i < v.out_ch; i++) v.bias[i] = (float)(i + 1) / 3.0f * (b ? -1.f : 1.f);
+    }
+  CHECK(kpcn_model_set_meta(m, "train.iterations", "1200") == KPCN_OK);
+  CHECK(kpcn_model_set_meta(m, "kpcn.bad", "x") == KPCN_ERR_INVALID_ARGUMENT);
+  const char *path = kt_tmpfile("good.safetensors");
+  CHECK(kpcn_model_save(m, path) == KPCN_OK);
+  kpcn_model *r = NULL;
+  CHECK(kpcn_model_load(path, &r) == KPCN_OK);
+  if (r) {
+    CHECK(memcmp(kpcn_model_arch(r), &a, sizeof a) == 0);
+    for (int b = 0; b < 2; b++)
+      for (int l = 0; l <= a.n_hidden; l++) {
+        kpcn_layer_view v, w;
+        kpcn_model_layer(m, (kpcn_branch)b, l, &v);
+        kpcn_model_layer(r, (kpcn_branch)b, l, &w);
+        CHECK(memcmp(v.weight, w.weight, (size_t)v.out_ch * v.in_ch * v.size * v.size * 4) == 0);
+        CHECK(memcmp(v.bias, w.bias, (size_t)v.out_ch * 4) == 0);
+      }
+    CHECK(kpcn_model_get_meta(r, "train.iterations") &&
+          !strcmp(kpcn_model_get_meta(r, "train.iterations"), "1200"));
+    kpcn_model_destroy(r);
+  }
+  *good = slurp(path);
+  CHECK(good->n > 8 && hlen(good) % 8 == 0);
+  /* independent check of the layout: data section size = 4 bytes x parameter count x 2 */
+  CHECK(good->n - 8 - hlen(good) == 4 * 2 * kpcn_arch_param_count(&a));
+  kpcn_model_destroy(m);
+  CHECK(kpcn_model_load(kt_tmpfile("does-not-exist.safetensors"), &r) == KPCN_ERR_IO);
+}
+
+static void test_malformed(const blob *good) {
+  const char *p = kt_tmpfile("bad.safetensors");
+  uint64_t hl = hlen(good);
+  spit(p, good->p, good->n - 10);
+  expect_reject("truncated data", p, "bytes");
+  spit(p, good->p, 8 + hl / 2);
+  expect_reject("truncated header", p, "header length");
+  spit(p, good->p, 5);
+  expect_reject("shorter than 8 bytes", p, "too short");
+  blob b = {malloc(good->n), good->n};
+  memcpy(b.p, good->p, good->n);
+  for (int i = 0; i < 8; i++) b.p[i] = (unsigned char)(((uint64_t)1 << 62) >> (8 * i));
+  spit(p, b.p, b.n);
+  expect_reject("huge header length", p, "header length");
+  for (int i = 0; i < 8; i++) b.p[i] = 0;
+  spit(p, b.p, b.n);
+  expect_reject("zero header length", p, "header length");
+  /* NaN in a weight */
+  memcpy(b.p, good->p, good->n);
+  float nan = NAN;
+  memcpy(b.p + 8 + hl + 12, &nan, 4);
+  spit(p, b.p, b.n);
+  expect_reject("NaN weight", p, "not finite");
+  free(b.p);
+  /* extra trailing data not covered by any tensor */
+  unsigned char *ext = malloc(good->n + 16);
+  memcpy(ext, good->p, good->n);
+  memset(ext + good->n, 0, 16);
+  spit(p, ext, good->n + 16);
+  free(ext);
+  expect_reject("trailing bytes", p, "cover");
+  write_st(p, 24, "this is not json at all!", good->p + 8 + hl, good->n - 8 - hl);
+  expect_reject("non-JSON header", p, "JSON");
+  write_st(p, 8, "[1,2,3] ", good->p + 8 + hl, good->n - 8 - hl);
+  expect_reject("JSON array header", p, "JSON object");
+  mutated(good, "wrong dtype", m_dtype, "specular.conv1.weight");
+  mutated(good, "shape mismatch", m_shape, "diffuse.conv0.weight");
+  mutated(good, "missing tensor", m_missing, "diffuse.conv2.bias");
+  mutated(good, "unknown tensor", m_extra, "diffuse.conv9.bias");
+  mutated(good, "overlapping offsets", m_overlap, "overlaps");
+  mutated(good, "offsets out of range", m_outofrange, "specular.conv2.bias");
+  mutated(good, "negative offset", m_negative, "specular.conv0.bias");
+  mutated(good, "end before begin", m_span, "specular.conv0.bias");
+  mutated(good, "arch channels vs shapes", m_arch_channels, "shape");
+  mutated(good, "arch not JSON", m_arch_bad, "architecture");
+  mutated(good, "arch even K", m_arch_k, "kernel_size");
+  mutated(good, "inputs disagree", m_inputs, "kpcn.inputs");
+  mutated(good, "no __metadata__", m_nometa, "__metadata__");
+  mutated(good, "unknown format version", m_format, "kpcn.format");
+  mutated(good, "non-string metadata", m_meta_number, "user");
+  /* random byte corruption of the header: never a crash, a model only if still valid */
+  unsigned rs = 2024;
+  blob c = {malloc(good->n), good->n};
+  int rejected = 0;
+  for (int t = 0; t < 300; t++) {
+    memcpy(c.p, good->p, good->n);
+    for (int k = 0; k < 3; k++) {
+      size_t i = (size_t)(kt_randf(&rs) * (double)(8 + hl)) % (8 + hl);
+      c.p[i] = (unsigned char)(kt_randf(&rs) * 256);
+    }
+    spit(p, c.p, c.n);
+    kpcn_model *m = NULL;
+    kpcn_status s = kpcn_model_load(p, &m);
+    if (s != KPCN_OK) rejected++;
+    CHECK((s == KPCN_OK) == (m != NULL));
+    CHECK(s == KPCN_OK || s == KPCN_ERR_FORMAT);
+    kpcn_model_destroy(m);
+  }
+  printf("random header corruption: %d/300 rejected, none crashed\n", rejected);
+  free(c.p);
+}
+
+int main(void) {
+  test_arch();
+  test_init();
+  blob good = {0, 0};
+  test_roundtrip(&good);
+  if (good.p) test_malformed(&good);
+  free(good.p);
+  return kt_summary("test_nn_model");
+}

@@ -1,0 +1,68 @@
+/* bench_train: training speed for the cpu and paper presets at batch 16 of 64x64 patches
+ * (synthetic 65x65 store): iterations/s, patches/s and achieved GFLOP/s counting the conv
+ * FLOPs of forward + backward (both branches; see kpcn_trainer_flops_per_iter).
+ * usage: bench_train [iters_cpu (6)] [iters_paper (2)] [threads (0)] */
+#include "kpcn/train.h"
+#include "testutil.h"
+#include "train_fixture.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <time.h>
+
+static double now(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static void bench(const char *store, const char *preset, int iters, int threads, int stage) {
+  kpcn_train_settings s;
+  kpcn_train_settings_defaults(&s);
+  if (kpcn_arch_preset(preset, &s.arch) != KPCN_OK) return;
+  s.store_path = store;
+  s.out_path = kt_tmpfile("bench.safetensors");
+  s.batch = 16;
+  s.patch = 64;
+  s.iters = 1000000;
+  s.stage1_iters = stage == 1 ? 1000000 : 0;
+  s.nthreads = threads;
+  kpcn_trainer *t;
+  if (kpcn_trainer_create(&t, &s) != KPCN_OK) {
+    fprintf(stderr, "bench_train: %s\n", kpcn_last_error());
+    return;
+  }
+  double loss, t0 = now();
+  if (kpcn_trainer_step(t, &loss) != KPCN_OK) { /* warm-up: primitive creation, first touch */
+    fprintf(stderr, "bench_train: %s\n", kpcn_last_error());
+    kpcn_trainer_destroy(t);
+    return;
+  }
+  double warm = now() - t0;
+  t0 = now();
+  for (int i = 0; i < iters; i++)
+    if (kpcn_trainer_step(t, &loss) != KPCN_OK) {
+      fprintf(stderr, "bench_train: %s\n", kpcn_last_error());
+      break;
+    }
+  double dt = now() - t0, f = kpcn_trainer_flops_per_iter(t);
+  printf("%-6s stage %d  batch 16x64x64  threads %d: %.3f it/s  %.1f patches/s  %.1f GFLOP/s "
+         "(%.1f GFLOP/it; warm-up %.2f s, %d timed iterations)\n",
+         preset, stage, kpcn_resolve_threads(threads), iters / dt, 16 * iters / dt,
+         f * iters / dt * 1e-9, f * 1e-9, warm, iters);
+  fflush(stdout);
+  kpcn_trainer_destroy(t);
+}
+
+int main(int argc, char **argv) {
+  int ic = argc > 1 ? atoi(argv[1]) : 6, ip = argc > 2 ? atoi(argv[2]) : 2;
+  int th = argc > 3 ? atoi(argv[3]) : 0;
+  const char *store = kt_tmpfile("bench.kps");
+  if (tf_make_store(store, 65, 160, 160, 64, 1, 0, NULL, 0) != 0) return 1;
+  printf("bench_train: conv FLOPs = forward + backward-weights + backward-data (no input "
+         "gradient for layer 0), both branches; other processes share this CPU.\n");
+  bench(store, "cpu", ic, th, 1);
+  bench(store, "cpu", ic, th, 2);
+  if (ip > 0) bench(store, "paper", ip, th, 1);
+  return 0;
+}

@@ -1,0 +1,135 @@
+/* Losses: values against naive independent formulas (written here from the
+ * definitions, SSIM with a direct 2-D window sum in double), gradients against
+ * double-precision central finite differences, determinism across thread counts. */
+#include "kpcn/train.h"
+#include "testutil.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Independent double-precision loss in plain loops (no separable filters). */
+static double naive_loss(kpcn_loss_kind k, const double *x, const float *y, int planes, int w,
+                         int h, int win) {
+  size_t n = (size_t)w * h;
+  if (k != KPCN_LOSS_SSIM) {
+    double s = 0;
+    for (size_t i = 0; i < n * planes; i++) {
+      double d = x[i] - y[i];
+      switch (k) {
+      case KPCN_LOSS_L1: s += fabs(d); break;
+      case KPCN_LOSS_L2: s += d * d; break;
+      case KPCN_LOSS_RELMSE: s += d * d / ((double)y[i] * y[i] + 0.01); break;
+      default: s += fabs(d) / (fabs((double)y[i]) + 0.01); break;
+      }
+    }
+    return s / (double)(n * planes);
+  }
+  double g[64], gs = 0, sigma = 1.5;
+  for (int i = 0; i < win; i++) {
+    double d = i - win / 2;
+    g[i] = exp(-d * d / (2 * sigma * sigma));
+    gs += g[i];
+  }
+  double c1 = 1e-4, c2 = 9e-4, tot = 0;
+  int cnt = 0;
+  for (int p = 0; p < planes; p++) {
+    const double *xp = x + p * n;
+    const float *yp = y + p * n;
+    for (int oy = 0; oy + win <= h; oy++)
+      for (int ox = 0; ox + win <= w; ox++) {
+        double mx = 0, my = 0, xx = 0, yy = 0, xy = 0;
+        for (int i = 0; i < win; i++)
+          for (int j = 0; j < win; j++) {
+            double wt = g[i] * g[j] / (gs * gs);
+            double a = xp[(oy + i) * w + ox + j], b = yp[(oy + i) * w + ox + j];
+            mx += wt * a, my += wt * b;
+          }
+        for (int i = 0; i < win; i++)
+          for (int j = 0; j < win; j++) {
+            double wt = g[i] * g[j] / (gs * gs);
+            double a = xp[(oy + i) * w + ox + j] - mx, b = yp[(oy + i) * w + ox + j] - my;
+            xx += wt * a * a, yy += wt * b * b, xy += wt * a * b;
+          }
+        tot += (2 * mx * my + c1) * (2 * xy + c2) / ((mx * mx + my * my + c1) * (xx + yy + c2));
+        cnt++;
+      }
+  }
+  return 1.0 - tot / cnt;
+}
+
+static void check_loss(kpcn_loss_kind k, int planes, int w, int h, int win, unsigned seed) {
+  size_t n = (size_t)planes * w * h;
+  float *x = malloc(n * sizeof(float)), *y = malloc(n * sizeof(float));
+  float *g = malloc(n * sizeof(float)), *g1 = malloc(n * sizeof(float));
+  double *xd = malloc(n * sizeof(double));
+  unsigned st = seed;
+  for (size_t i = 0; i < n; i++) {
+    y[i] = kt_randf(&st) * 1.5f - 0.2f;
+    /* keep |x - y| away from 0 so L1's kink is not crossed by the FD step */
+    float d = 0.05f + 0.3f * kt_randf(&st);
+    x[i] = y[i] + (kt_randf(&st) < 0.5f ? -d : d);
+    xd[i] = x[i];
+  }
+  kpcn_loss_settings ls;
+  kpcn_loss_settings_defaults(&ls);
+  ls.ssim_window = win;
+  double v = 0, v1 = 0;
+  CHECK(kpcn_loss_compute(k, &ls, x, y, 1, planes, w, h, g, &v, 2) == KPCN_OK);
+  double ref = naive_loss(k, xd, y, planes, w, h, win);
+  CHECK_CLOSE(v, ref, 1e-9, 1e-12);
+  /* thread-count independence, bit for bit */
+  CHECK(kpcn_loss_compute(k, &ls, x, y, 1, planes, w, h, g1, &v1, 1) == KPCN_OK);
+  CHECK(v == v1);
+  CHECK(memcmp(g, g1, n * sizeof(float)) == 0);
+  /* central differences on the double-precision naive formula at sampled elements */
+  double maxrel = 0;
+  for (int t = 0; t < 40; t++) {
+    size_t i = (size_t)(kt_randf(&st) * (float)n) % n;
+    double hstep = 1e-5, keep = xd[i];
+    xd[i] = keep + hstep;
+    double fp = naive_loss(k, xd, y, planes, w, h, win);
+    xd[i] = keep - hstep;
+    double fm = naive_loss(k, xd, y, planes, w, h, win);
+    xd[i] = keep;
+    double fd = (fp - fm) / (2 * hstep);
+    double err = fabs(fd - g[i]) / (fabs(fd) + 1e-3 * (1.0 / (double)n) + 1e-12);
+    if (err > maxrel) maxrel = err;
+  }
+  if (maxrel > 2e-3) fprintf(stderr, "loss %s: max rel grad err %g\n", kpcn_loss_name(k), maxrel);
+  CHECK(maxrel <= 2e-3);
+  free(x), free(y), free(g), free(g1), free(xd);
+}
+
+int main(void) {
+  for (int k = KPCN_LOSS_L1; k <= KPCN_LOSS_RELL1; k++) check_loss((kpcn_loss_kind)k, 3, 13, 9, 11, 7u + k);
+  check_loss(KPCN_LOSS_SSIM, 2, 16, 14, 11, 3u); /* 6x4 valid positions, full window */
+  check_loss(KPCN_LOSS_SSIM, 3, 12, 12, 7, 5u);  /* the small-window variant */
+  check_loss(KPCN_LOSS_SSIM, 1, 5, 5, 5, 9u);    /* window == image: one position */
+
+  /* identical images: SSIM loss 0, zero gradient; L1 exactly 0 */
+  float a[4 * 20 * 20], gr[4 * 20 * 20];
+  unsigned st = 1;
+  for (int i = 0; i < 4 * 400; i++) a[i] = kt_randf(&st);
+  double v = -1;
+  CHECK(kpcn_loss_compute(KPCN_LOSS_SSIM, NULL, a, a, 2, 2, 20, 20, gr, &v, 0) == KPCN_OK);
+  CHECK_NEAR(v, 0.0, 1e-12);
+  double gmax = 0;
+  for (int i = 0; i < 4 * 400; i++) gmax = fmax(gmax, fabs(gr[i]));
+  CHECK(gmax < 1e-9);
+  CHECK(kpcn_loss_compute(KPCN_LOSS_L1, NULL, a, a, 2, 2, 20, 20, gr, &v, 0) == KPCN_OK);
+  CHECK(v == 0.0);
+
+  /* errors: window larger than the image, bad names, NULLs */
+  kpcn_loss_settings ls;
+  kpcn_loss_settings_defaults(&ls);
+  CHECK(kpcn_loss_compute(KPCN_LOSS_SSIM, &ls, a, a, 1, 1, 8, 8, NULL, &v, 0) ==
+        KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "window") != NULL);
+  kpcn_loss_kind k;
+  CHECK(kpcn_loss_parse("huber", &k) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "huber") != NULL);
+  CHECK(kpcn_loss_parse("mse", &k) == KPCN_OK && k == KPCN_LOSS_L2);
+  CHECK(kpcn_loss_compute(KPCN_LOSS_L1, NULL, NULL, a, 1, 1, 8, 8, NULL, &v, 0) != KPCN_OK);
+  return kt_summary("train_loss");
+}

@@ -1,0 +1,249 @@
+/* Trainer end to end on a synthetic store: determinism (two runs, same seed -> identical
+ * weights), checkpoint/resume equal to an uninterrupted run bit for bit (weights AND Adam
+ * moments), both stages, full-image validation, CSV/plot outputs, and clear errors for a
+ * store with the wrong channel list, a garbage store, a model with other inputs and a
+ * checkpoint of another run. */
+#include "kpcn/exr.h"
+#include "kpcn/train.h"
+#include "testutil.h"
+#include "train_fixture.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char *g_store;
+/* kt_tmpfile rotates 8 static buffers; the tests keep many paths alive */
+static const char *tf_tmp(const char *name) { return strdup(kt_tmpfile(name)); }
+
+static void settings(kpcn_train_settings *s, const char *out) {
+  kpcn_train_settings_defaults(s);
+  kpcn_arch_preset("tiny", &s->arch);
+  s->store_path = g_store;
+  s->out_path = out;
+  s->batch = 3;
+  s->patch = 16;
+  s->iters = 8;
+  s->stage1_iters = 4;
+  s->nthreads = 2;
+  s->seed = 5;
+  s->adam.lr = 1e-2;
+  s->log_every = 2;
+}
+
+/* All parameters of both branches, concatenated (malloc'ed). */
+static float *weights(kpcn_trainer *t, size_t *n) {
+  kpcn_model *m = kpcn_trainer_model(t);
+  const kpcn_arch *a = kpcn_model_arch(m);
+  size_t tot = 2 * kpcn_arch_param_count(a), k = 0;
+  float *w = malloc(tot * sizeof(float));
+  for (int b = 0; b < 2; b++)
+    for (int l = 0; l < kpcn_arch_n_layers(a); l++) {
+      kpcn_layer_view v;
+      kpcn_model_layer(m, (kpcn_branch)b, l, &v);
+      size_t nw = (size_t)v.out_ch * v.in_ch * v.size * v.size;
+      memcpy(w + k, v.weight, nw * sizeof(float)), k += nw;
+      memcpy(w + k, v.bias, v.out_ch * sizeof(float)), k += v.out_ch;
+    }
+  *n = k;
+  return w;
+}
+
+static int stop_at;
+static int stop_cb(void *u, const kpcn_train_progress *p) {
+  (void)u;
+  return p->iter >= stop_at;
+}
+
+static float *run_full(const char *out, size_t *n) {
+  kpcn_train_settings s;
+  settings(&s, out);
+  kpcn_trainer *t = NULL;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (!t) {
+    fprintf(stderr, "%s\n", kpcn_last_error());
+    return NULL;
+  }
+  int stopped = -1;
+  CHECK(kpcn_trainer_run(t, &stopped) == KPCN_OK);
+  CHECK(stopped == 0 && kpcn_trainer_iteration(t) == 8);
+  CHECK(kpcn_trainer_validate(t, NULL, NULL, NULL) == KPCN_ERR_INVALID_ARGUMENT);
+  float *w = weights(t, n);
+  kpcn_trainer_destroy(t);
+  return w;
+}
+
+static void test_determinism_and_resume(void) {
+  size_t n1, n2, n3;
+  float *w1 = run_full(tf_tmp("a.safetensors"), &n1);
+  float *w2 = run_full(tf_tmp("b.safetensors"), &n2);
+  CHECK(w1 && w2 && n1 == n2 && memcmp(w1, w2, n1 * sizeof(float)) == 0);
+  /* the training changed the weights (not a no-op) */
+  kpcn_train_settings s;
+  settings(&s, tf_tmp("c.safetensors"));
+  kpcn_trainer *t;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  size_t n0;
+  float *w0 = weights(t, &n0);
+  CHECK(n0 == n1 && memcmp(w0, w1, n0 * sizeof(float)) != 0);
+  /* interrupted at iteration 3 (stage 1), resumed to 8 (through stage 2) */
+  stop_at = 3;
+  s.progress = stop_cb;
+  kpcn_trainer_destroy(t);
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  int stopped = 0;
+  CHECK(kpcn_trainer_run(t, &stopped) == KPCN_OK);
+  CHECK(stopped == 1 && kpcn_trainer_iteration(t) == 3);
+  kpcn_trainer_destroy(t);
+  s.progress = NULL;
+  s.resume = 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  CHECK(kpcn_trainer_iteration(t) == 3);
+  CHECK(kpcn_trainer_run(t, &stopped) == KPCN_OK && stopped == 0);
+  float *w3 = weights(t, &n3);
+  CHECK(n3 == n1 && memcmp(w3, w1, n1 * sizeof(float)) == 0);
+  kpcn_trainer_destroy(t);
+  /* the resumed CSV reads as one run: rows 2,4,6,8 */
+  FILE *f = fopen(tf_tmp("c.safetensors.csv"), "r");
+  CHECK(f != NULL);
+  if (f) {
+    char line[512];
+    int rows = 0, last = 0, ordered = 1;
+    while (fgets(line, sizeof line, f))
+      if (line[0] != 'i') {
+        int it = atoi(line);
+        if (it <= last) ordered = 0;
+        last = it, rows++;
+      }
+    fclose(f);
+    CHECK(rows == 4 && ordered && last == 8);
+  }
+  /* outputs: model loads, plot exists */
+  kpcn_model *m = NULL;
+  CHECK(kpcn_model_load(tf_tmp("c.safetensors"), &m) == KPCN_OK);
+  if (m) CHECK(kpcn_model_get_meta(m, "train.iterations") && !strcmp(kpcn_model_get_meta(m, "train.iterations"), "8"));
+  kpcn_model_destroy(m);
+  FILE *p = fopen(tf_tmp("c.safetensors.png"), "rb");
+  CHECK(p != NULL);
+  if (p) fclose(p);
+  /* a checkpoint of another run (other seed) is refused, naming the key */
+  settings(&s, tf_tmp("c.safetensors"));
+  s.seed = 6;
+  s.resume = 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
+  CHECK(strstr(kpcn_last_error(), "train.seed") != NULL);
+  /* a truncated checkpoint is refused */
+  FILE *src = fopen(tf_tmp("c.safetensors.ckpt"), "rb");
+  FILE *dst = fopen(tf_tmp("trunc.ckpt"), "wb");
+  if (src && dst) {
+    char buf[1000];
+    size_t k = fread(buf, 1, sizeof buf, src);
+    fwrite(buf, 1, k, dst);
+  }
+  if (src) fclose(src);
+  if (dst) fclose(dst);
+  settings(&s, tf_tmp("c.safetensors"));
+  s.ckpt_path = tf_tmp("trunc.ckpt");
+  s.resume = 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
+  free(w0), free(w1), free(w2), free(w3);
+}
+
+static void test_validation(void) {
+  kpcn_aov_set *n, *r;
+  CHECK(tf_make_pair(&n, &r, 40, 32, 9, 0) == 0);
+  const char *np = tf_tmp("val_noisy.exr"), *rp = tf_tmp("val_ref.exr");
+  CHECK(kpcn_exr_write_aov(np, n, NULL) == KPCN_OK);
+  CHECK(kpcn_exr_write_aov(rp, r, NULL) == KPCN_OK);
+  kpcn_aov_destroy(n), kpcn_aov_destroy(r);
+  kpcn_train_settings s;
+  settings(&s, tf_tmp("v.safetensors"));
+  const char *vn[1] = {np}, *vr[1] = {rp};
+  s.nval = 1, s.val_noisy = vn, s.val_ref = vr, s.val_every = 4;
+  kpcn_trainer *t;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (!t) {
+    fprintf(stderr, "%s\n", kpcn_last_error());
+    return;
+  }
+  double rel, ssim, psnr;
+  CHECK(kpcn_trainer_validate(t, &rel, &ssim, &psnr) == KPCN_OK);
+  CHECK(rel > 0 && rel < 10 && ssim > -1 && ssim < 1 && psnr > 0);
+  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+  FILE *f = fopen(tf_tmp("v.safetensors.csv"), "r");
+  int vrows = 0;
+  char line[512];
+  while (f && fgets(line, sizeof line, f)) {
+    char *last = strrchr(line, ',');
+    if (line[0] != 'i' && last && last[1] != '\n' && last[1] != 0) vrows++;
+  }
+  if (f) fclose(f);
+  CHECK(vrows == 2); /* iterations 4 and 8 */
+  /* a missing validation file is named */
+  const char *bad[1] = {"/nonexistent/val.exr"};
+  s.val_noisy = bad;
+  CHECK(kpcn_trainer_create(&t, &s) != KPCN_OK);
+  CHECK(strstr(kpcn_last_error(), "/nonexistent/val.exr") != NULL);
+}
+
+static void test_bad_stores(void) {
+  kpcn_train_settings s;
+  kpcn_trainer *t = NULL;
+  /* a store without the reference specular channels */
+  const char *chans[30];
+  int nc = 0;
+  for (int i = 0; i < KPCN_PATCHSTORE_NUM_DEFAULT; i++)
+    if (strncmp(kpcn_patchstore_default_channels[i], "ref.specular", 12) != 0)
+      chans[nc++] = kpcn_patchstore_default_channels[i];
+  const char *p2 = tf_tmp("nospec.kps");
+  CHECK(tf_make_store(p2, 20, 40, 40, 4, 3, 0, chans, nc) == 0);
+  settings(&s, tf_tmp("x.safetensors"));
+  s.store_path = p2;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
+  CHECK(strstr(kpcn_last_error(), "ref.specular.R") != NULL);
+  CHECK(strstr(kpcn_last_error(), "nospec.kps") != NULL);
+  /* garbage file */
+  const char *g = tf_tmp("garbage.kps");
+  FILE *f = fopen(g, "wb");
+  fputs("this is not a patch store", f);
+  fclose(f);
+  s.store_path = g;
+  CHECK(kpcn_trainer_create(&t, &s) != KPCN_OK);
+  CHECK(strstr(kpcn_last_error(), "garbage.kps") != NULL);
+  /* patch larger than the store's */
+  settings(&s, tf_tmp("x.safetensors"));
+  s.patch = 32;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "32") != NULL);
+  /* a model whose input list differs from the feature builder's */
+  kpcn_arch a;
+  kpcn_arch_preset("tiny", &a);
+  const char *names[3] = {"R", "G", "B"};
+  kpcn_arch_set_inputs(&a, 3, names);
+  kpcn_model *m;
+  CHECK(kpcn_model_create(&a, 1, &m) == KPCN_OK);
+  CHECK(kpcn_model_save(m, tf_tmp("rgb.safetensors")) == KPCN_OK);
+  kpcn_model_destroy(m);
+  settings(&s, tf_tmp("x.safetensors"));
+  s.init_model = tf_tmp("rgb.safetensors");
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
+  CHECK(strstr(kpcn_last_error(), "input channels") != NULL);
+  /* resume without a checkpoint */
+  settings(&s, tf_tmp("nockpt.safetensors"));
+  s.resume = 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_IO);
+  CHECK(strstr(kpcn_last_error(), "nockpt.safetensors.ckpt") != NULL);
+}
+
+int main(void) {
+  g_store = tf_tmp("train.kps");
+  if (tf_make_store(g_store, 20, 48, 40, 12, 1, 0, NULL, 0) != 0) {
+    fprintf(stderr, "cannot build the synthetic store: %s\n", kpcn_last_error());
+    return 1;
+  }
+  test_determinism_and_resume();
+  test_validation();
+  test_bad_stores();
+  return kt_summary("train_pipeline");
+}

@@ -1,0 +1,62 @@
+/* kpcn-dataset internals: manifest jobs, small file helpers, the three subcommands. */
+#ifndef KPCN_DATASET_TOOL_H
+#define KPCN_DATASET_TOOL_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#define DS_PATH 1024
+
+typedef enum ds_kind { DS_PREVIEW = 0, DS_NOISY, DS_REFERENCE } ds_kind;
+
+/* One independent render job (one line of manifest.jsonl). Paths are relative to the
+ * dataset directory. */
+typedef struct ds_job {
+  char id[192];         /* "<scene>/v003/16spp", "<scene>/v003/ref", "<scene>/v003/preview" */
+  ds_kind kind;
+  char scene[128];      /* base scene name: the split unit */
+  int variant;
+  char split[16];
+  char scene_file[DS_PATH];
+  int spp;
+  uint64_t seed;
+  int width, height;
+  char out[DS_PATH];
+  char preview[DS_PATH]; /* preview render of this variant ("" = no degenerate check) */
+} ds_job;
+
+typedef struct ds_manifest {
+  ds_job *jobs;
+  int n, cap;
+} ds_manifest;
+
+/* manifest.c */
+int ds_manifest_push(ds_manifest *m, const ds_job *j);
+void ds_manifest_free(ds_manifest *m);
+/* Writes dir/manifest.jsonl atomically. Returns 0 on success (error printed). */
+int ds_manifest_write(const char *dir, const ds_manifest *m);
+/* Reads dir/manifest.jsonl; errors name the line. */
+int ds_manifest_read(const char *dir, ds_manifest *m);
+const char *ds_kind_name(ds_kind k);
+
+/* util.c */
+extern const char *ds_prog;
+void ds_err(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+int ds_mkdir_p(const char *path);
+int ds_exists(const char *path);
+void ds_join(char *out, size_t n, const char *a, const char *b);
+char *ds_slurp(const char *path, size_t *len);
+int ds_write_atomic(const char *path, const char *data, size_t len);
+int ds_parse_int(const char *s, long lo, long hi, int *out);
+int ds_parse_double(const char *s, double *out);
+uint64_t ds_hash(const char *s, uint64_t seed);
+double ds_now(void);
+int ds_isatty(void);
+
+/* subcommands */
+int ds_cmd_plan(int argc, char **argv);
+int ds_cmd_run(int argc, char **argv);
+int ds_cmd_patches(int argc, char **argv);
+
+#endif

@@ -1,0 +1,253 @@
+/* `kpcn-dataset patches`: finished renders -> patch store (.kps) with flat-patch culling.
+ * Only the chosen split (default train) is used; rejected variants are skipped; missing
+ * renders are an error unless --allow-partial, so a half-finished run never silently
+ * yields a smaller training set. */
+#define _GNU_SOURCE
+#include "ds.h"
+#include "kpcn/augment.h"
+#include "kpcn/dataset.h"
+#include "kpcn/exr.h"
+
+#include <cjson/cJSON.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+static int rejected(const char *dir, const ds_job *j) {
+  if (!j->preview[0]) return 0;
+  char rel[DS_PATH], vp[DS_PATH];
+  snprintf(rel, sizeof rel, "%s", j->preview);
+  char *dot = strrchr(rel, '.');
+  if (dot) *dot = 0;
+  char tmp[DS_PATH + 16];
+  snprintf(tmp, sizeof tmp, "%s.verdict.json", rel);
+  ds_join(vp, sizeof vp, dir, tmp);
+  char *t = ds_slurp(vp, NULL);
+  if (!t) return 0;
+  cJSON *o = cJSON_Parse(t);
+  free(t);
+  int rej = cJSON_IsFalse(cJSON_GetObjectItemCaseSensitive(o, "ok"));
+  cJSON_Delete(o);
+  return rej;
+}
+
+static int spp_selected(const int *spps, int n, int spp) {
+  if (n == 0) return 1;
+  for (int i = 0; i < n; i++)
+    if (spps[i] == spp) return 1;
+  return 0;
+}
+
+static void usage(void) {
+  fprintf(stderr,
+          "usage: kpcn-dataset patches DATASET_DIR -o OUT.kps [--split train] [--spp 16,32|all]\n"
+          "         [--size 65] [--per-image 100 | --stride S] [--cull 0.9] [--cull-tol 0.05]\n"
+          "         [--cull-abs 0.01] [--importance] [--seed 1] [--dtype f32|f16] [--allow-partial]\n");
+}
+
+int ds_cmd_patches(int argc, char **argv) {
+  const char *dir = NULL, *out = NULL, *split = "train", *spp_list = "all", *dtype = "f32";
+  int allow_partial = 0;
+  kpcn_patch_settings ps;
+  kpcn_patch_settings_defaults(&ps);
+  ps.count = 100;
+  for (int i = 1; i < argc; i++) {
+    const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
+    if (!strcmp(a, "--importance")) {
+      ps.importance = 1;
+      continue;
+    }
+    if (!strcmp(a, "--allow-partial")) {
+      allow_partial = 1;
+      continue;
+    }
+    if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
+      usage();
+      return 0;
+    }
+    if (a[0] != '-') {
+      if (dir) {
+        ds_err("patches: more than one dataset directory ('%s', '%s')", dir, a);
+        return 2;
+      }
+      dir = a;
+      continue;
+    }
+    if (!v) {
+      ds_err("patches: %s needs a value", a);
+      return 2;
+    }
+    int ok = 1, iv;
+    if (!strcmp(a, "-o") || !strcmp(a, "--output")) out = v;
+    else if (!strcmp(a, "--split")) split = v;
+    else if (!strcmp(a, "--spp")) spp_list = v;
+    else if (!strcmp(a, "--dtype")) {
+      dtype = v;
+      ok = !strcmp(v, "f32") || !strcmp(v, "f16");
+    } else if (!strcmp(a, "--size")) ok = ds_parse_int(v, 2, 4096, &ps.size);
+    else if (!strcmp(a, "--per-image")) ok = ds_parse_int(v, 1, 1 << 20, &ps.count);
+    else if (!strcmp(a, "--stride")) {
+      ok = ds_parse_int(v, 1, 4096, &ps.stride);
+      ps.count = 0;
+    } else if (!strcmp(a, "--cull")) ok = ds_parse_double(v, &ps.cull) && ps.cull >= 0;
+    else if (!strcmp(a, "--cull-tol")) ok = ds_parse_double(v, &ps.cull_tol) && ps.cull_tol >= 0;
+    else if (!strcmp(a, "--cull-abs")) ok = ds_parse_double(v, &ps.cull_abs) && ps.cull_abs >= 0;
+    else if (!strcmp(a, "--seed")) {
+      ok = ds_parse_int(v, 0, 2147483647, &iv);
+      ps.seed = (uint64_t)iv;
+    } else {
+      ds_err("patches: unknown option '%s'", a);
+      usage();
+      return 2;
+    }
+    if (!ok) {
+      ds_err("patches: bad value '%s' for %s", v, a);
+      return 2;
+    }
+    i++;
+  }
+  if (!dir || !out) {
+    usage();
+    return 2;
+  }
+  int spps[32], nspp = 0;
+  if (strcmp(spp_list, "all") != 0) {
+    char b[256];
+    snprintf(b, sizeof b, "%s", spp_list);
+    char *save = NULL;
+    for (char *t = strtok_r(b, ",", &save); t; t = strtok_r(NULL, ",", &save))
+      if (nspp == 32 || !ds_parse_int(t, 1, 1 << 24, &spps[nspp++])) {
+        ds_err("patches: --spp '%s': expected a comma list or 'all'", spp_list);
+        return 2;
+      }
+  }
+  ds_manifest m;
+  if (ds_manifest_read(dir, &m) != 0) return 1;
+  /* Pair every selected noisy job with its variant's reference; check completeness first. */
+  int *pairs = malloc(sizeof(int) * 2 * (size_t)(m.n + 1)), np = 0, missing = 0, nrej = 0;
+  for (int i = 0; i < m.n; i++) {
+    const ds_job *j = &m.jobs[i];
+    if (j->kind != DS_NOISY || strcmp(j->split, split) != 0 || !spp_selected(spps, nspp, j->spp))
+      continue;
+    int r = -1;
+    for (int k = 0; k < m.n && r < 0; k++)
+      if (m.jobs[k].kind == DS_REFERENCE && !strcmp(m.jobs[k].scene, j->scene) &&
+          m.jobs[k].variant == j->variant)
+        r = k;
+    if (rejected(dir, j)) {
+      nrej++;
+      continue;
+    }
+    char a[DS_PATH], b[DS_PATH];
+    ds_join(a, sizeof a, dir, j->out);
+    if (r >= 0) ds_join(b, sizeof b, dir, m.jobs[r].out);
+    if (r < 0 || !ds_exists(a) || !ds_exists(b)) {
+      if (!allow_partial && missing < 5)
+        ds_err("patches: %s not rendered yet (%s)", j->id, r < 0 ? "no reference job" : !ds_exists(a) ? a : b);
+      missing++;
+      continue;
+    }
+    pairs[2 * np] = i;
+    pairs[2 * np + 1] = r;
+    np++;
+  }
+  if ((missing && !allow_partial) || np == 0) {
+    if (np == 0) ds_err("patches: no finished %s image pairs in '%s'", split, dir);
+    if (missing && !allow_partial)
+      ds_err("patches: %d image pairs missing: finish `kpcn-dataset run` or pass --allow-partial", missing);
+    free(pairs);
+    ds_manifest_free(&m);
+    return 1;
+  }
+  kpcn_patchstore_settings ss;
+  kpcn_patchstore_settings_defaults(&ss);
+  ss.patch_size = ps.size;
+  ss.dtype = !strcmp(dtype, "f16") ? KPCN_DTYPE_F16 : KPCN_DTYPE_F32;
+  char settings[512];
+  snprintf(settings, sizeof settings,
+           "{\"split\":\"%s\",\"spp\":\"%s\",\"per_image\":%d,\"stride\":%d,\"cull\":%g,"
+           "\"cull_tol\":%g,\"cull_abs\":%g,\"importance\":%d,\"seed\":%llu}",
+           split, spp_list, ps.count, ps.stride, ps.cull, ps.cull_tol, ps.cull_abs, ps.importance,
+           (unsigned long long)ps.seed);
+  ss.settings_json = settings;
+  kpcn_patchstore_writer *w = NULL;
+  if (kpcn_patchstore_create(&w, out, &ss) != KPCN_OK) {
+    ds_err("patches: %s", kpcn_last_error());
+    free(pairs);
+    ds_manifest_free(&m);
+    return 1;
+  }
+  int rc = 0;
+  kpcn_patch_stats tot = {0, 0, 0};
+  double t0 = ds_now();
+  for (int p = 0; p < np && rc == 0; p++) {
+    const ds_job *j = &m.jobs[pairs[2 * p]], *r = &m.jobs[pairs[2 * p + 1]];
+    char a[DS_PATH], b[DS_PATH];
+    ds_join(a, sizeof a, dir, j->out);
+    ds_join(b, sizeof b, dir, r->out);
+    kpcn_aov_set *noisy = NULL, *ref = NULL;
+    kpcn_patch_origin *o = NULL;
+    int n = 0;
+    kpcn_patch_stats st;
+    kpcn_patch_settings pi = ps;
+    pi.seed = ds_hash(j->id, ps.seed);
+    kpcn_patch_source src;
+    memset(&src, 0, sizeof src);
+    uint32_t sid = 0;
+    if (kpcn_exr_read_aov(a, &noisy) != KPCN_OK || kpcn_exr_read_aov(b, &ref) != KPCN_OK ||
+        kpcn_patches_select(&o, &n, &st, noisy, ref, &pi) != KPCN_OK ||
+        kpcn_patch_source_depth_stats(&src, noisy) != KPCN_OK) {
+      ds_err("patches: %s: %s", j->id, kpcn_last_error());
+      rc = 1;
+    }
+    if (rc == 0) {
+      snprintf(src.scene, sizeof src.scene, "%s", j->scene);
+      snprintf(src.split, sizeof src.split, "%s", j->split);
+      src.variant = j->variant;
+      src.spp = j->spp;
+      src.ref_spp = r->spp;
+      snprintf(src.noisy, sizeof src.noisy, "%.255s", j->out);
+      snprintf(src.reference, sizeof src.reference, "%.255s", r->out);
+      kpcn_patchstore_add_source(w, &src, &sid);
+      for (int k = 0; k < n && rc == 0; k++) {
+        kpcn_patch_record rec = {sid, o[k].x, o[k].y, 0, o[k].flat_frac, o[k].weight, 0};
+        if (kpcn_patchstore_append_aov(w, &rec, noisy, ref) != KPCN_OK) {
+          ds_err("patches: %s: %s", j->id, kpcn_last_error());
+          rc = 1;
+        }
+      }
+      kpcn_patchstore_add_stats(w, st.candidates, st.kept, st.culled);
+      tot.candidates += st.candidates;
+      tot.kept += st.kept;
+      tot.culled += st.culled;
+    }
+    free(o);
+    kpcn_aov_destroy(noisy);
+    kpcn_aov_destroy(ref);
+    if (ds_isatty()) {
+      fprintf(stderr, "\r[%d/%d] %lld patches kept, %lld culled, %.0fs   ", p + 1, np,
+              (long long)tot.kept, (long long)tot.culled, ds_now() - t0);
+      fflush(stderr);
+    }
+  }
+  if (ds_isatty()) fputc('\n', stderr);
+  if (rc == 0 && kpcn_patchstore_finish(w) != KPCN_OK) {
+    ds_err("patches: %s", kpcn_last_error());
+    rc = 1;
+  } else if (rc != 0) {
+    kpcn_patchstore_abort(w);
+  }
+  if (rc == 0) {
+    struct stat sb;
+    stat(out, &sb);
+    printf("%s: %d image pairs (%d rejected variants' images skipped%s), %lld candidates, "
+           "%lld kept, %lld culled (%.1f%%), %.1f MB, %.1f s\n",
+           out, np, nrej, missing ? ", some missing" : "", (long long)tot.candidates,
+           (long long)tot.kept, (long long)tot.culled,
+           tot.candidates ? 100.0 * tot.culled / tot.candidates : 0.0, sb.st_size / 1e6,
+           ds_now() - t0);
+  }
+  free(pairs);
+  ds_manifest_free(&m);
+  return rc;
+}

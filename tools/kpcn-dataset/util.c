@@ -1,0 +1,124 @@
+/* Small helpers for kpcn-dataset: messages, directories, atomic files, parsing. */
+#define _GNU_SOURCE
+#include "ds.h"
+
+#include <errno.h>
+#include <stdarg.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+const char *ds_prog = "kpcn-dataset";
+
+void ds_err(const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  fprintf(stderr, "%s: ", ds_prog);
+  vfprintf(stderr, fmt, ap);
+  fputc('\n', stderr);
+  va_end(ap);
+}
+
+int ds_mkdir_p(const char *path) {
+  char tmp[DS_PATH];
+  snprintf(tmp, sizeof tmp, "%s", path);
+  for (char *p = tmp + 1; *p; p++) {
+    if (*p != '/') continue;
+    *p = 0;
+    if (mkdir(tmp, 0777) != 0 && errno != EEXIST) return -1;
+    *p = '/';
+  }
+  if (mkdir(tmp, 0777) != 0 && errno != EEXIST) return -1;
+  return 0;
+}
+
+int ds_exists(const char *path) {
+  struct stat sb;
+  return stat(path, &sb) == 0 && S_ISREG(sb.st_mode) && sb.st_size > 0;
+}
+
+void ds_join(char *out, size_t n, const char *a, const char *b) {
+  if (b[0] == '/' || !a[0]) snprintf(out, n, "%s", b);
+  else snprintf(out, n, "%s/%s", a, b);
+}
+
+char *ds_slurp(const char *path, size_t *len) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return NULL;
+  size_t cap = 1 << 16, n = 0;
+  char *b = malloc(cap);
+  for (;;) {
+    if (n + 4096 > cap) {
+      cap *= 2;
+      char *nb = realloc(b, cap);
+      if (!nb) {
+        free(b);
+        fclose(f);
+        return NULL;
+      }
+      b = nb;
+    }
+    size_t got = fread(b + n, 1, cap - n - 1, f);
+    n += got;
+    if (got == 0) break;
+  }
+  fclose(f);
+  b[n] = 0;
+  if (len) *len = n;
+  return b;
+}
+
+int ds_write_atomic(const char *path, const char *data, size_t len) {
+  char tmp[DS_PATH + 32];
+  snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid());
+  FILE *f = fopen(tmp, "wb");
+  if (!f) {
+    ds_err("cannot write '%s': %s", tmp, strerror(errno));
+    return -1;
+  }
+  int ok = fwrite(data, 1, len, f) == len;
+  ok &= fclose(f) == 0;
+  if (!ok || rename(tmp, path) != 0) {
+    ds_err("cannot write '%s': %s", path, strerror(errno));
+    unlink(tmp);
+    return -1;
+  }
+  return 0;
+}
+
+int ds_parse_int(const char *s, long lo, long hi, int *out) {
+  char *end;
+  if (!s || !*s) return 0;
+  errno = 0;
+  long v = strtol(s, &end, 10);
+  if (*end || errno || v < lo || v > hi) return 0;
+  *out = (int)v;
+  return 1;
+}
+
+int ds_parse_double(const char *s, double *out) {
+  char *end;
+  if (!s || !*s) return 0;
+  double v = strtod(s, &end);
+  if (*end) return 0;
+  *out = v;
+  return 1;
+}
+
+uint64_t ds_hash(const char *s, uint64_t seed) {
+  uint64_t h = 1469598103934665603ull ^ (seed * 0x9e3779b97f4a7c15ull);
+  for (; *s; s++) h = (h ^ (unsigned char)*s) * 1099511628211ull;
+  h ^= h >> 29;
+  h *= 0xbf58476d1ce4e5b9ull;
+  return h ^ (h >> 32);
+}
+
+double ds_now(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+int ds_isatty(void) { return isatty(2); }

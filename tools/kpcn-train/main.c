@@ -1,0 +1,330 @@
+/* kpcn-train — trains the two-branch KPCN on a patch store (seed ch. 4.4-6).
+ * See docs/training.md. Exit status: 0 done (or stopped cleanly and checkpointed), 1 error,
+ * 2 bad usage. */
+#include "kpcn/dataset.h"
+#include "kpcn/train.h"
+
+#include <errno.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+static volatile sig_atomic_t g_stop = 0;
+static void on_signal(int sig) {
+  (void)sig;
+  g_stop = 1;
+}
+
+static void usage(FILE *f) {
+  fputs(
+      "usage: kpcn-train --store PATCHES.kps -o MODEL.safetensors [options]\n"
+      "  --preset cpu|paper|tiny   architecture preset (default cpu)\n"
+      "  --layers N --channels C --conv K --kernel K --dilations D1,D2,...\n"
+      "                            architecture overrides (hidden layers, width, conv size\n"
+      "                            of every layer, prediction window, per-layer dilation)\n"
+      "  --init MODEL              start from an existing model (fine-tuning)\n"
+      "  --loss l1|l2|relmse|rell1|ssim   stage-1 loss (default l1)\n"
+      "  --loss2 NAME              stage-2 loss (default: same as --loss)\n"
+      "  --ssim-window N           SSIM window (odd, default 11), --loss-margin M\n"
+      "  --lr X (1e-3) --lr-decay X (0.96) --decay-every N (100000) --staircase --clip X\n"
+      "  --batch N (16) --patch P (64) --iters N (1000) --stage1-iters N (0.6*iters)\n"
+      "  --threads N (0 = all) --seed N (1)\n"
+      "  --val NOISY.exr,REF.exr   validation pair (repeatable); --val-from-store uses the\n"
+      "                            store's sources of split 'val'\n"
+      "  --val-every N --ckpt-every N --log-every N (10)\n"
+      "  --ckpt PATH --csv PATH --plot PATH   (default MODEL.ckpt/.csv/.png; '' = none)\n"
+      "  --time-limit MINUTES      stop cleanly and checkpoint\n"
+      "  --resume                  continue bit-exactly from the checkpoint\n"
+      "  --no-colorswap --no-mirror --no-rotate --no-shift   disable augmentations\n"
+      "  --quiet                   no log lines\n",
+      f);
+}
+
+static int g_quiet = 0;
+static void log_cb(void *u, kpcn_log_level l, const char *msg) {
+  (void)u;
+  if (!g_quiet || l == KPCN_LOG_WARNING) fprintf(stderr, "kpcn-train: %s\n", msg);
+}
+
+static void fmt_time(char *b, size_t n, double s) {
+  if (!(s >= 0) || s > 1e8) s = 0;
+  long t = (long)(s + 0.5);
+  snprintf(b, n, "%ld:%02ld:%02ld", t / 3600, (t / 60) % 60, t % 60);
+}
+
+static int progress_cb(void *u, const kpcn_train_progress *p) {
+  int tty = *(int *)u;
+  if (p->has_val && !g_quiet)
+    fprintf(stderr, "%sval @%lld: relMSE %.4g  SSIM %.4f  PSNR %.2f dB\n", tty ? "\r\033[K" : "",
+            (long long)p->iter, p->val_relmse, p->val_ssim, p->val_psnr);
+  if (tty) {
+    char el[32], eta[32];
+    fmt_time(el, sizeof el, p->elapsed_s);
+    fmt_time(eta, sizeof eta, p->eta_s);
+    fprintf(stderr, "\r\033[K%lld/%lld (%.1f%%) stage %d  loss %.4g  lr %.3g  %.2f it/s  %s, %s left",
+            (long long)p->iter, (long long)p->total, 100.0 * p->iter / (p->total ? p->total : 1),
+            p->stage, p->loss, p->lr, p->its_per_s, el, eta);
+    fflush(stderr);
+  }
+  return g_stop;
+}
+
+static int parse_ll(const char *s, long long lo, long long hi, long long *out, const char *opt) {
+  char *end;
+  errno = 0;
+  long long v = strtoll(s, &end, 10);
+  if (errno || end == s || *end || v < lo || v > hi) {
+    fprintf(stderr, "kpcn-train: %s: '%s' is not an integer in [%lld, %lld]\n", opt, s, lo, hi);
+    return 0;
+  }
+  *out = v;
+  return 1;
+}
+
+static int parse_d(const char *s, double lo, double hi, double *out, const char *opt) {
+  char *end;
+  double v = strtod(s, &end);
+  if (end == s || *end || !(v >= lo && v <= hi)) {
+    fprintf(stderr, "kpcn-train: %s: '%s' is not a number in [%g, %g]\n", opt, s, lo, hi);
+    return 0;
+  }
+  *out = v;
+  return 1;
+}
+
+#define MAX_VAL 64
+static char *g_valn[MAX_VAL], *g_valr[MAX_VAL];
+static int g_nval = 0;
+
+static int add_val(const char *noisy, const char *ref, size_t nlen) {
+  if (g_nval >= MAX_VAL) {
+    fprintf(stderr, "kpcn-train: at most %d validation pairs\n", MAX_VAL);
+    return 0;
+  }
+  g_valn[g_nval] = strndup(noisy, nlen);
+  g_valr[g_nval] = strdup(ref);
+  g_nval++;
+  return 1;
+}
+
+/* Validation pairs from the store's "val" sources (paths relative to the store's folder). */
+static int val_from_store(const char *store) {
+  kpcn_patchstore *ps;
+  if (kpcn_patchstore_open(&ps, store, NULL, 0) != KPCN_OK) {
+    fprintf(stderr, "kpcn-train: %s\n", kpcn_last_error());
+    return 0;
+  }
+  char dir[4096];
+  snprintf(dir, sizeof dir, "%s", store);
+  char *sl = strrchr(dir, '/');
+  if (sl) sl[1] = 0; else dir[0] = 0;
+  int ok = 1, found = 0;
+  for (int i = 0; i < kpcn_patchstore_nsources(ps) && ok; i++) {
+    const kpcn_patch_source *s = kpcn_patchstore_source(ps, i);
+    if (strcmp(s->split, "val") != 0) continue;
+    char n[8192], r[8192];
+    snprintf(n, sizeof n, "%s%s", s->noisy[0] == '/' ? "" : dir, s->noisy);
+    snprintf(r, sizeof r, "%s%s", s->reference[0] == '/' ? "" : dir, s->reference);
+    struct stat sb;
+    if (stat(n, &sb) != 0 || stat(r, &sb) != 0) {
+      fprintf(stderr, "kpcn-train: validation source '%s' / '%s' of the store not found\n", n, r);
+      ok = 0;
+      break;
+    }
+    ok = add_val(n, r, strlen(n));
+    found++;
+  }
+  kpcn_patchstore_close(ps);
+  if (ok && !found) fprintf(stderr, "kpcn-train: warning: the store has no 'val' sources\n");
+  return ok;
+}
+
+int main(int argc, char **argv) {
+  kpcn_train_settings s;
+  kpcn_train_settings_defaults(&s);
+  const char *preset = "cpu", *dil = NULL, *loss2 = NULL;
+  long long layers = -1, channels = -1, conv = -1, kernel = -1, ssim_win = -1, v;
+  int from_store = 0;
+  double d;
+  for (int i = 1; i < argc; i++) {
+    const char *a = argv[i];
+    const char *arg = i + 1 < argc ? argv[i + 1] : NULL;
+#define NEEDARG                                                                                    \
+  do {                                                                                             \
+    if (!arg) {                                                                                    \
+      fprintf(stderr, "kpcn-train: %s needs a value\n", a);                                        \
+      return 2;                                                                                    \
+    }                                                                                              \
+    i++;                                                                                           \
+  } while (0)
+#define INT(name, lo, hi, dst)                                                                     \
+  else if (!strcmp(a, name)) {                                                                     \
+    NEEDARG;                                                                                       \
+    if (!parse_ll(arg, lo, hi, &v, a)) return 2;                                                   \
+    dst = v;                                                                                       \
+  }
+#define DBL(name, lo, hi, dst)                                                                     \
+  else if (!strcmp(a, name)) {                                                                     \
+    NEEDARG;                                                                                       \
+    if (!parse_d(arg, lo, hi, &d, a)) return 2;                                                    \
+    dst = d;                                                                                       \
+  }
+#define STR(name, dst)                                                                             \
+  else if (!strcmp(a, name)) {                                                                     \
+    NEEDARG;                                                                                       \
+    dst = arg;                                                                                     \
+  }
+    if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
+      usage(stdout);
+      return 0;
+    }
+    STR("--store", s.store_path)
+    STR("-o", s.out_path)
+    STR("--preset", preset)
+    STR("--init", s.init_model)
+    STR("--dilations", dil)
+    STR("--ckpt", s.ckpt_path)
+    STR("--csv", s.csv_path)
+    STR("--plot", s.plot_path)
+    STR("--loss2", loss2)
+    INT("--layers", 1, KPCN_NN_MAX_LAYERS - 1, layers)
+    INT("--channels", 1, 1024, channels)
+    INT("--conv", 1, 11, conv)
+    INT("--kernel", 3, KPCN_NN_MAX_KERNEL, kernel)
+    INT("--ssim-window", 1, 63, ssim_win)
+    INT("--loss-margin", 0, 512, s.loss_margin)
+    INT("--batch", 1, 256, s.batch)
+    INT("--patch", 8, 1024, s.patch)
+    INT("--iters", 0, (long long)1e12, s.iters)
+    INT("--stage1-iters", 0, (long long)1e12, s.stage1_iters)
+    INT("--threads", 0, 1024, s.nthreads)
+    INT("--seed", 0, (long long)9e18, s.seed)
+    INT("--val-every", 0, (long long)1e12, s.val_every)
+    INT("--ckpt-every", 0, (long long)1e12, s.ckpt_every)
+    INT("--log-every", 1, (long long)1e12, s.log_every)
+    INT("--decay-every", 0, (long long)1e12, s.adam.decay_every)
+    DBL("--lr", 1e-12, 10, s.adam.lr)
+    DBL("--lr-decay", 1e-6, 1, s.adam.lr_decay)
+    DBL("--clip", 0, 1e12, s.adam.clip_norm)
+    DBL("--time-limit", 0, 1e7, s.time_limit_s)
+    else if (!strcmp(a, "--loss")) {
+      NEEDARG;
+      if (kpcn_loss_parse(arg, &s.loss1) != KPCN_OK) {
+        fprintf(stderr, "kpcn-train: --loss: %s\n", kpcn_last_error());
+        return 2;
+      }
+    }
+    else if (!strcmp(a, "--val")) {
+      NEEDARG;
+      const char *comma = strchr(arg, ',');
+      if (!comma || comma == arg || !comma[1]) {
+        fprintf(stderr, "kpcn-train: --val expects NOISY.exr,REF.exr, got '%s'\n", arg);
+        return 2;
+      }
+      if (!add_val(arg, comma + 1, (size_t)(comma - arg))) return 2;
+    }
+    else if (!strcmp(a, "--val-from-store")) from_store = 1;
+    else if (!strcmp(a, "--staircase")) s.adam.staircase = 1;
+    else if (!strcmp(a, "--resume")) s.resume = 1;
+    else if (!strcmp(a, "--no-colorswap")) s.augment.colorswap = 0;
+    else if (!strcmp(a, "--no-mirror")) s.augment.mirror = s.augment.mirror_v = 0;
+    else if (!strcmp(a, "--no-rotate")) s.augment.rotate = 0;
+    else if (!strcmp(a, "--no-shift")) s.crop_jitter = 0;
+    else if (!strcmp(a, "--quiet")) g_quiet = 1;
+    else {
+      fprintf(stderr, "kpcn-train: unknown option '%s' (see --help)\n", a);
+      return 2;
+    }
+  }
+  if (!s.store_path || !s.out_path) {
+    fprintf(stderr, "kpcn-train: --store and -o are required\n");
+    usage(stderr);
+    return 2;
+  }
+  s.time_limit_s *= 60.0;
+  s.loss2 = s.loss1;
+  if (loss2 && kpcn_loss_parse(loss2, &s.loss2) != KPCN_OK) {
+    fprintf(stderr, "kpcn-train: --loss2: %s\n", kpcn_last_error());
+    return 2;
+  }
+  if (ssim_win > 0) s.loss.ssim_window = (int)ssim_win;
+  if (kpcn_arch_preset(preset, &s.arch) != KPCN_OK) {
+    fprintf(stderr, "kpcn-train: --preset: %s\n", kpcn_last_error());
+    return 2;
+  }
+  if (layers > 0) {
+    /* hidden layers keep the preset's first conv size (dilation 1 beyond the preset's
+     * depth); the output layer keeps its own conv size */
+    int hid = s.arch.conv_size[0], out = s.arch.conv_size[s.arch.n_hidden], old = s.arch.n_hidden;
+    for (int l = 0; l < layers; l++) {
+      s.arch.conv_size[l] = hid;
+      if (l >= old) s.arch.dilation[l] = 1;
+    }
+    s.arch.n_hidden = (int)layers;
+    s.arch.conv_size[layers] = out;
+    s.arch.dilation[layers] = 1;
+  }
+  if (channels > 0) s.arch.channels = (int)channels;
+  if (conv > 0)
+    for (int l = 0; l <= s.arch.n_hidden; l++) s.arch.conv_size[l] = (int)conv;
+  if (kernel > 0) s.arch.kernel_size = (int)kernel;
+  if (dil) {
+    const char *p = dil;
+    for (int l = 0; l <= s.arch.n_hidden; l++) {
+      char *end;
+      long dv = strtol(p, &end, 10);
+      if (end == p || dv < 1 || dv > 64) {
+        fprintf(stderr, "kpcn-train: --dilations '%s': need %d positive integers\n", dil,
+                s.arch.n_hidden + 1);
+        return 2;
+      }
+      s.arch.dilation[l] = (int)dv;
+      p = end;
+      if (*p == ',') p++;
+      else if (*p == 0 && l < s.arch.n_hidden) {
+        for (int r = l + 1; r <= s.arch.n_hidden; r++) s.arch.dilation[r] = 1; /* rest: 1 */
+        break;
+      }
+    }
+  }
+  if (from_store && !val_from_store(s.store_path)) return 1;
+  s.nval = g_nval;
+  s.val_noisy = (const char *const *)g_valn;
+  s.val_ref = (const char *const *)g_valr;
+  s.log = log_cb;
+  int tty = isatty(2);
+  s.progress = progress_cb;
+  s.progress_user = &tty;
+  signal(SIGINT, on_signal);
+  signal(SIGTERM, on_signal);
+
+  kpcn_trainer *t = NULL;
+  if (kpcn_trainer_create(&t, &s) != KPCN_OK) {
+    fprintf(stderr, "kpcn-train: %s\n", kpcn_last_error());
+    return 1;
+  }
+  if (!g_quiet)
+    fprintf(stderr, "kpcn-train: %s preset, %lld iterations (stage 1: %lld), batch %d of %dx%d, "
+            "%.1f GFLOP/iteration%s\n", preset, (long long)s.iters,
+            (long long)(s.stage1_iters < 0 ? (long long)(0.6 * s.iters + 0.5) : s.stage1_iters),
+            s.batch, s.patch, s.patch, kpcn_trainer_flops_per_iter(t) * 1e-9,
+            s.resume ? ", resuming" : "");
+  int stopped = 0;
+  kpcn_status st = kpcn_trainer_run(t, &stopped);
+  if (tty) fputs("\n", stderr);
+  if (st != KPCN_OK) {
+    fprintf(stderr, "kpcn-train: %s\n", kpcn_last_error());
+    kpcn_trainer_destroy(t);
+    return 1;
+  }
+  if (!g_quiet)
+    fprintf(stderr, "kpcn-train: %s at iteration %lld; model '%s'%s\n",
+            stopped ? "stopped" : "finished", (long long)kpcn_trainer_iteration(t), s.out_path,
+            stopped ? " (resume with --resume)" : "");
+  kpcn_trainer_destroy(t);
+  for (int i = 0; i < g_nval; i++) free(g_valn[i]), free(g_valr[i]);
+  return 0;
+}

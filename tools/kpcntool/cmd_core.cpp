@@ -1,0 +1,365 @@
+// Core kpcntool commands: -o, --threads, --json, --info, --ch, --ociodisplay, --mosaic,
+// plus the shared read_image / write_image helpers (see kpcntool.h, docs/kpcntool.md).
+#include "kpcntool.h"
+
+#include "kpcn/image.h"
+#include "kpcn/oiio_convert.h"
+
+#include <OpenImageIO/color.h>
+#include <OpenImageIO/imagebufalgo.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+#include <sstream>
+#include <sys/stat.h>
+#include <unistd.h>
+
+using OIIO::ImageBuf;
+using OIIO::ImageSpec;
+using OIIO::TypeDesc;
+namespace IBA = OIIO::ImageBufAlgo;
+
+namespace kpcntool {
+
+static std::string lower_ext(const std::string &path) {
+  size_t dot = path.find_last_of('.');
+  size_t slash = path.find_last_of('/');
+  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
+  std::string e = path.substr(dot + 1);
+  for (char &c : e) c = (char)std::tolower((unsigned char)c);
+  return e;
+}
+
+bool read_image(ImageBuf &dst, const std::string &path, std::string &err) {
+  struct stat st;
+  if (stat(path.c_str(), &st) != 0) {
+    err = "cannot open '" + path + "': no such file";
+    return false;
+  }
+  ImageBuf b(path);
+  if (!b.init_spec(path, 0, 0)) {
+    err = "cannot read '" + path + "': " + b.geterror();
+    return false;
+  }
+  const ImageSpec &sp = b.spec();
+  if (sp.width <= 0 || sp.height <= 0 || sp.depth != 1 || sp.nchannels <= 0 ||
+      sp.width > KPCN_MAX_DIM || sp.height > KPCN_MAX_DIM ||
+      (int64_t)sp.width * sp.height > KPCN_MAX_PIXELS) {
+    err = "'" + path + "' has an unsupported or absurd size " + std::to_string(sp.width) + "x" +
+          std::to_string(sp.height) + "x" + std::to_string(sp.depth) + " with " +
+          std::to_string(sp.nchannels) + " channels";
+    return false;
+  }
+  if (!b.read(0, 0, true, TypeDesc::FLOAT)) {
+    err = "cannot read '" + path + "' (truncated or corrupt?): " + b.geterror();
+    return false;
+  }
+  dst = std::move(b);
+  return true;
+}
+
+bool write_image(const ImageBuf &img, const std::string &path, std::string &err) {
+  std::string ext = lower_ext(path);
+  if (ext.empty()) {
+    err = "'" + path + "' has no file extension to choose the format from";
+    return false;
+  }
+  static const char *eight_bit[] = {"png", "jpg", "jpeg", "bmp", "tga", "ppm", "pgm", "gif"};
+  TypeDesc fmt = TypeDesc::FLOAT;
+  for (const char *e : eight_bit)
+    if (ext == e) fmt = TypeDesc::UINT8;
+  // The temp name keeps the extension so OIIO picks the same writer.
+  std::string tmp = path + ".tmp" + std::to_string((long)getpid()) + "." + ext;
+  if (!img.write(tmp, fmt)) {
+    err = "cannot write '" + path + "': " + img.geterror();
+    std::remove(tmp.c_str());
+    return false;
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    err = "cannot rename '" + tmp + "' to '" + path + "'";
+    std::remove(tmp.c_str());
+    return false;
+  }
+  return true;
+}
+
+namespace {
+
+bool cmd_output(Context &ctx, const Modifiers &, const std::vector<std::string> &a,
+                std::string &) {
+  ctx.outputs.emplace_back(a[0], ctx.top()); // a deep copy: later commands may change the top
+  return true;
+}
+
+bool cmd_threads(Context &ctx, const Modifiers &, const std::vector<std::string> &a,
+                 std::string &err) {
+  char *end = nullptr;
+  long n = std::strtol(a[0].c_str(), &end, 10);
+  if (end == a[0].c_str() || *end || n < 0 || n > 4096) {
+    err = "thread count must be an integer in [0, 4096] (got '" + a[0] + "')";
+    return false;
+  }
+  ctx.nthreads = (int)n;
+  OIIO::attribute("threads", (int)n);
+  return true;
+}
+
+bool cmd_json(Context &ctx, const Modifiers &, const std::vector<std::string> &, std::string &) {
+  ctx.json = true;
+  return true;
+}
+
+std::string quote(const std::string &s) {
+  std::string o = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') o += '\\';
+    if ((unsigned char)c >= 0x20) o += c;
+  }
+  return o + "\"";
+}
+
+bool cmd_info(Context &ctx, const Modifiers &, const std::vector<std::string> &, std::string &) {
+  const ImageBuf &b = ctx.top();
+  const ImageSpec &sp = b.spec();
+  std::vector<std::string> names;
+  std::vector<const char *> cn;
+  for (int c = 0; c < sp.nchannels; ++c) names.push_back(std::string(sp.channel_name(c)));
+  for (auto &n : names) cn.push_back(n.c_str());
+  int chan[KPCN_BUF_COUNT][3], var[KPCN_BUF_COUNT];
+  std::string aov_error;
+  if (kpcn_aov_map_channels(cn.data(), (int)cn.size(), chan, var, std::string(b.name()).c_str()) != KPCN_OK)
+    aov_error = kpcn_last_error();
+  std::ostringstream txt, js;
+  std::string chlist;
+  for (auto &n : names) chlist += (chlist.empty() ? "" : ",") + n;
+  txt << std::string(b.name()) << ": " << sp.width << "x" << sp.height << ", " << sp.nchannels
+      << " channels (" << chlist << "), " << b.nativespec().format.c_str() << "\n";
+  js << "{\"file\": " << quote(std::string(b.name())) << ", \"width\": " << sp.width
+     << ", \"height\": " << sp.height << ", \"channels\": [";
+  for (size_t i = 0; i < names.size(); ++i) js << (i ? ", " : "") << quote(names[i]);
+  js << "], \"buffers\": {";
+  bool first = true;
+  for (int bi = 0; bi < KPCN_BUF_COUNT && aov_error.empty(); ++bi) {
+    kpcn_buffer buf = (kpcn_buffer)bi;
+    if (chan[bi][0] < 0) continue;
+    std::string src;
+    for (int c = 0; c < kpcn_buffer_channels(buf); ++c)
+      src += (c ? "," : "") + names[chan[bi][c]];
+    std::string vs = var[bi] >= 0 ? names[var[bi]] : "";
+    txt << "  buffer " << kpcn_buffer_name(buf) << ": " << src
+        << (vs.empty() ? "" : "  variance: " + vs) << "\n";
+    js << (first ? "" : ", ") << quote(kpcn_buffer_name(buf)) << ": {\"channels\": "
+       << quote(src) << ", \"variance\": " << (vs.empty() ? "null" : quote(vs)) << "}";
+    first = false;
+  }
+  js << "}";
+  if (!aov_error.empty()) {
+    txt << "  AOV buffers: " << aov_error << "\n";
+    js << ", \"aov_error\": " << quote(aov_error);
+  }
+  for (const char *attr : {"kpcn:spp", "kpcn:seed", "kpcn:scene", "kpcn:version"}) {
+    const OIIO::ParamValue *p = sp.find_attribute(attr);
+    if (!p) continue;
+    std::string v = p->get_string();
+    bool is_str = p->type() == TypeDesc::STRING;
+    txt << "  " << attr << ": " << v << "\n";
+    js << ", " << quote(attr) << ": " << (is_str ? quote(v) : v);
+  }
+  js << "}";
+  if (ctx.json)
+    ctx.json_items.emplace_back("info", js.str());
+  else
+    std::fputs(txt.str().c_str(), stdout);
+  return true;
+}
+
+// --ch R,G,B | R=albedo.R,G=albedo.G,B=albedo.B | A=1.0 (like oiiotool's --ch).
+bool cmd_ch(Context &ctx, const Modifiers &, const std::vector<std::string> &a,
+            std::string &err) {
+  const ImageBuf &src = ctx.top();
+  std::vector<std::string> items = kpcn::ops::split_names(a[0]);
+  if (items.empty()) {
+    err = "empty channel list";
+    return false;
+  }
+  std::vector<int> order;
+  std::vector<float> values;
+  std::vector<std::string> names;
+  for (auto &it : items) {
+    size_t eq = it.find('=');
+    std::string newname = it.substr(0, eq), from = eq == std::string::npos ? it : it.substr(eq + 1);
+    int idx = src.spec().channelindex(from);
+    float v = 0.f;
+    if (idx < 0) {
+      char *end = nullptr;
+      v = std::strtof(from.c_str(), &end);
+      if (eq == std::string::npos || end == from.c_str() || *end) {
+        err = "image '" + std::string(src.name()) + "' has no channel '" + from + "'";
+        return false;
+      }
+    }
+    order.push_back(idx);
+    values.push_back(v);
+    names.push_back(newname);
+  }
+  ImageBuf dst;
+  if (!IBA::channels(dst, src, (int)order.size(), order, values, names, false, ctx.nthreads)) {
+    err = dst.geterror();
+    return false;
+  }
+  ctx.pop();
+  ctx.push(std::move(dst));
+  return true;
+}
+
+std::string default_ocio_config() {
+  const char *env = std::getenv("OCIO");
+  if (env && *env) return env;
+  struct stat st;
+  if (stat(KPCN_DEFAULT_OCIO, &st) == 0) return KPCN_DEFAULT_OCIO;
+  return KPCN_INSTALLED_OCIO;
+}
+
+bool cmd_ociodisplay(Context &ctx, const Modifiers &m, const std::vector<std::string> &,
+                     std::string &err) {
+  std::string path = m.str("config", default_ocio_config());
+  struct stat st;
+  if (stat(path.c_str(), &st) != 0) {
+    err = "OCIO config '" + path + "' not found";
+    return false;
+  }
+  // One ColorConfig per path for the process: building processors is the expensive part.
+  static std::map<std::string, std::unique_ptr<OIIO::ColorConfig>> configs;
+  auto &cc = configs[path];
+  if (!cc) cc.reset(new OIIO::ColorConfig(path));
+  if (cc->has_error()) {
+    err = "OCIO config '" + path + "': " + cc->geterror();
+    cc.reset();
+    return false;
+  }
+  std::string display = m.str("display", cc->getDefaultDisplayName());
+  bool found = false;
+  for (int i = 0; i < cc->getNumDisplays(); ++i) found = found || display == cc->getDisplayNameByIndex(i);
+  if (!found) {
+    err = "display '" + display + "' is not in OCIO config '" + path + "'";
+    return false;
+  }
+  std::string view = m.str("view", cc->getDefaultViewName(display));
+  found = false;
+  for (int i = 0; i < cc->getNumViews(display); ++i)
+    found = found || view == cc->getViewNameByIndex(display, i);
+  if (!found) {
+    err = "view '" + view + "' of display '" + display + "' is not in OCIO config '" + path + "'";
+    return false;
+  }
+  ImageBuf src = ctx.top();
+  // AOV images: transform the colour only (R,G,B and A when present).
+  if (src.nchannels() > 4 || src.spec().channelindex("R") > 0) {
+    std::vector<int> order;
+    for (const char *c : {"R", "G", "B", "A"}) {
+      int i = src.spec().channelindex(c);
+      if (i >= 0) order.push_back(i);
+    }
+    if (order.size() < 3) {
+      err = "image '" + std::string(src.name()) + "' has " + std::to_string(src.nchannels()) +
+            " channels but no R,G,B to display (use --ch)";
+      return false;
+    }
+    ImageBuf rgb;
+    if (!IBA::channels(rgb, src, (int)order.size(), order, {}, {}, true, ctx.nthreads)) {
+      err = rgb.geterror();
+      return false;
+    }
+    src = std::move(rgb);
+  } else if (src.nchannels() < 3) {
+    err = "image '" + std::string(src.name()) + "' has " + std::to_string(src.nchannels()) +
+          " channel(s); the display transform needs R,G,B";
+    return false;
+  }
+  ImageBuf dst;
+  if (!IBA::ociodisplay(dst, src, display, view, m.str("from", "scene_linear"), m.str("looks"),
+                        false, "", "", cc.get(), {}, ctx.nthreads)) {
+    err = dst.geterror();
+    return false;
+  }
+  dst.specmod().attribute("oiio:ColorSpace", display);
+  ctx.pop();
+  ctx.push(std::move(dst));
+  return true;
+}
+
+bool cmd_mosaic(Context &ctx, const Modifiers &m, const std::vector<std::string> &,
+                std::string &err) {
+  std::vector<std::string> labels = kpcn::ops::split_names(m.str("labels"));
+  long n = m.integer("n", labels.empty() ? 2 : (long)labels.size());
+  if (n < 1 || n > (long)ctx.stack.size()) {
+    err = "n=" + std::to_string(n) + " but the stack holds " + std::to_string(ctx.stack.size()) +
+          " image(s)";
+    return false;
+  }
+  if (!labels.empty() && (long)labels.size() != n) {
+    err = std::to_string(labels.size()) + " labels for " + std::to_string(n) + " images";
+    return false;
+  }
+  size_t base = ctx.stack.size() - (size_t)n; // left to right = bottom to top
+  int nch = ctx.stack[base].nchannels(), W = 0, H = 0;
+  for (long i = 0; i < n; ++i) {
+    const ImageBuf &b = ctx.stack[base + i];
+    if (b.nchannels() != nch) {
+      err = "image " + std::to_string(i + 1) + " ('" + std::string(b.name()) + "') has " +
+            std::to_string(b.nchannels()) + " channels, image 1 has " + std::to_string(nch);
+      return false;
+    }
+    W += b.spec().width;
+    H = std::max(H, b.spec().height);
+  }
+  ImageSpec spec(W, H, nch, TypeDesc::FLOAT);
+  spec.channelnames = ctx.stack[base].spec().channelnames;
+  ImageBuf dst(spec);
+  IBA::zero(dst);
+  int x = 0;
+  int fontsize = (int)m.integer("fontsize", 16);
+  std::string font = m.str("font", "DejaVuSans");
+  std::vector<float> white((size_t)nch, 1.0f);
+  bool warned = false;
+  for (long i = 0; i < n; ++i) {
+    const ImageBuf &b = ctx.stack[base + i];
+    if (!IBA::paste(dst, x, 0, 0, 0, b)) {
+      err = dst.geterror();
+      return false;
+    }
+    if (!labels.empty() && !warned &&
+        !IBA::render_text(dst, x + 4, 4 + fontsize, labels[i], fontsize, font, white,
+                          IBA::TextAlignX::Left, IBA::TextAlignY::Baseline, 1)) {
+      std::fprintf(stderr, "kpcntool: warning: --mosaic: labels not drawn (%s)\n",
+                   dst.geterror().c_str());
+      warned = true;
+    }
+    x += b.spec().width;
+  }
+  ctx.stack.resize(base);
+  ctx.push(std::move(dst));
+  return true;
+}
+
+bool r1 = register_command({"o", 1, {}, "queue the top image for writing to a file (EXR float, "
+                            "PNG/JPEG 8 bit; written atomically after all commands succeed)",
+                            cmd_output});
+bool r2 = register_command({"threads", 1, {}, "threads for the following commands (0 = all)",
+                            cmd_threads});
+bool r3 = register_command({"json", 0, {}, "print results as one JSON object", cmd_json});
+bool r4 = register_command({"info", 0, {}, "describe the top image: size, channels, AOV "
+                            "buffers, kpcn:* attributes", cmd_info});
+bool r5 = register_command({"ch", 1, {}, "select/rename channels of the top image: R,G,B or "
+                            "R=albedo.R,... or A=1", cmd_ch});
+bool r6 = register_command({"ociodisplay", 0, {"display", "view", "config", "from", "looks"},
+                            "OCIO display transform of the top image (default config: "
+                            "$OCIO or testdata/ocio/config.ocio)", cmd_ociodisplay});
+bool r7 = register_command({"mosaic", 0, {"n", "labels", "font", "fontsize"},
+                            "pop n images, push them side by side (left = deepest), with labels",
+                            cmd_mosaic});
+
+} // namespace
+} // namespace kpcntool

@@ -1,0 +1,198 @@
+// kpcntool — oiiotool-style command line over kpcn's image operations (docs/kpcntool.md).
+//
+// Two passes: the whole command line is parsed and checked first (unknown command or
+// modifier, missing arguments -> exit 2, nothing read or written), then the steps run left to
+// right. `-o` outputs are written only after every step succeeded (exit 1 otherwise), so a
+// failing command line never leaves a partial or stale output file.
+#include "kpcntool.h"
+
+#include "kpcn/common.h"
+
+#include <OpenImageIO/imageio.h>
+
+#include <cmath>
+#include <cstdio>
+#include <exception>
+#include <sstream>
+
+namespace {
+
+struct Step {
+  const kpcntool::Command *cmd = nullptr; // nullptr: read the image file `file`
+  std::string token;                      // as written, for messages
+  kpcntool::Modifiers mods;
+  std::vector<std::string> args;
+  std::string file;
+};
+
+void print_help() {
+  std::printf(
+      "kpcntool %s — image stack tool for kpcn (oiiotool-style)\n\n"
+      "usage: kpcntool [file | --command[:key=value...] [args]] ...\n\n"
+      "File names push the image (all channels, as float) on the stack; commands act on the\n"
+      "top of the stack, left to right. Metrics compare the two top images (second-from-top\n"
+      "is the test image x, the top is the reference y) and print their results at the end\n"
+      "(one JSON object with --json). Outputs (-o) are written only if every command\n"
+      "succeeded. Exit status: 0 ok, 1 runtime error, 2 usage error.\n\n"
+      "commands:\n",
+      KPCN_VERSION_STRING);
+  std::printf("  %-14s %s\n", "--help", "print this help");
+  for (const kpcntool::Command *c : kpcntool::all_commands()) {
+    std::string name = (c->name.size() == 1 ? "-" : "--") + c->name;
+    for (int i = 0; i < c->nargs; ++i) name += " ARG";
+    std::printf("  %-14s %s\n", name.c_str(), c->help.c_str());
+    if (!c->modifiers.empty()) {
+      std::string m;
+      for (auto &k : c->modifiers) m += (m.empty() ? "" : ", ") + k;
+      std::printf("  %-14s   modifiers: %s\n", "", m.c_str());
+    }
+  }
+}
+
+std::string json_number(double v) {
+  if (!std::isfinite(v)) return "null"; // JSON has no inf/nan (e.g. PSNR of equal images)
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.17g", v);
+  return buf;
+}
+
+std::string json_string(const std::string &s) {
+  std::string o = "\"";
+  for (char ch : s) {
+    if (ch == '"' || ch == '\\') {
+      o += '\\';
+      o += ch;
+    } else if ((unsigned char)ch < 0x20) {
+      char b[8];
+      std::snprintf(b, sizeof b, "\\u%04x", ch);
+      o += b;
+    } else {
+      o += ch;
+    }
+  }
+  return o + "\"";
+}
+
+// Parses argv into steps; returns false with err on a usage error.
+bool parse(int argc, char **argv, std::vector<Step> &steps, std::string &err) {
+  for (int i = 1; i < argc; ++i) {
+    std::string a = argv[i];
+    Step st;
+    st.token = a;
+    if (a.size() < 2 || a[0] != '-') {
+      st.file = a;
+      steps.push_back(std::move(st));
+      continue;
+    }
+    std::string body = a.substr(a[1] == '-' ? 2 : 1);
+    std::vector<std::string> parts;
+    std::stringstream ss(body);
+    for (std::string p; std::getline(ss, p, ':');) parts.push_back(p);
+    if (parts.empty() || parts[0].empty()) {
+      err = "malformed command '" + a + "'";
+      return false;
+    }
+    st.cmd = kpcntool::find_command(parts[0]);
+    if (!st.cmd) {
+      err = "unknown command '" + a.substr(0, a.find(':')) + "' (see --help)";
+      return false;
+    }
+    for (size_t k = 1; k < parts.size(); ++k) {
+      size_t eq = parts[k].find('=');
+      std::string key = parts[k].substr(0, eq);
+      bool known = false;
+      for (auto &m : st.cmd->modifiers) known = known || m == key;
+      if (!known) {
+        std::string accepted;
+        for (auto &m : st.cmd->modifiers) accepted += (accepted.empty() ? "" : ", ") + m;
+        err = "unknown modifier '" + key + "' for --" + st.cmd->name +
+              (accepted.empty() ? " (it takes none)" : " (accepted: " + accepted + ")");
+        return false;
+      }
+      if (eq == std::string::npos) {
+        err = "modifier '" + key + "' of --" + st.cmd->name + " needs a value (" + key + "=...)";
+        return false;
+      }
+      st.mods.kv[key] = parts[k].substr(eq + 1);
+    }
+    for (int n = 0; n < st.cmd->nargs; ++n) {
+      if (i + 1 >= argc) {
+        err = "command '" + a + "' needs " + std::to_string(st.cmd->nargs) + " argument(s)";
+        return false;
+      }
+      st.args.push_back(argv[++i]);
+    }
+    steps.push_back(std::move(st));
+  }
+  return true;
+}
+
+void print_results(const kpcntool::Context &ctx) {
+  if (ctx.json) {
+    std::string o = "{";
+    bool first = true;
+    for (auto &r : ctx.results) {
+      o += (first ? "" : ", ") + json_string(r.first) + ": " + json_number(r.second);
+      first = false;
+    }
+    for (auto &r : ctx.json_items) {
+      o += (first ? "" : ", ") + json_string(r.first) + ": " + r.second;
+      first = false;
+    }
+    std::printf("%s}\n", o.c_str());
+    return;
+  }
+  for (auto &r : ctx.results) std::printf("%-16s %.9g\n", (r.first + ":").c_str(), r.second);
+}
+
+} // namespace
+
+int main(int argc, char **argv) {
+  for (int i = 1; i < argc; ++i) {
+    std::string a = argv[i];
+    if (a == "--help" || a == "-h") {
+      print_help();
+      return 0;
+    }
+  }
+  std::vector<Step> steps;
+  std::string err;
+  if (!parse(argc, argv, steps, err)) {
+    std::fprintf(stderr, "kpcntool: error: %s\n", err.c_str());
+    return 2;
+  }
+  if (steps.empty()) {
+    std::fprintf(stderr, "kpcntool: error: nothing to do (see --help)\n");
+    return 2;
+  }
+  kpcntool::Context ctx;
+  for (Step &st : steps) {
+    bool ok = false;
+    err.clear();
+    try {
+      if (!st.cmd) {
+        OIIO::ImageBuf buf;
+        ok = kpcntool::read_image(buf, st.file, err);
+        if (ok) ctx.push(std::move(buf));
+      } else {
+        ok = st.cmd->run(ctx, st.mods, st.args, err);
+      }
+    } catch (const std::exception &e) {
+      ok = false;
+      err = e.what();
+    }
+    if (!ok) {
+      if (err.empty()) err = "failed";
+      std::fprintf(stderr, "kpcntool: error: %s: %s\n", st.token.c_str(), err.c_str());
+      return 1;
+    }
+  }
+  for (auto &o : ctx.outputs) {
+    if (!kpcntool::write_image(o.second, o.first, err)) {
+      std::fprintf(stderr, "kpcntool: error: -o %s: %s\n", o.first.c_str(), err.c_str());
+      return 1;
+    }
+  }
+  print_results(ctx);
+  return 0;
+}
