@@ -27,12 +27,18 @@ int channel_index(const ImageSpec &spec, const std::string &name) {
   return spec.channelindex(name);
 }
 
+// "image 'name'" for messages; images made in memory have no name.
+static std::string desc(const ImageBuf &b) {
+  std::string n = std::string(b.name());
+  return n.empty() ? std::string("image (in memory)") : "image '" + n + "'";
+}
+
 // Reads channel `ch` of `src` over `roi` (one channel) into a planar float plane.
 static bool read_plane(const ImageBuf &src, ROI roi, int ch, float *dst, std::string &err) {
   roi.chbegin = ch;
   roi.chend = ch + 1;
   if (!src.get_pixels(roi, TypeDesc::FLOAT, dst)) {
-    err = "cannot read pixels of '" + std::string(src.name()) + "': " + src.geterror();
+    err = "cannot read pixels of " + desc(src) + ": " + src.geterror();
     return false;
   }
   return true;
@@ -40,14 +46,14 @@ static bool read_plane(const ImageBuf &src, ROI roi, int ch, float *dst, std::st
 
 static bool check_source(const ImageBuf &src, ROI &roi, std::string &err) {
   if (!src.initialized()) {
-    err = "image '" + std::string(src.name()) + "' is not initialized";
+    err = desc(src) + " is not initialized";
     return false;
   }
   // A file-backed ImageBuf reads lazily; unreadable / truncated files surface in get_pixels
   // (read_plane names the file).
   if (!roi.defined()) roi = src.roi();
   if (roi.width() <= 0 || roi.height() <= 0 || roi.depth() != 1) {
-    err = "image '" + std::string(src.name()) + "' has an unsupported size " + std::to_string(roi.width()) +
+    err = desc(src) + " has an unsupported size " + std::to_string(roi.width()) +
           "x" + std::to_string(roi.height()) + "x" + std::to_string(roi.depth());
     return false;
   }
@@ -79,7 +85,7 @@ ImagePtr to_kpcn_image(const ImageBuf &src, std::string &err, ROI roi) {
   for (int c = roi.chbegin; c < roi.chend; ++c)
     names.push_back(std::string(spec.channel_name(c)).empty() ? std::to_string(c) : std::string(spec.channel_name(c)));
   if (names.empty()) {
-    err = "image '" + std::string(src.name()) + "' has no channels in the requested range";
+    err = desc(src) + " has no channels in the requested range";
     return nullptr;
   }
   ImagePtr img = make_image(roi.width(), roi.height(), names, err);
@@ -97,13 +103,13 @@ ImagePtr to_kpcn_image(const ImageBuf &src, const std::vector<std::string> &chan
   for (auto &n : channels) {
     int i = src.spec().channelindex(n);
     if (i < 0) {
-      err = "image '" + std::string(src.name()) + "' has no channel '" + n + "'";
+      err = desc(src) + " has no channel '" + n + "'";
       return nullptr;
     }
     idx.push_back(i);
   }
   if (idx.empty()) {
-    err = "empty channel list for image '" + std::string(src.name()) + "'";
+    err = "empty channel list for " + desc(src);
     return nullptr;
   }
   ImagePtr img = make_image(roi.width(), roi.height(), channels, err);
@@ -143,7 +149,7 @@ AovPtr to_aov_set(const ImageBuf &src, std::string &err) {
   if (!img) return nullptr;
   kpcn_aov_set *set = nullptr;
   if (kpcn_aov_from_image(&set, img.get()) != KPCN_OK) {
-    err = "'" + std::string(src.name()) + "': " + kpcn_last_error();
+    err = desc(src) + ": " + kpcn_last_error();
     return nullptr;
   }
   AovPtr out(set);

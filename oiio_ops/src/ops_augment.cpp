@@ -180,7 +180,7 @@ bool write_patches(const std::string &out, const OIIO::ImageBuf &noisy, const OI
     }
     kpcn_patch_source src;
     std::memset(&src, 0, sizeof src);
-    std::snprintf(src.scene, sizeof src.scene, "%s", n->scene);
+    std::snprintf(src.scene, sizeof src.scene, "%.127s", n->scene);
     std::snprintf(src.noisy, sizeof src.noisy, "%s", noisy.name().c_str());
     std::snprintf(src.reference, sizeof src.reference, "%s", ref.name().c_str());
     src.spp = n->spp;

@@ -18,6 +18,12 @@ bool metric_from_name(const std::string &name, Metric &m) {
   return true;
 }
 
+// Name for messages: the file name, or the role for images made in memory.
+static std::string label(const ImageBuf &b, const char *role) {
+  std::string n = std::string(b.name());
+  return n.empty() ? std::string(role) : "'" + n + "'";
+}
+
 static std::string size_str(const ROI &r) {
   return std::to_string(r.width()) + "x" + std::to_string(r.height());
 }
@@ -33,21 +39,22 @@ static MetricResult run(const ImageBuf &x, const ImageBuf &ref, Metric m,
   }
   ROI rx = roi.defined() ? roi : x.roi(), ry = roi.defined() ? roi : ref.roi();
   if (rx.width() != ry.width() || rx.height() != ry.height()) {
-    r.error = std::string(what) + ": image sizes differ ('" + std::string(x.name()) + "' is " + size_str(rx) +
-              ", '" + std::string(ref.name()) + "' is " + size_str(ry) + ")";
+    r.error = std::string(what) + ": image sizes differ (" + label(x, "the test image") +
+              " is " + size_str(rx) + ", " + label(ref, "the reference image") + " is " +
+              size_str(ry) + ")";
     return r;
   }
   std::string err;
   ImagePtr ix = opt.channels.empty() ? to_kpcn_image(x, err, rx)
                                      : to_kpcn_image(x, opt.channels, err, rx);
   if (!ix) {
-    r.error = std::string(what) + ": " + err;
+    r.error = std::string(what) + ": test image: " + err;
     return r;
   }
   ImagePtr iy = opt.channels.empty() ? to_kpcn_image(ref, err, ry)
                                      : to_kpcn_image(ref, opt.channels, err, ry);
   if (!iy) {
-    r.error = std::string(what) + ": " + err;
+    r.error = std::string(what) + ": reference image: " + err;
     return r;
   }
   kpcn_metric_options o;

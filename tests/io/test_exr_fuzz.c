@@ -106,7 +106,7 @@ static void fuzz_file(const char *seed_path, int iters, unsigned seed, int *ok, 
 }
 
 int main(int argc, char **argv) {
-  int iters = argc > 1 ? atoi(argv[1]) : 100;
+  int iters = argc > 1 ? atoi(argv[1]) : 40;
   int ok = 0, err = 0;
   fuzz_file(make_seed("seed_zip.exr", KPCN_EXR_ZIP, KPCN_EXR_FLOAT), iters, 1, &ok, &err);
   fuzz_file(make_seed("seed_piz.exr", KPCN_EXR_PIZ, KPCN_EXR_HALF), iters, 2, &ok, &err);

@@ -169,6 +169,12 @@ static void test_map_channels(void) {
                       "Denoising Normal.Z"};
   CHECK(kpcn_aov_map_channels(n3, 5, chan, var, "t3") == KPCN_OK);
   CHECK(chan[KPCN_BUF_NORMAL][0] == 2 && chan[KPCN_BUF_NORMAL][2] == 4);
+  /* Cycles: the un-denoised "Noisy Image" is preferred over "Combined" */
+  const char *n5[] = {"ViewLayer.Combined.B", "ViewLayer.Combined.G", "ViewLayer.Combined.R",
+                      "ViewLayer.Noisy Image.B", "ViewLayer.Noisy Image.G",
+                      "ViewLayer.Noisy Image.R"};
+  CHECK(kpcn_aov_map_channels(n5, 6, chan, var, "t5") == KPCN_OK);
+  CHECK(chan[KPCN_BUF_COLOR][0] == 5 && chan[KPCN_BUF_COLOR][2] == 3);
   /* channels from two different layers never mix */
   const char *n4[] = {"L1.Combined.R", "L1.Combined.G", "L2.Combined.B"};
   CHECK(kpcn_aov_map_channels(n4, 3, chan, var, "t4") == KPCN_ERR_MISSING_CHANNEL);

@@ -6,7 +6,7 @@
  *   training:  batch 16 of 64 x 64, fp32 forward + backward of one branch, plus kpa
  *              forward/backward; iterations/s and GFLOP/s (fwd + bwd-data + bwd-weights).
  * usage: bench_nn [--size WxH] [--tile T] [--threads N] [--presets paper,cpu] [--iters N]
- *                 [--no-bf16] [--no-train] [--no-infer] */
+ *                 [--layout auto|nchw16c|nhwc] [--no-bf16] [--no-train] [--no-infer] */
 #include "kpcn/nn.h"
 
 #include <stdio.h>
@@ -48,6 +48,8 @@ static void fill(float *p, size_t n, unsigned s) {
   }
 }
 
+static kpcn_layout g_layout = KPCN_LAYOUT_AUTO;
+
 static int infer(const char *preset, kpcn_precision prec, int W, int H, int T, int nt) {
   kpcn_model *m = make_model(preset);
   if (!m) return 1;
@@ -61,7 +63,7 @@ static int infer(const char *preset, kpcn_precision prec, int W, int H, int T, i
   fill(nz, tp * 3, 2);
   kpcn_net_options o;
   kpcn_net_options_defaults(&o);
-  o.height = th, o.width = tw, o.precision = prec, o.nthreads = nt;
+  o.height = th, o.width = tw, o.precision = prec, o.nthreads = nt, o.layout = g_layout;
   kpcn_net *net[2] = {NULL, NULL};
   for (int b = 0; b < 2; b++)
     if (kpcn_net_create(m, (kpcn_branch)b, &o, &net[b]) != KPCN_OK) {
@@ -95,11 +97,11 @@ static int infer(const char *preset, kpcn_precision prec, int W, int H, int T, i
   kpcn_net_get_stats(net[0], &s);
   printf("infer %-5s %-4s %dx%d in %d tiles of %dx%d, 2 branches: %8.0f ms/MP | %6.1f GFLOP/s "
          "end-to-end, %6.1f in convs | outside convs %4.1f%% (reorders %4.1f%%, kpa %4.1f%%) | "
-         "net %.0f MiB, peak RSS %.0f MiB | %s\n",
+         "net %.0f MiB, peak RSS %.0f MiB | %s, %d slow prims\n",
          preset, prec == KPCN_PREC_BF16 ? "bf16" : "fp32", W, H, tiles, tw, th, 1e3 * total / mp,
          flops / total / 1e9, flops / conv / 1e9, 100 * (total - conv) / total,
          100 * (fwd - conv) / total, 100 * kpa_s / total, (double)s.bytes / 1048576.0,
-         peak_rss_mib(), kpcn_net_impl_name(net[0], 1));
+         peak_rss_mib(), kpcn_net_impl_name(net[0], 1), s.n_slow);
   fflush(stdout);
   kpcn_net_destroy(net[0]);
   kpcn_net_destroy(net[1]);
@@ -121,7 +123,7 @@ static int train(const char *preset, int iters, int nt) {
   fill(dout, px * 3, 5);
   kpcn_net_options o;
   kpcn_net_options_defaults(&o);
-  o.batch = N, o.height = S, o.width = S, o.training = 1, o.nthreads = nt;
+  o.batch = N, o.height = S, o.width = S, o.training = 1, o.nthreads = nt, o.layout = g_layout;
   kpcn_net *net = NULL;
   if (kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &net) != KPCN_OK) {
     fprintf(stderr, "net: %s\n", kpcn_last_error());
@@ -152,11 +154,11 @@ static int train(const char *preset, int iters, int nt) {
   double conv = (s.fwd_conv_s - s0.fwd_conv_s) + (s.bwd_conv_s - s0.bwd_conv_s);
   printf("train %-5s fp32 batch %dx%dx%d, 1 branch: %6.2f it/s, %7.1f patches/s | %6.1f GFLOP/s "
          "end-to-end, %6.1f in convs (fwd %.0f%%, bwd %.0f%% of conv time) | kpa %4.1f%% | "
-         "net %.0f MiB, peak RSS %.0f MiB\n",
+         "net %.0f MiB, peak RSS %.0f MiB, %d slow prims\n",
          preset, N, S, S, iters / total, N * iters / total, flops_it * iters / total / 1e9,
          flops_it * iters / conv / 1e9, 100 * (s.fwd_conv_s - s0.fwd_conv_s) / conv,
          100 * (s.bwd_conv_s - s0.bwd_conv_s) / conv, 100 * kpa / total,
-         (double)s.bytes / 1048576.0, peak_rss_mib());
+         (double)s.bytes / 1048576.0, peak_rss_mib(), s.n_slow);
   fflush(stdout);
   kpcn_net_destroy(net);
   kpcn_model_destroy(m);
@@ -174,11 +176,14 @@ int main(int argc, char **argv) {
     else if (!strcmp(argv[i], "--iters") && i + 1 < argc) iters = atoi(argv[++i]);
     else if (!strcmp(argv[i], "--presets") && i + 1 < argc) snprintf(presets, sizeof presets, "%s", argv[++i]);
     else if (!strcmp(argv[i], "--no-bf16")) bf16 = 0;
+    else if (!strcmp(argv[i], "--layout") && i + 1 < argc)
+      g_layout = !strcmp(argv[++i], "nhwc") ? KPCN_LAYOUT_NHWC
+                 : !strcmp(argv[i], "nchw16c") ? KPCN_LAYOUT_NCHW16C : KPCN_LAYOUT_AUTO;
     else if (!strcmp(argv[i], "--no-train")) do_train = 0;
     else if (!strcmp(argv[i], "--no-infer")) do_infer = 0;
     else {
       fprintf(stderr, "usage: %s [--size WxH] [--tile T] [--threads N] [--presets paper,cpu] "
-                      "[--iters N] [--no-bf16] [--no-train] [--no-infer]\n", argv[0]);
+                      "[--iters N] [--layout auto|nchw16c|nhwc] [--no-bf16] [--no-train] [--no-infer]\n", argv[0]);
       return 2;
     }
   }

@@ -1,14 +1,17 @@
 /* bench_train: training speed for the cpu and paper presets at batch 16 of 64x64 patches
  * (synthetic 65x65 store): iterations/s, patches/s and achieved GFLOP/s counting the conv
  * FLOPs of forward + backward (both branches; see kpcn_trainer_flops_per_iter).
- * usage: bench_train [iters_cpu (6)] [iters_paper (2)] [threads (0)] */
+ * usage: bench_train [--threads N] [PRESET[:STAGE]:ITERS ...]   (default cpu:1:6 cpu:2:6 paper:1:2)
+ * STAGE 1 = both branches on their own targets, 2 = fine-tuning through the recombination. */
 #include "kpcn/train.h"
 #include "testutil.h"
 #include "train_fixture.h"
 
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 static double now(void) {
   struct timespec ts;
@@ -55,14 +58,24 @@ static void bench(const char *store, const char *preset, int iters, int threads,
 }
 
 int main(int argc, char **argv) {
-  int ic = argc > 1 ? atoi(argv[1]) : 6, ip = argc > 2 ? atoi(argv[2]) : 2;
-  int th = argc > 3 ? atoi(argv[3]) : 0;
+  int th = 0, first = 1;
+  if (argc > 2 && !strcmp(argv[1], "--threads")) th = atoi(argv[2]), first = 3;
+  static const char *defaults[] = {"cpu:1:6", "cpu:2:6", "paper:1:2"};
+  const char *const *jobs = first < argc ? (const char *const *)argv + first : defaults;
+  int njobs = first < argc ? argc - first : 3;
   const char *store = kt_tmpfile("bench.kps");
   if (tf_make_store(store, 65, 160, 160, 64, 1, 0, NULL, 0) != 0) return 1;
   printf("bench_train: conv FLOPs = forward + backward-weights + backward-data (no input "
          "gradient for layer 0), both branches; other processes share this CPU.\n");
-  bench(store, "cpu", ic, th, 1);
-  bench(store, "cpu", ic, th, 2);
-  if (ip > 0) bench(store, "paper", ip, th, 1);
+  for (int j = 0; j < njobs; j++) {
+    char preset[32];
+    int stage = 1, iters = 2;
+    const char *c1 = strchr(jobs[j], ':');
+    size_t pl = c1 ? (size_t)(c1 - jobs[j]) : strlen(jobs[j]);
+    snprintf(preset, sizeof preset, "%.*s", (int)(pl < 31 ? pl : 31), jobs[j]);
+    if (c1 && sscanf(c1 + 1, "%d:%d", &stage, &iters) < 2) sscanf(c1 + 1, "%d", &iters), stage = 1;
+    bench(store, preset, iters, th, stage);
+  }
+  unlink(store);
   return 0;
 }

@@ -1,6 +1,7 @@
 /* Losses: values against naive independent formulas (written here from the
  * definitions, SSIM with a direct 2-D window sum in double), gradients against
  * double-precision central finite differences, determinism across thread counts. */
+#include "kpcn/metrics.h"
 #include "kpcn/train.h"
 #include "testutil.h"
 
@@ -102,7 +103,8 @@ static void check_loss(kpcn_loss_kind k, int planes, int w, int h, int win, unsi
 }
 
 int main(void) {
-  for (int k = KPCN_LOSS_L1; k <= KPCN_LOSS_RELL1; k++) check_loss((kpcn_loss_kind)k, 3, 13, 9, 11, 7u + k);
+  for (int k = KPCN_LOSS_L1; k <= KPCN_LOSS_RELL1; k++)
+    check_loss((kpcn_loss_kind)k, 3, 13, 9, 11, 7u + k);
   check_loss(KPCN_LOSS_SSIM, 2, 16, 14, 11, 3u); /* 6x4 valid positions, full window */
   check_loss(KPCN_LOSS_SSIM, 3, 12, 12, 7, 5u);  /* the small-window variant */
   check_loss(KPCN_LOSS_SSIM, 1, 5, 5, 5, 9u);    /* window == image: one position */
@@ -110,15 +112,37 @@ int main(void) {
   /* identical images: SSIM loss 0, zero gradient; L1 exactly 0 */
   float a[4 * 20 * 20], gr[4 * 20 * 20];
   unsigned st = 1;
-  for (int i = 0; i < 4 * 400; i++) a[i] = kt_randf(&st);
+  for (int i = 0; i < 4 * 400; i++)
+    a[i] = kt_randf(&st);
   double v = -1;
   CHECK(kpcn_loss_compute(KPCN_LOSS_SSIM, NULL, a, a, 2, 2, 20, 20, gr, &v, 0) == KPCN_OK);
   CHECK_NEAR(v, 0.0, 1e-12);
   double gmax = 0;
-  for (int i = 0; i < 4 * 400; i++) gmax = fmax(gmax, fabs(gr[i]));
+  for (int i = 0; i < 4 * 400; i++)
+    gmax = fmax(gmax, fabs(gr[i]));
   CHECK(gmax < 1e-9);
   CHECK(kpcn_loss_compute(KPCN_LOSS_L1, NULL, a, a, 2, 2, 20, 20, gr, &v, 0) == KPCN_OK);
   CHECK(v == 0.0);
+
+  /* SSIM value vs the metrics module (skimage-compatible, interior = valid positions):
+   * 1 - loss must equal the metric on a 3-channel 30x26 image. */
+  {
+    enum { W = 30, H = 26 };
+    static float x[3 * W * H], y[3 * W * H];
+    unsigned s2 = 77;
+    for (int i = 0; i < 3 * W * H; i++) {
+      y[i] = kt_randf(&s2);
+      x[i] = y[i] + 0.2f * (kt_randf(&s2) - 0.5f);
+    }
+    double lv;
+    kpcn_metric_result r;
+    CHECK(kpcn_loss_compute(KPCN_LOSS_SSIM, NULL, x, y, 1, 3, W, H, NULL, &lv, 0) == KPCN_OK);
+    CHECK(kpcn_metric_planar(KPCN_METRIC_SSIM, x, y, W, H, 3, NULL, &r, NULL) == KPCN_OK);
+    CHECK_NEAR(1.0 - lv, r.value, 1e-6);
+    CHECK(kpcn_metric_planar(KPCN_METRIC_RELMSE, x, y, W, H, 3, NULL, &r, NULL) == KPCN_OK);
+    CHECK(kpcn_loss_compute(KPCN_LOSS_RELMSE, NULL, x, y, 1, 3, W, H, NULL, &lv, 0) == KPCN_OK);
+    CHECK_NEAR(lv, r.value, 1e-9 * r.value);
+  }
 
   /* errors: window larger than the image, bad names, NULLs */
   kpcn_loss_settings ls;

@@ -13,7 +13,8 @@ static void test_adam(void) {
   static float p[N], g[N];
   static double pd[N], md[N], vd[N];
   unsigned st = 11;
-  for (int i = 0; i < N; i++) pd[i] = p[i] = kt_randf(&st) - 0.5f;
+  for (int i = 0; i < N; i++)
+    pd[i] = p[i] = kt_randf(&st) - 0.5f;
   kpcn_adam_settings s;
   kpcn_adam_settings_defaults(&s);
   s.lr = 1e-2;
@@ -23,7 +24,8 @@ static void test_adam(void) {
   kpcn_param_block blk[2] = {{p, g, N1}, {p + N1, g + N1, N2}};
   double maxerr = 0;
   for (int t = 1; t <= STEPS; t++) {
-    for (int i = 0; i < N; i++) g[i] = (float)(sin(0.37 * i + t) * (1 + i % 3)); /* any gradient */
+    for (int i = 0; i < N; i++)
+      g[i] = (float)(sin(0.37 * i + t) * (1 + i % 3)); /* any gradient */
     CHECK(kpcn_adam_step(a, blk, 2, t % 2 ? 1 : 2, NULL) == KPCN_OK);
     double lr = 1e-2 * pow(0.96, (t - 1) / 10.0);
     for (int i = 0; i < N; i++) {
@@ -33,7 +35,8 @@ static void test_adam(void) {
       pd[i] -= lr * mh / (sqrt(vh) + 1e-8);
     }
   }
-  for (int i = 0; i < N; i++) maxerr = fmax(maxerr, fabs(pd[i] - p[i]));
+  for (int i = 0; i < N; i++)
+    maxerr = fmax(maxerr, fabs(pd[i] - p[i]));
   CHECK(maxerr < 2e-5); /* float state vs double reference over 25 steps of size ~1e-2 */
   CHECK(kpcn_adam_steps(a) == STEPS);
   /* mismatched block total is an error */
@@ -82,7 +85,8 @@ static void test_xavier_rng(void) {
   r2 = r;
   CHECK(kpcn_xavier_uniform(w, N, 100 * 25, 100 * 25, &r) == KPCN_OK);
   double a = sqrt(6.0 / 5000.0), mean = 0, var = 0, mx = 0;
-  for (int i = 0; i < N; i++) mean += w[i], var += (double)w[i] * w[i], mx = fmax(mx, fabs(w[i]));
+  for (int i = 0; i < N; i++)
+    mean += w[i], var += (double)w[i] * w[i], mx = fmax(mx, fabs(w[i]));
   mean /= N, var /= N;
   CHECK(mx <= a);
   CHECK(mx > 0.99 * a);
@@ -93,13 +97,16 @@ static void test_xavier_rng(void) {
   kpcn_rng r3 = r2;
   CHECK(kpcn_rng_next(&r2) == kpcn_rng_next(&r3));
   unsigned hist[10] = {0};
-  for (int i = 0; i < 100000; i++) hist[kpcn_rng_below(&r, 10)]++;
-  for (int i = 0; i < 10; i++) CHECK(hist[i] > 9500 && hist[i] < 10500);
+  for (int i = 0; i < 100000; i++)
+    hist[kpcn_rng_below(&r, 10)]++;
+  for (int i = 0; i < 10; i++)
+    CHECK(hist[i] > 9500 && hist[i] < 10500);
 }
 
 static void test_plot(void) {
   double x[50], y[50], y2[50];
-  for (int i = 0; i < 50; i++) x[i] = i * 100, y[i] = exp(-i / 10.0), y2[i] = 0.5 * y[i] + 0.01;
+  for (int i = 0; i < 50; i++)
+    x[i] = i * 100, y[i] = exp(-i / 10.0), y2[i] = 0.5 * y[i] + 0.01;
   kpcn_plot_series s[2] = {{"train l1", x, y, 50}, {"val relmse", x, y2, 50}};
   kpcn_plot_settings ps;
   kpcn_plot_settings_defaults(&ps);

@@ -14,6 +14,7 @@ int main(void) {
   kpcn_train_settings s;
   kpcn_train_settings_defaults(&s);
   kpcn_arch_preset("tiny", &s.arch);
+  s.arch.channels = 16; /* oneDNN 2.6 jit kernels need channel blocks of 16 (8 -> ref:any) */
   s.store_path = store;
   s.out_path = kt_tmpfile("overfit.safetensors");
   s.batch = 1;

@@ -19,6 +19,7 @@ static const char *tf_tmp(const char *name) { return strdup(kt_tmpfile(name)); }
 static void settings(kpcn_train_settings *s, const char *out) {
   kpcn_train_settings_defaults(s);
   kpcn_arch_preset("tiny", &s->arch);
+  s->arch.channels = 16; /* oneDNN 2.6 jit kernels need channel blocks of 16 (8 -> ref:any) */
   s->store_path = g_store;
   s->out_path = out;
   s->batch = 3;
@@ -121,7 +122,9 @@ static void test_determinism_and_resume(void) {
   /* outputs: model loads, plot exists */
   kpcn_model *m = NULL;
   CHECK(kpcn_model_load(tf_tmp("c.safetensors"), &m) == KPCN_OK);
-  if (m) CHECK(kpcn_model_get_meta(m, "train.iterations") && !strcmp(kpcn_model_get_meta(m, "train.iterations"), "8"));
+  if (m)
+    CHECK(kpcn_model_get_meta(m, "train.iterations") &&
+          !strcmp(kpcn_model_get_meta(m, "train.iterations"), "8"));
   kpcn_model_destroy(m);
   FILE *p = fopen(tf_tmp("c.safetensors.png"), "rb");
   CHECK(p != NULL);

@@ -47,9 +47,11 @@ int tf_make_pair(kpcn_aov_set **noisy, kpcn_aov_set **ref, int w, int h, unsigne
       }
       double nx = 0.3 * sin(3 * u), ny = 0.3 * cos(4 * v), nz = sqrt(1 - nx * nx - ny * ny);
       float nn[3] = {(float)nx, (float)ny, (float)nz};
-      for (int c = 0; c < 3; c++) n->buf[KPCN_BUF_NORMAL][c * np + i] = r->buf[KPCN_BUF_NORMAL][c * np + i] = nn[c];
+      for (int c = 0; c < 3; c++)
+        n->buf[KPCN_BUF_NORMAL][c * np + i] = r->buf[KPCN_BUF_NORMAL][c * np + i] = nn[c];
       n->buf[KPCN_BUF_DEPTH][i] = r->buf[KPCN_BUF_DEPTH][i] = (float)(2 + 3 * u + v);
-      n->buf[KPCN_BUF_VISIBILITY][i] = r->buf[KPCN_BUF_VISIBILITY][i] = (u + v > 0.8) ? 1.0f : 0.25f;
+      n->buf[KPCN_BUF_VISIBILITY][i] = r->buf[KPCN_BUF_VISIBILITY][i] =
+          (u + v > 0.8) ? 1.0f : 0.25f;
       for (int b = 0; b < KPCN_BUF_COUNT; b++) {
         n->var[b][i] = b == KPCN_BUF_DIFFUSE || b == KPCN_BUF_COLOR ? 0.01f : 0.001f;
         r->var[b][i] = 0;

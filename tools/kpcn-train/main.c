@@ -19,28 +19,32 @@ static void on_signal(int sig) {
 }
 
 static void usage(FILE *f) {
-  fputs(
-      "usage: kpcn-train --store PATCHES.kps -o MODEL.safetensors [options]\n"
-      "  --preset cpu|paper|tiny   architecture preset (default cpu)\n"
-      "  --layers N --channels C --conv K --kernel K --dilations D1,D2,...\n"
-      "                            architecture overrides (hidden layers, width, conv size\n"
-      "                            of every layer, prediction window, per-layer dilation)\n"
-      "  --init MODEL              start from an existing model (fine-tuning)\n"
-      "  --loss l1|l2|relmse|rell1|ssim   stage-1 loss (default l1)\n"
-      "  --loss2 NAME              stage-2 loss (default: same as --loss)\n"
-      "  --ssim-window N           SSIM window (odd, default 11), --loss-margin M\n"
-      "  --lr X (1e-3) --lr-decay X (0.96) --decay-every N (100000) --staircase --clip X\n"
-      "  --batch N (16) --patch P (64) --iters N (1000) --stage1-iters N (0.6*iters)\n"
-      "  --threads N (0 = all) --seed N (1)\n"
-      "  --val NOISY.exr,REF.exr   validation pair (repeatable); --val-from-store uses the\n"
-      "                            store's sources of split 'val'\n"
-      "  --val-every N --ckpt-every N --log-every N (10)\n"
-      "  --ckpt PATH --csv PATH --plot PATH   (default MODEL.ckpt/.csv/.png; '' = none)\n"
-      "  --time-limit MINUTES      stop cleanly and checkpoint\n"
-      "  --resume                  continue bit-exactly from the checkpoint\n"
-      "  --no-colorswap --no-mirror --no-rotate --no-shift   disable augmentations\n"
-      "  --quiet                   no log lines\n",
-      f);
+  fputs("usage: kpcn-train --store PATCHES.kps -o MODEL.safetensors [options]\n"
+        "  --preset cpu|paper|tiny   architecture preset (default cpu)\n"
+        "  --layers N --channels C --conv K --kernel K --dilations D1,D2,...\n"
+        "                            architecture overrides (hidden layers, width, conv size\n"
+        "                            of every layer, prediction window, per-layer dilation)\n"
+        "  --init MODEL              start from an existing model (fine-tuning)\n"
+        "  --loss l1|l2|relmse|rell1|ssim   stage-1 loss (default l1)\n"
+        "  --loss2 NAME              stage-2 loss (default: same as --loss)\n"
+        "  --ssim-window N           SSIM window (odd, default 11), --loss-margin M\n"
+        "  --lr X (1e-3) --lr-decay X (0.96) --decay-every N (100000) --staircase --clip X\n"
+        "  --batch N (16) --patch P (64) --iters N (1000) --stage1-iters N (0.6*iters)\n"
+        "  --threads N (0 = all) --seed N (1)\n"
+        "  --val NOISY.exr,REF.exr   validation pair (repeatable); --val-from-store uses the\n"
+        "                            store's sources of split 'val'\n"
+        "  --val-every N --ckpt-every N --log-every N (10)\n"
+        "  --ckpt PATH --csv PATH --plot PATH   (default MODEL.ckpt/.csv/.png; '' = none)\n"
+        "  --time-limit MINUTES      stop cleanly and checkpoint\n"
+        "  --resume                  continue bit-exactly from the checkpoint\n"
+        "  --no-colorswap --no-mirror --no-rotate --no-shift   disable augmentations\n"
+        "  --quiet                   no log lines\n"
+        "\n"
+        "usage: kpcn-train --compare OUT.png [--x iter|elapsed_s] [--y COLUMN] [--title T]\n"
+        "                  [--linear] LABEL=RUN.csv ...\n"
+        "  draws one CSV column (default loss; val_relmse, val_ssim, val_psnr ...) of up to 8\n"
+        "  runs against the iteration or the elapsed seconds (default elapsed_s)\n",
+        f);
 }
 
 static int g_quiet = 0;
@@ -64,7 +68,8 @@ static int progress_cb(void *u, const kpcn_train_progress *p) {
     char el[32], eta[32];
     fmt_time(el, sizeof el, p->elapsed_s);
     fmt_time(eta, sizeof eta, p->eta_s);
-    fprintf(stderr, "\r\033[K%lld/%lld (%.1f%%) stage %d  loss %.4g  lr %.3g  %.2f it/s  %s, %s left",
+    fprintf(stderr,
+            "\r\033[K%lld/%lld (%.1f%%) stage %d  loss %.4g  lr %.3g  %.2f it/s  %s, %s left",
             (long long)p->iter, (long long)p->total, 100.0 * p->iter / (p->total ? p->total : 1),
             p->stage, p->loss, p->lr, p->its_per_s, el, eta);
     fflush(stderr);
@@ -120,7 +125,10 @@ static int val_from_store(const char *store) {
   char dir[4096];
   snprintf(dir, sizeof dir, "%s", store);
   char *sl = strrchr(dir, '/');
-  if (sl) sl[1] = 0; else dir[0] = 0;
+  if (sl)
+    sl[1] = 0;
+  else
+    dir[0] = 0;
   int ok = 1, found = 0;
   for (int i = 0; i < kpcn_patchstore_nsources(ps) && ok; i++) {
     const kpcn_patch_source *s = kpcn_patchstore_source(ps, i);
@@ -142,7 +150,48 @@ static int val_from_store(const char *store) {
   return ok;
 }
 
+static int compare_main(int argc, char **argv) {
+  const char *png = argv[2], *x = "elapsed_s", *y = "loss", *title = NULL;
+  const char *labels[KPCN_PLOT_MAX_SERIES], *csvs[KPCN_PLOT_MAX_SERIES];
+  char *owned[KPCN_PLOT_MAX_SERIES];
+  int n = 0, log_y = 1;
+  for (int i = 3; i < argc; i++) {
+    if (!strcmp(argv[i], "--x") && i + 1 < argc)
+      x = argv[++i];
+    else if (!strcmp(argv[i], "--y") && i + 1 < argc)
+      y = argv[++i];
+    else if (!strcmp(argv[i], "--title") && i + 1 < argc)
+      title = argv[++i];
+    else if (!strcmp(argv[i], "--linear"))
+      log_y = 0;
+    else {
+      const char *eq = strchr(argv[i], '=');
+      if (!eq || eq == argv[i] || !eq[1] || n == KPCN_PLOT_MAX_SERIES) {
+        fprintf(stderr, "kpcn-train --compare: expected LABEL=RUN.csv (at most %d), got '%s'\n",
+                KPCN_PLOT_MAX_SERIES, argv[i]);
+        return 2;
+      }
+      owned[n] = strndup(argv[i], (size_t)(eq - argv[i]));
+      labels[n] = owned[n];
+      csvs[n++] = eq + 1;
+    }
+  }
+  if (!n) {
+    fprintf(stderr, "kpcn-train --compare: no runs given\n");
+    return 2;
+  }
+  kpcn_status st = kpcn_train_plot_compare(png, title ? title : y, x, y, log_y, n, labels, csvs);
+  for (int i = 0; i < n; i++)
+    free(owned[i]);
+  if (st != KPCN_OK) {
+    fprintf(stderr, "kpcn-train --compare: %s\n", kpcn_last_error());
+    return 1;
+  }
+  return 0;
+}
+
 int main(int argc, char **argv) {
+  if (argc >= 3 && !strcmp(argv[1], "--compare")) return compare_main(argc, argv);
   kpcn_train_settings s;
   kpcn_train_settings_defaults(&s);
   const char *preset = "cpu", *dil = NULL, *loss2 = NULL;
@@ -269,7 +318,8 @@ int main(int argc, char **argv) {
   }
   if (channels > 0) s.arch.channels = (int)channels;
   if (conv > 0)
-    for (int l = 0; l <= s.arch.n_hidden; l++) s.arch.conv_size[l] = (int)conv;
+    for (int l = 0; l <= s.arch.n_hidden; l++)
+      s.arch.conv_size[l] = (int)conv;
   if (kernel > 0) s.arch.kernel_size = (int)kernel;
   if (dil) {
     const char *p = dil;
@@ -283,9 +333,11 @@ int main(int argc, char **argv) {
       }
       s.arch.dilation[l] = (int)dv;
       p = end;
-      if (*p == ',') p++;
+      if (*p == ',')
+        p++;
       else if (*p == 0 && l < s.arch.n_hidden) {
-        for (int r = l + 1; r <= s.arch.n_hidden; r++) s.arch.dilation[r] = 1; /* rest: 1 */
+        for (int r = l + 1; r <= s.arch.n_hidden; r++)
+          s.arch.dilation[r] = 1; /* rest: 1 */
         break;
       }
     }
@@ -307,8 +359,10 @@ int main(int argc, char **argv) {
     return 1;
   }
   if (!g_quiet)
-    fprintf(stderr, "kpcn-train: %s preset, %lld iterations (stage 1: %lld), batch %d of %dx%d, "
-            "%.1f GFLOP/iteration%s\n", preset, (long long)s.iters,
+    fprintf(stderr,
+            "kpcn-train: %s preset, %lld iterations (stage 1: %lld), batch %d of %dx%d, "
+            "%.1f GFLOP/iteration%s\n",
+            preset, (long long)s.iters,
             (long long)(s.stage1_iters < 0 ? (long long)(0.6 * s.iters + 0.5) : s.stage1_iters),
             s.batch, s.patch, s.patch, kpcn_trainer_flops_per_iter(t) * 1e-9,
             s.resume ? ", resuming" : "");
@@ -325,6 +379,7 @@ int main(int argc, char **argv) {
             stopped ? "stopped" : "finished", (long long)kpcn_trainer_iteration(t), s.out_path,
             stopped ? " (resume with --resume)" : "");
   kpcn_trainer_destroy(t);
-  for (int i = 0; i < g_nval; i++) free(g_valn[i]), free(g_valr[i]);
+  for (int i = 0; i < g_nval; i++)
+    free(g_valn[i]), free(g_valr[i]);
   return 0;
 }

@@ -87,6 +87,12 @@ bool write_image(const ImageBuf &img, const std::string &path, std::string &err)
 
 namespace {
 
+// "image 'file.exr'", or "the top image" for images computed in this run (they have no name).
+std::string img_desc(const ImageBuf &b, const char *role = "the top image") {
+  std::string n = std::string(b.name());
+  return n.empty() ? std::string(role) : "image '" + n + "'";
+}
+
 bool cmd_output(Context &ctx, const Modifiers &, const std::vector<std::string> &a,
                 std::string &) {
   ctx.outputs.emplace_back(a[0], ctx.top()); // a deep copy: later commands may change the top
@@ -134,7 +140,7 @@ bool cmd_info(Context &ctx, const Modifiers &, const std::vector<std::string> &,
   std::ostringstream txt, js;
   std::string chlist;
   for (auto &n : names) chlist += (chlist.empty() ? "" : ",") + n;
-  txt << std::string(b.name()) << ": " << sp.width << "x" << sp.height << ", " << sp.nchannels
+  txt << (b.name().empty() ? std::string("(top image)") : std::string(b.name())) << ": " << sp.width << "x" << sp.height << ", " << sp.nchannels
       << " channels (" << chlist << "), " << b.nativespec().format.c_str() << "\n";
   js << "{\"file\": " << quote(std::string(b.name())) << ", \"width\": " << sp.width
      << ", \"height\": " << sp.height << ", \"channels\": [";
@@ -196,7 +202,7 @@ bool cmd_ch(Context &ctx, const Modifiers &, const std::vector<std::string> &a,
       char *end = nullptr;
       v = std::strtof(from.c_str(), &end);
       if (eq == std::string::npos || end == from.c_str() || *end) {
-        err = "image '" + std::string(src.name()) + "' has no channel '" + from + "'";
+        err = img_desc(src) + " has no channel '" + from + "'";
         return false;
       }
     }
@@ -263,7 +269,7 @@ bool cmd_ociodisplay(Context &ctx, const Modifiers &m, const std::vector<std::st
       if (i >= 0) order.push_back(i);
     }
     if (order.size() < 3) {
-      err = "image '" + std::string(src.name()) + "' has " + std::to_string(src.nchannels()) +
+      err = img_desc(src) + " has " + std::to_string(src.nchannels()) +
             " channels but no R,G,B to display (use --ch)";
       return false;
     }
@@ -274,7 +280,7 @@ bool cmd_ociodisplay(Context &ctx, const Modifiers &m, const std::vector<std::st
     }
     src = std::move(rgb);
   } else if (src.nchannels() < 3) {
-    err = "image '" + std::string(src.name()) + "' has " + std::to_string(src.nchannels()) +
+    err = img_desc(src) + " has " + std::to_string(src.nchannels()) +
           " channel(s); the display transform needs R,G,B";
     return false;
   }
@@ -308,7 +314,7 @@ bool cmd_mosaic(Context &ctx, const Modifiers &m, const std::vector<std::string>
   for (long i = 0; i < n; ++i) {
     const ImageBuf &b = ctx.stack[base + i];
     if (b.nchannels() != nch) {
-      err = "image " + std::to_string(i + 1) + " ('" + std::string(b.name()) + "') has " +
+      err = "image " + std::to_string(i + 1) + " (" + img_desc(b, "computed") + ") has " +
             std::to_string(b.nchannels()) + " channels, image 1 has " + std::to_string(nch);
       return false;
     }

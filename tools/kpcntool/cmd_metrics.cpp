@@ -38,8 +38,11 @@ bool options(const kpcntool::Modifiers &m, kpcn::ops::CompareOptions &o, std::st
 bool check_nonfinite(const kpcn::ops::MetricResult &r, const kpcntool::Modifiers &m,
                      const OIIO::ImageBuf &x, const OIIO::ImageBuf &y, std::string &err) {
   if (r.nonfinite == 0 || m.integer("allow_nonfinite", 0) != 0) return true;
-  err = std::to_string(r.nonfinite) + " pixel(s) hold NaN/Inf in '" + std::string(x.name()) + "' or '" +
-        std::string(y.name()) + "' (add :allow_nonfinite=1 to exclude them)";
+  auto nm = [](const OIIO::ImageBuf &b, const char *role) {
+    return b.name().empty() ? std::string(role) : "'" + std::string(b.name()) + "'";
+  };
+  err = std::to_string(r.nonfinite) + " pixel(s) hold NaN/Inf in " + nm(x, "the test image") +
+        " or " + nm(y, "the reference image") + " (add :allow_nonfinite=1 to exclude them)";
   return false;
 }
 

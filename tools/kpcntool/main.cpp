@@ -166,6 +166,9 @@ int main(int argc, char **argv) {
     return 2;
   }
   kpcntool::Context ctx;
+  // --json is global (it only changes how results are printed), wherever it appears.
+  for (Step &st : steps)
+    if (st.cmd && st.cmd->name == "json") ctx.json = true;
   for (Step &st : steps) {
     bool ok = false;
     err.clear();

@@ -138,12 +138,22 @@ const char *kpcn_model_meta_key(const kpcn_model *m, int i);
 
 typedef enum kpcn_precision { KPCN_PREC_F32 = 0, KPCN_PREC_BF16 = 1 } kpcn_precision;
 
+/* Activation layout between layers. AUTO: nChw16c for f32 (jit:avx512_core), nhwc for bf16
+ * (brgconv / AMX). The others exist for benchmarking. All give the same results up to
+ * summation order. */
+typedef enum kpcn_layout {
+  KPCN_LAYOUT_AUTO = 0,
+  KPCN_LAYOUT_NCHW16C = 1,
+  KPCN_LAYOUT_NHWC = 2
+} kpcn_layout;
+
 typedef struct kpcn_net_options {
   int batch, height, width; /* N, H, W the net is bound to */
   kpcn_precision precision; /* BF16: weights+activations bf16, fp32 accumulate, fp32 I/O */
   int training;             /* 1: keep activations, enable kpcn_net_backward (F32 only) */
   int input_grad;           /* 1: backward also computes dL/dinput */
   int nthreads;             /* 0 = all cores */
+  kpcn_layout layout;       /* activation layout, AUTO by default */
 } kpcn_net_options;
 
 void kpcn_net_options_defaults(kpcn_net_options *o); /* N=1, 64x64, F32, inference, 0 */
@@ -181,6 +191,7 @@ typedef struct kpcn_net_stats {
   double fwd_s, fwd_conv_s, bwd_s, bwd_conv_s;
   long n_fwd, n_bwd;
   size_t bytes; /* memory held by the net (activations, scratchpad, weight copies) */
+  int n_slow;   /* primitives running oneDNN's slow reference ("ref:") implementation */
 } kpcn_net_stats;
 void kpcn_net_get_stats(const kpcn_net *net, kpcn_net_stats *s);
 /* Name of the oneDNN implementation chosen for conv layer l forward ("brgconv:..."). */

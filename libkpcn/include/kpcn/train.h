@@ -48,11 +48,11 @@ typedef enum kpcn_loss_kind {
 } kpcn_loss_kind;
 
 typedef struct kpcn_loss_settings {
-  double rel_eps;  /* 0.01 */
-  int ssim_window; /* odd; 11 (Wang 2004). 64x64 patches leave 54x54 valid positions. */
-  float ssim_sigma; /* 1.5 */
+  double rel_eps;         /* 0.01 */
+  int ssim_window;        /* odd; 11 (Wang 2004). 64x64 patches leave 54x54 valid positions. */
+  float ssim_sigma;       /* 1.5 */
   float ssim_k1, ssim_k2; /* 0.01, 0.03 */
-  float ssim_range; /* dynamic range L, 1.0 */
+  float ssim_range;       /* dynamic range L, 1.0 */
 } kpcn_loss_settings;
 
 void kpcn_loss_settings_defaults(kpcn_loss_settings *s);
@@ -74,7 +74,7 @@ typedef struct kpcn_rng {
 } kpcn_rng;
 void kpcn_rng_seed(kpcn_rng *r, uint64_t seed);
 uint64_t kpcn_rng_next(kpcn_rng *r);
-double kpcn_rng_uniform(kpcn_rng *r);           /* [0, 1) with 53 bits */
+double kpcn_rng_uniform(kpcn_rng *r);             /* [0, 1) with 53 bits */
 uint32_t kpcn_rng_below(kpcn_rng *r, uint32_t n); /* [0, n) */
 
 /* Xavier/Glorot uniform init: U(-a, a), a = sqrt(6/(fan_in+fan_out)); for a k x k conv
@@ -88,14 +88,14 @@ kpcn_status kpcn_xavier_uniform(float *w, size_t count, int fan_in, int fan_out,
  * exponent is floored — TensorFlow's exponential_decay, which the seed used).
  * clip_norm > 0: gradients are scaled by min(1, clip_norm / ||g||_2) over ALL blocks. */
 typedef struct kpcn_adam_settings {
-  double lr;          /* 1e-3 (seed) */
-  double beta1;       /* 0.9 */
-  double beta2;       /* 0.999 */
-  double eps;         /* 1e-8 */
-  double lr_decay;    /* 0.96 (seed §6) */
+  double lr;           /* 1e-3 (seed) */
+  double beta1;        /* 0.9 */
+  double beta2;        /* 0.999 */
+  double eps;          /* 1e-8 */
+  double lr_decay;     /* 0.96 (seed §6) */
   int64_t decay_every; /* 100000 (seed §6.4); <= 0 disables decay */
-  int staircase;      /* 0 */
-  double clip_norm;   /* 0 = off */
+  int staircase;       /* 0 */
+  double clip_norm;    /* 0 = off */
 } kpcn_adam_settings;
 
 void kpcn_adam_settings_defaults(kpcn_adam_settings *s);
@@ -116,8 +116,8 @@ kpcn_status kpcn_adam_create(kpcn_adam **out, const kpcn_adam_settings *s, size_
 void kpcn_adam_destroy(kpcn_adam *a);
 /* One update of all blocks; grad_norm (may be NULL) receives the pre-clip L2 norm.
  * Fails with KPCN_ERR_NONFINITE when the gradient norm is not finite (nothing updated). */
-kpcn_status kpcn_adam_step(kpcn_adam *a, const kpcn_param_block *blocks, int nblocks,
-                           int nthreads, double *grad_norm);
+kpcn_status kpcn_adam_step(kpcn_adam *a, const kpcn_param_block *blocks, int nblocks, int nthreads,
+                           double *grad_norm);
 /* Global L2 norm of the gradients (fixed-order reduction). */
 double kpcn_grad_norm(const kpcn_param_block *blocks, int nblocks, int nthreads);
 /* State access for checkpoints: moments are `count` floats each, in block order. */
@@ -178,9 +178,9 @@ typedef struct kpcn_train_progress {
   int stage;           /* 1 or 2 */
   double loss;         /* mean training loss over the last log interval */
   double lr;
-  double its_per_s;    /* over the last log interval */
+  double its_per_s; /* over the last log interval */
   double elapsed_s, eta_s;
-  int has_val;         /* 1 when validation ran at this iteration: */
+  int has_val;                           /* 1 when validation ran at this iteration: */
   double val_relmse, val_ssim, val_psnr; /* means over the validation images */
 } kpcn_train_progress;
 
@@ -189,34 +189,34 @@ typedef struct kpcn_train_progress {
 typedef int (*kpcn_train_progress_fn)(void *user, const kpcn_train_progress *p);
 
 typedef struct kpcn_train_settings {
-  const char *store_path;   /* patch store (.kps), required */
-  kpcn_arch arch;           /* architecture (inputs are set by the trainer); from a preset */
-  const char *init_model;   /* optional model file to start from (fine-tuning) */
-  kpcn_loss_kind loss1;     /* stage-1 loss, default l1 (seed §4.4) */
-  kpcn_loss_kind loss2;     /* stage-2 loss, default l1 (seed fine-tunes with ssim) */
-  kpcn_loss_settings loss;  /* defaults */
-  int loss_margin;          /* 0 */
-  kpcn_adam_settings adam;  /* defaults; decay_every default 100000 */
+  const char *store_path;  /* patch store (.kps), required */
+  kpcn_arch arch;          /* architecture (inputs are set by the trainer); from a preset */
+  const char *init_model;  /* optional model file to start from (fine-tuning) */
+  kpcn_loss_kind loss1;    /* stage-1 loss, default l1 (seed §4.4) */
+  kpcn_loss_kind loss2;    /* stage-2 loss, default l1 (seed fine-tunes with ssim) */
+  kpcn_loss_settings loss; /* defaults */
+  int loss_margin;         /* 0 */
+  kpcn_adam_settings adam; /* defaults; decay_every default 100000 */
   kpcn_augment_draw_settings augment; /* defaults of augment.h (colour swap, mirror, rot90) */
-  int crop_jitter;          /* 1: random crop offset (shift); 0: centred crop */
-  int batch;                /* 16 */
-  int patch;                /* P, 64 (<= store patch size) */
-  int64_t iters;            /* total iterations, 1000 */
-  int64_t stage1_iters;     /* stage-1 iterations, default 0.6 * iters (seed 600k/1M) */
-  int nthreads;             /* 0 = all cores */
-  uint64_t seed;            /* 1 */
-  int64_t log_every;        /* CSV row every N iterations, 10 */
-  int64_t val_every;        /* 0 = only at the end */
-  int64_t ckpt_every;       /* 0 = only at the end / on stop */
-  double time_limit_s;      /* 0 = none: stop cleanly, checkpoint, stopped = 1 */
-  const char *out_path;     /* final model, required (written atomically) */
-  const char *ckpt_path;    /* NULL = "<out_path>.ckpt" */
-  const char *csv_path;     /* NULL = "<out_path>.csv"; "" = none */
-  const char *plot_path;    /* NULL = "<out_path>.png"; "" = none */
-  int resume;               /* 1: continue from ckpt_path (must exist) */
-  int nval;                 /* validation image pairs (full images) */
-  const char *const *val_noisy; /* noisy AOV EXRs */
-  const char *const *val_ref;   /* reference EXRs (color R G B used) */
+  int crop_jitter;                    /* 1: random crop offset (shift); 0: centred crop */
+  int batch;                          /* 16 */
+  int patch;                          /* P, 64 (<= store patch size) */
+  int64_t iters;                      /* total iterations, 1000 */
+  int64_t stage1_iters;               /* stage-1 iterations, default 0.6 * iters (seed 600k/1M) */
+  int nthreads;                       /* 0 = all cores */
+  uint64_t seed;                      /* 1 */
+  int64_t log_every;                  /* CSV row every N iterations, 10 */
+  int64_t val_every;                  /* 0 = only at the end */
+  int64_t ckpt_every;                 /* 0 = only at the end / on stop */
+  double time_limit_s;                /* 0 = none: stop cleanly, checkpoint, stopped = 1 */
+  const char *out_path;               /* final model, required (written atomically) */
+  const char *ckpt_path;              /* NULL = "<out_path>.ckpt" */
+  const char *csv_path;               /* NULL = "<out_path>.csv"; "" = none */
+  const char *plot_path;              /* NULL = "<out_path>.png"; "" = none */
+  int resume;                         /* 1: continue from ckpt_path (must exist) */
+  int nval;                           /* validation image pairs (full images) */
+  const char *const *val_noisy;       /* noisy AOV EXRs */
+  const char *const *val_ref;         /* reference EXRs (color R G B used) */
   kpcn_log_fn log;
   void *log_user;
   kpcn_train_progress_fn progress;
@@ -257,6 +257,11 @@ double kpcn_trainer_flops_per_iter(const kpcn_trainer *t);
 /* Writes the training-curve plot from a CSV written by the trainer (any columns named
  * loss, val_relmse, val_ssim of the header are drawn against iter). */
 kpcn_status kpcn_train_plot_csv(const char *csv_path, const char *png_path, const char *title);
+/* One column (ycol, e.g. "loss", "val_relmse"; "val_ssim" is drawn as 1 - SSIM) of several
+ * runs' CSVs against xcol ("iter" or "elapsed_s"), one labelled line per run (<= 8). */
+kpcn_status kpcn_train_plot_compare(const char *png_path, const char *title, const char *xcol,
+                                    const char *ycol, int log_y, int nruns,
+                                    const char *const *labels, const char *const *csv_paths);
 
 #ifdef __cplusplus
 }

@@ -53,7 +53,8 @@ kpcn_status kpcn_fail_context(const char *fmt, ...) {
   vsnprintf(prefix, sizeof prefix, fmt, ap);
   va_end(ap);
   memcpy(old, g_msg, sizeof old);
-  snprintf(g_msg, sizeof g_msg, "%s: %s", prefix, old);
+  /* Bounded precisions keep the result inside g_msg (and -Wformat-truncation quiet). */
+  snprintf(g_msg, sizeof g_msg, "%.1000s: %.1000s", prefix, old);
   return g_status == KPCN_OK ? KPCN_ERR_INTERNAL : g_status;
 }
 

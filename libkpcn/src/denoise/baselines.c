@@ -105,63 +105,17 @@ static inline float color_dist(const guide *g, size_t i, size_t j) {
   return (s * (1.0f / 3.0f) - (vi + vmin)) / (1e-10f + g->k2 * (vi + vj));
 }
 
-/* Rows are processed in bands so the progress callback is called between bands. */
-#define BAND 32
-
-kpcn_status kpcn_baseline_bilateral(const kpcn_aov_set *aov, const kpcn_baseline_params *p,
-                                    float *out, int nthreads, kpcn_progress *prog) {
-  guide g;
-  KPCN_TRY(guide_init(&g, aov, p, "bilateral filter"));
-  if (!(p->sigma_spatial > 0.0f))
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "bilateral filter: sigma_spatial must be > 0");
-  const int W = g.W, H = g.H, r = p->radius, nt = kpcn_resolve_threads(nthreads);
-  const size_t P = (size_t)W * H;
-  const float is = 0.5f / (p->sigma_spatial * p->sigma_spatial);
-  for (int y0 = 0; y0 < H; y0 += BAND) {
-    if (kpcn_progress_report(prog, (double)y0 / H))
-      return kpcn_fail(KPCN_ERR_CANCELLED, "bilateral filter: cancelled by the progress callback");
-    const int y1 = y0 + BAND < H ? y0 + BAND : H;
-#pragma omp parallel for num_threads(nt) schedule(dynamic, 1)
-    for (int y = y0; y < y1; y++) {
-      for (int x = 0; x < W; x++) {
-        const size_t i = (size_t)y * W + x;
-        double acc[3] = {0, 0, 0}, ws = 0.0;
-        for (int qy = y - r; qy <= y + r; qy++) {
-          if (qy < 0 || qy >= H) continue;
-          for (int qx = x - r; qx <= x + r; qx++) {
-            if (qx < 0 || qx >= W) continue;
-            const size_t j = (size_t)qy * W + qx;
-            float dc = color_dist(&g, i, j);
-            float e = (float)((qx - x) * (qx - x) + (qy - y) * (qy - y)) * is +
-                      (dc > 0.0f ? dc : 0.0f) + feat_dist(&g, i, j);
-            float w = expf(-e);
-            ws += w;
-            for (int c = 0; c < 3; c++)
-              acc[c] += w * g.c[c][j];
-          }
-        }
-        for (int c = 0; c < 3; c++)
-          out[c * P + i] = (float)(acc[c] / ws); /* ws >= 1 (self) */
-      }
-    }
-  }
-  kpcn_progress_report(prog, 1.0);
-  return KPCN_OK;
-}
-
-/* NL-means over square tiles: for every offset o of the search window the per-pixel
- * colour distance image of the tile (plus the patch margin) is box-filtered with the
- * patch size, which makes the patch distance O(1) per pixel and offset. */
+/* Both filters run offset-major over square tiles: for every offset o of the search
+ * window, the per-pixel colour distance image of the tile (plus the patch margin) is
+ * computed in contiguous, vectorisable loops and box-filtered with the patch size (NL-means;
+ * f = 0 for the bilateral filter), which makes the patch distance O(1) per pixel and
+ * offset. Each output pixel is accumulated by one thread in a fixed offset order. */
 #define NLM_TILE 64
 
-kpcn_status kpcn_baseline_nlmeans(const kpcn_aov_set *aov, const kpcn_baseline_params *p,
-                                  float *out, int nthreads, kpcn_progress *prog) {
-  guide g;
-  KPCN_TRY(guide_init(&g, aov, p, "non-local means"));
-  if (p->patch_radius < 0 || p->patch_radius > 16)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "non-local means: patch_radius %d outside [0, 16]",
-                     p->patch_radius);
-  const int W = g.W, H = g.H, r = p->radius, f = p->patch_radius;
+static kpcn_status offset_filter(const guide *gp, int r, int f, float is, const char *what,
+                                 float *out, int nthreads, kpcn_progress *prog) {
+  const guide g = *gp;
+  const int W = g.W, H = g.H;
   const int nt = kpcn_resolve_threads(nthreads);
   const size_t P = (size_t)W * H;
   const int tx = (W + NLM_TILE - 1) / NLM_TILE, ty = (H + NLM_TILE - 1) / NLM_TILE;
@@ -169,7 +123,7 @@ kpcn_status kpcn_baseline_nlmeans(const kpcn_aov_set *aov, const kpcn_baseline_p
   const int M = NLM_TILE + 2 * f; /* tile plus patch margin */
   /* Per-thread scratch: distance image, row-summed image, accumulators. */
   const size_t per = (size_t)M * M * 2 + (size_t)NLM_TILE * NLM_TILE * 4;
-  float *scratch = kpcn_aligned_alloc(per * (size_t)nt * sizeof(float), "nlmeans scratch");
+  float *scratch = kpcn_aligned_alloc(per * (size_t)nt * sizeof(float), "baseline filter scratch");
   if (!scratch) return KPCN_ERR_OUT_OF_MEMORY;
   int done = 0, cancelled = 0;
 #pragma omp parallel num_threads(nt)
@@ -197,6 +151,7 @@ kpcn_status kpcn_baseline_nlmeans(const kpcn_aov_set *aov, const kpcn_baseline_p
       memset(acc, 0, sizeof(float) * 4 * (size_t)NLM_TILE * NLM_TILE);
       for (int oy = -r; oy <= r; oy++) {
         for (int ox = -r; ox <= r; ox++) {
+          const float sp = (float)(ox * ox + oy * oy) * is; /* bilateral spatial term */
           /* distance image over the margin region; partner coordinates clamped */
           for (int yy = 0; yy < mh; yy++) {
             const int y = my0 + yy;
@@ -236,7 +191,7 @@ kpcn_status kpcn_baseline_nlmeans(const kpcn_aov_set *aov, const kpcn_baseline_p
                 sum += R[k * mw + xx];
               const float dp = sum / (float)((b - a + 1) * (cb - ca + 1));
               const size_t i = (size_t)y * W + x, j = (size_t)qy * W + qx;
-              const float w = expf(-((dp > 0.0f ? dp : 0.0f) + feat_dist(&g, i, j)));
+              const float w = expf(-(sp + (dp > 0.0f ? dp : 0.0f) + feat_dist(&g, i, j)));
               float *ac = acc + 4 * ((size_t)(y - y0) * NLM_TILE + (x - x0));
               ac[0] += w * g.c[0][j];
               ac[1] += w * g.c[1][j];
@@ -265,6 +220,28 @@ kpcn_status kpcn_baseline_nlmeans(const kpcn_aov_set *aov, const kpcn_baseline_p
   }
   kpcn_aligned_free(scratch);
   if (cancelled)
-    return kpcn_fail(KPCN_ERR_CANCELLED, "non-local means: cancelled by the progress callback");
+    return kpcn_fail(KPCN_ERR_CANCELLED, "%s: cancelled by the progress callback", what);
   return KPCN_OK;
+}
+
+kpcn_status kpcn_baseline_bilateral(const kpcn_aov_set *aov, const kpcn_baseline_params *p,
+                                    float *out, int nthreads, kpcn_progress *prog) {
+  guide g;
+  KPCN_TRY(guide_init(&g, aov, p, "bilateral filter"));
+  if (!(p->sigma_spatial > 0.0f))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "bilateral filter: sigma_spatial must be > 0");
+  /* a bilateral filter is the offset filter with 1x1 "patches" plus the spatial term */
+  return offset_filter(&g, p->radius, 0, 0.5f / (p->sigma_spatial * p->sigma_spatial),
+                       "bilateral filter", out, nthreads, prog);
+}
+
+kpcn_status kpcn_baseline_nlmeans(const kpcn_aov_set *aov, const kpcn_baseline_params *p,
+                                  float *out, int nthreads, kpcn_progress *prog) {
+  guide g;
+  KPCN_TRY(guide_init(&g, aov, p, "non-local means"));
+  if (p->patch_radius < 0 || p->patch_radius > 16)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "non-local means: patch_radius %d outside [0, 16]",
+                     p->patch_radius);
+  return offset_filter(&g, p->radius, p->patch_radius, 0.0f, "non-local means", out, nthreads,
+                       prog);
 }

@@ -37,6 +37,7 @@ static kpcn_status add_attr(kpcn_exr_write_options *opt, const char *name, kpcn_
 kpcn_status kpcn_exr_options_add_string(kpcn_exr_write_options *opt, const char *name,
                                         const char *value) {
   kpcn_exr_attr *a;
+  if (!name) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "EXR attribute: NULL name");
   if (!value) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "EXR attribute '%s': NULL value", name);
   if (strlen(value) >= sizeof a->svalue)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "EXR attribute '%s': value longer than %zu bytes",

@@ -64,6 +64,7 @@ struct kpcn_net {
   void *scratch;
   dnnl_memory_t scratch_mem;
   size_t bytes;
+  int n_slow;
   kpcn_net_stats st;
   char impl[KPCN_NN_MAX_LAYERS][64];
 };
@@ -142,6 +143,10 @@ static kpcn_status make_pd(kpcn_net *n, dnnl_primitive_desc_t *pd, const void *d
                      dnnl_status2str(d));
   size_t s = pd_scratch(*pd);
   if (s > *scratch) *scratch = s;
+  const char *impl = NULL;
+  if (dnnl_primitive_desc_query(*pd, dnnl_query_impl_info_str, 0, &impl) == dnnl_success &&
+      impl && !strncmp(impl, "ref", 3))
+    n->n_slow++;
   return KPCN_OK;
 }
 
@@ -172,7 +177,11 @@ static kpcn_status build_layer(kpcn_net *n, int l, const dnnl_memory_desc_t *src
   dnnl_memory_desc_t wany, bmd, dany;
   DN(dnnl_memory_desc_init_by_tag(&wany, 4, wd, adt, dnnl_format_tag_any));
   DN(dnnl_memory_desc_init_by_tag(&bmd, 1, bd, dnnl_f32, dnnl_x));
-  DN(dnnl_memory_desc_init_by_tag(&dany, 4, dd, ddt, dnnl_format_tag_any));
+  /* One fixed activation layout for every layer: with "any" oneDNN may pick different
+   * layouts for consecutive layers and then find no optimized kernel for the pair. */
+  dnnl_format_tag_t tag = n->o.layout == KPCN_LAYOUT_NHWC ? dnnl_nhwc : dnnl_nChw16c;
+  if (n->o.layout == KPCN_LAYOUT_AUTO) tag = bf ? dnnl_nhwc : dnnl_nChw16c;
+  DN(dnnl_memory_desc_init_by_tag(&dany, 4, dd, ddt, tag));
   dnnl_convolution_desc_t cd;
   DN(dnnl_dilated_convolution_forward_desc_init(
       &cd, n->o.training ? dnnl_forward_training : dnnl_forward_inference,
@@ -369,6 +378,9 @@ kpcn_status kpcn_net_create(kpcn_model *m, kpcn_branch b, const kpcn_net_options
   if (o->precision != KPCN_PREC_F32 && o->precision != KPCN_PREC_BF16)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_create: unknown precision %d",
                      (int)o->precision);
+  if ((int)o->layout < 0 || (int)o->layout > KPCN_LAYOUT_NHWC)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_create: unknown layout %d",
+                     (int)o->layout);
   if (o->training && o->precision != KPCN_PREC_F32)
     return kpcn_fail(KPCN_ERR_UNSUPPORTED, "kpcn_net_create: bf16 is inference-only");
   kpcn_net *n = kpcn_calloc(1, sizeof *n, "kpcn_net");
@@ -550,6 +562,7 @@ void kpcn_net_get_stats(const kpcn_net *n, kpcn_net_stats *s) {
   if (!n || !s) return;
   *s = n->st;
   s->bytes = n->bytes;
+  s->n_slow = n->n_slow;
 }
 
 const char *kpcn_net_impl_name(const kpcn_net *n, int l) {

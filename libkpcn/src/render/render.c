@@ -84,6 +84,7 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   ctx.color_only = st.color_only;
   ctx.seed = (uint64_t)st.seed;
   kpcn_filter_table_init(&ctx.filter, scene->cam.filter);
+  kpcn_sampler_init();
 
   kpcn_aov_set *set = NULL;
   KPCN_TRY(kpcn_aov_create(&set, cw, chh));

@@ -29,12 +29,10 @@ static inline uint32_t kpcn_hash_combine(uint32_t seed, uint32_t v) {
   return seed ^ (kpcn_hash32(v) + 0x9e3779b9U + (seed << 6) + (seed >> 2));
 }
 
+extern uint8_t kpcn_rev8_table[256];
 static inline uint32_t kpcn_reverse_bits(uint32_t x) {
-  x = ((x >> 1) & 0x55555555U) | ((x & 0x55555555U) << 1);
-  x = ((x >> 2) & 0x33333333U) | ((x & 0x33333333U) << 2);
-  x = ((x >> 4) & 0x0F0F0F0FU) | ((x & 0x0F0F0F0FU) << 4);
-  x = ((x >> 8) & 0x00FF00FFU) | ((x & 0x00FF00FFU) << 8);
-  return (x >> 16) | (x << 16);
+  return ((uint32_t)kpcn_rev8_table[x & 255U] << 24) | ((uint32_t)kpcn_rev8_table[(x >> 8) & 255U] << 16) |
+         ((uint32_t)kpcn_rev8_table[(x >> 16) & 255U] << 8) | (uint32_t)kpcn_rev8_table[x >> 24];
 }
 
 /* Laine-Karras style hash permutation, improved constants from Burley 2020. */
@@ -51,15 +49,22 @@ static inline uint32_t kpcn_nested_scramble(uint32_t x, uint32_t seed) {
   return kpcn_reverse_bits(kpcn_lk_permute(kpcn_reverse_bits(x), seed));
 }
 
-/* Sobol dimension 1 (primitive polynomial x + 1): direction v_0 = 2^31, v_k = v_{k-1} ^ v_{k-1}>>1. */
-static inline uint32_t kpcn_sobol1(uint32_t index) {
-  uint32_t r = 0, v = 0x80000000U;
-  while (index) {
-    if (index & 1U) r ^= v;
-    index >>= 1;
-    v ^= v >> 1;
-  }
-  return r;
+/* Sobol dimension 1 (primitive polynomial x + 1): direction v_0 = 2^31, v_k = v_{k-1} ^ v_{k-1}>>1.
+ * The shuffled indices are full 32-bit numbers, so the generator matrix is applied a byte at a
+ * time through tables holding the BIT-REVERSED direction numbers (what the Owen scramble works
+ * on); filled once by kpcn_sampler_init. */
+extern uint32_t kpcn_sobol1_rev_table[4][256];
+void kpcn_sampler_init(void);
+
+static inline uint32_t kpcn_sobol1_reversed(uint32_t index) {
+  return kpcn_sobol1_rev_table[0][index & 255U] ^ kpcn_sobol1_rev_table[1][(index >> 8) & 255U] ^
+         kpcn_sobol1_rev_table[2][(index >> 16) & 255U] ^ kpcn_sobol1_rev_table[3][index >> 24];
+}
+
+/* Cheap independent uniform for decisions that need no stratification (Russian roulette). */
+static inline float kpcn_sampler_random(const kpcn_sampler *s, uint32_t salt) {
+  return (float)(kpcn_hash32(kpcn_hash_combine(s->pixel_seed ^ 0x5bd1e995U, s->index * 0x9e3779b9U + salt)) >> 8) *
+         (1.0f / 16777216.0f);
 }
 
 static inline void kpcn_sampler_start(kpcn_sampler *s, uint64_t seed, uint32_t px, uint32_t py,
@@ -75,12 +80,14 @@ static inline void kpcn_sampler_start(kpcn_sampler *s, uint64_t seed, uint32_t p
 
 static inline float kpcn_u32_to_unit(uint32_t x) { return (float)(x >> 8) * (1.0f / 16777216.0f); }
 
+/* Nested uniform scrambling is rev(LK(rev(x))); working in the reversed domain saves the
+ * inner reversals: dimension 0 of Sobol is rev(i), dimension 1 comes reversed from the table. */
 static inline void kpcn_sampler_2d(kpcn_sampler *s, float *u, float *v) {
   uint32_t seed = kpcn_hash_combine(s->pixel_seed, s->pair++);
-  uint32_t i = kpcn_nested_scramble(s->index, seed);
-  uint32_t x = kpcn_reverse_bits(i), y = kpcn_sobol1(i);
-  x = kpcn_nested_scramble(x, kpcn_hash32(seed ^ 0x68bc21ebU));
-  y = kpcn_nested_scramble(y, kpcn_hash32(seed ^ 0x02e5be93U));
+  uint32_t ir = kpcn_lk_permute(kpcn_reverse_bits(s->index), seed); /* reversed shuffled index */
+  uint32_t i = kpcn_reverse_bits(ir);
+  uint32_t x = kpcn_reverse_bits(kpcn_lk_permute(i, kpcn_hash32(seed ^ 0x68bc21ebU)));
+  uint32_t y = kpcn_reverse_bits(kpcn_lk_permute(kpcn_sobol1_reversed(i), kpcn_hash32(seed ^ 0x02e5be93U)));
   *u = kpcn_u32_to_unit(x);
   *v = kpcn_u32_to_unit(y);
 }

@@ -37,7 +37,8 @@ kpcn_status kt_batch_setup(kpcn_trainer *t) {
                      t->S, t->store_path);
   for (int b = 0; b < KPCN_BUF_COUNT; b++) {
     t->ch_var[b] = -1;
-    for (int c = 0; c < 3; c++) t->ch_buf[b][c] = -1;
+    for (int c = 0; c < 3; c++)
+      t->ch_buf[b][c] = -1;
   }
   for (int i = 0; i < N_NEEDED; i++) {
     kpcn_buffer b = k_needed[i];
@@ -64,8 +65,7 @@ kpcn_status kt_batch_setup(kpcn_trainer *t) {
   t->ntrain = 0;
   /* The store has no record-only accessor, so the split is read through a full patch
    * copy once per patch at setup (the cost of reading the store once). */
-  float *tmp = any_train ? kpcn_alloc((size_t)t->nch * t->S * t->S * sizeof(float), "patch")
-                         : NULL;
+  float *tmp = any_train ? kpcn_alloc((size_t)t->nch * t->S * t->S * sizeof(float), "patch") : NULL;
   if (any_train && !tmp) return kpcn_last_status();
   for (uint64_t i = 0; i < n; i++) {
     if (!any_train) {
@@ -85,9 +85,8 @@ kpcn_status kt_batch_setup(kpcn_trainer *t) {
   if (t->ntrain == 0)
     return kpcn_fail(KPCN_ERR_FORMAT, "patch store '%s' has no training patches", t->store_path);
   kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_INFO,
-           "patch store '%s': %llu patches (%llu for training), %dx%d, %d channels",
-           t->store_path, (unsigned long long)n, (unsigned long long)t->ntrain, t->S, t->S,
-           t->nch);
+           "patch store '%s': %llu patches (%llu for training), %dx%d, %d channels", t->store_path,
+           (unsigned long long)n, (unsigned long long)t->ntrain, t->S, t->S, t->nch);
   return KPCN_OK;
 }
 

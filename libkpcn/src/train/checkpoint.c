@@ -108,9 +108,11 @@ kpcn_status kt_checkpoint_save(kpcn_trainer *t, const char *path) {
     st = kpcn_fail(KPCN_ERR_IO, "cannot write checkpoint '%s': %s", path, strerror(errno));
   } else {
     unsigned char len[8];
-    for (int i = 0; i < 8; i++) len[i] = (unsigned char)((uint64_t)padded >> (8 * i));
+    for (int i = 0; i < 8; i++)
+      len[i] = (unsigned char)((uint64_t)padded >> (8 * i));
     int ok = fwrite(len, 1, 8, f) == 8 && fwrite(hdr, 1, hl, f) == hl;
-    for (size_t i = hl; i < padded && ok; i++) ok = fputc(' ', f) != EOF;
+    for (size_t i = hl; i < padded && ok; i++)
+      ok = fputc(' ', f) != EOF;
     for (int i = 0; i < n && ok; i++) /* little-endian host (x86-64) */
       ok = fwrite(ts[i].data, 4, ts[i].count, f) == ts[i].count;
     if (fclose(f) != 0) ok = 0;
@@ -137,16 +139,16 @@ static kpcn_status meta_expect(cJSON *meta, const char *key, long long want, con
   char *end = NULL;
   long long v = s ? strtoll(s, &end, 10) : 0;
   if (!s || !end || *end)
-    return kpcn_fail(KPCN_ERR_FORMAT, "checkpoint '%s': metadata '%s' missing or malformed",
-                     path, key);
+    return kpcn_fail(KPCN_ERR_FORMAT, "checkpoint '%s': metadata '%s' missing or malformed", path,
+                     key);
   if (got) {
     *got = v;
     return KPCN_OK;
   }
   if (v != want)
     return kpcn_fail(KPCN_ERR_FORMAT,
-                     "checkpoint '%s' was written with %s = %lld, this run uses %lld", path, key,
-                     v, want);
+                     "checkpoint '%s' was written with %s = %lld, this run uses %lld", path, key, v,
+                     want);
   return KPCN_OK;
 }
 
@@ -168,10 +170,11 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
     goto done;                                                                                     \
   } while (0)
   if (fread(len8, 1, 8, f) != 8) BAD("checkpoint '%s' is truncated (no header length)", path);
-  for (int i = 0; i < 8; i++) hl |= (uint64_t)len8[i] << (8 * i);
+  for (int i = 0; i < 8; i++)
+    hl |= (uint64_t)len8[i] << (8 * i);
   if (hl == 0 || hl > fsize - 8 || hl > (64u << 20))
-    BAD("checkpoint '%s': header length %" PRIu64 " does not fit the %" PRIu64 "-byte file",
-        path, hl, fsize);
+    BAD("checkpoint '%s': header length %" PRIu64 " does not fit the %" PRIu64 "-byte file", path,
+        hl, fsize);
   hdr = kpcn_alloc(hl + 1, "checkpoint header");
   if (!hdr) {
     st = kpcn_last_status();
@@ -191,8 +194,7 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
   int same = arch && mine && strcmp(arch, mine) == 0;
   free(mine);
   if (!same)
-    BAD("checkpoint '%s' holds a different architecture than this run (kpcn.architecture)",
-        path);
+    BAD("checkpoint '%s' holds a different architecture than this run (kpcn.architecture)", path);
   const char *seed = meta_str(meta, "train.seed");
   if (!seed || strtoull(seed, NULL, 10) != t->s.seed)
     BAD("checkpoint '%s' was written with train.seed = %s, this run uses %" PRIu64, path,
@@ -228,7 +230,8 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
     double b0 = cJSON_GetArrayItem(of, 0)->valuedouble, b1 = cJSON_GetArrayItem(of, 1)->valuedouble;
     if (b0 < 0 || b1 - b0 != (double)ts[i].count * 4 || data0 + b1 > (double)fsize)
       BAD("checkpoint '%s': tensor '%s' offsets [%.0f, %.0f) do not match %zu floats in the "
-          "file", path, ts[i].name, b0, b1, ts[i].count);
+          "file",
+          path, ts[i].name, b0, b1, ts[i].count);
     if (fseek(f, (long)(data0 + (uint64_t)b0), SEEK_SET) != 0 ||
         fread(ts[i].data, 4, ts[i].count, f) != ts[i].count)
       BAD("checkpoint '%s' is truncated (tensor '%s')", path, ts[i].name);

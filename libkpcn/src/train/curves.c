@@ -34,62 +34,122 @@ static double field(char **f, int n, int col) {
   return end == f[col] ? NAN : v;
 }
 
-kpcn_status kpcn_train_plot_csv(const char *csv_path, const char *png_path, const char *title) {
-  if (!csv_path || !png_path)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_train_plot_csv: NULL path");
-  FILE *in = fopen(csv_path, "r");
-  if (!in) return kpcn_fail(KPCN_ERR_IO, "cannot open CSV '%s': %s", csv_path, strerror(errno));
+/* Reads columns xcol and ycols[0..ny-1] of a trainer CSV into *out (layout: x then each y,
+ * *n values each, malloc'ed). Missing cells are NaN; a missing column is an error. */
+static kpcn_status read_columns(const char *path, const char *xcol, const char *const *ycols,
+                                int ny, double **out, size_t *n_out) {
+  FILE *in = fopen(path, "r");
+  if (!in) return kpcn_fail(KPCN_ERR_IO, "cannot open CSV '%s': %s", path, strerror(errno));
   char line[2048], *f[32];
   if (!fgets(line, sizeof line, in)) {
     fclose(in);
-    return kpcn_fail(KPCN_ERR_FORMAT, "CSV '%s' is empty", csv_path);
+    return kpcn_fail(KPCN_ERR_FORMAT, "CSV '%s' is empty", path);
   }
-  int nf = split(line, f, 32), ci = -1, cl = -1, cr = -1, cs = -1;
-  for (int i = 0; i < nf; i++) {
-    if (!strcmp(f[i], "iter")) ci = i;
-    if (!strcmp(f[i], "loss")) cl = i;
-    if (!strcmp(f[i], "val_relmse")) cr = i;
-    if (!strcmp(f[i], "val_ssim")) cs = i;
+  int nf = split(line, f, 32), col[9];
+  for (int k = 0; k <= ny; k++) {
+    const char *want = k == 0 ? xcol : ycols[k - 1];
+    col[k] = -1;
+    for (int i = 0; i < nf; i++)
+      if (!strcmp(f[i], want)) col[k] = i;
+    if (col[k] < 0) {
+      fclose(in);
+      return kpcn_fail(KPCN_ERR_FORMAT, "CSV '%s' has no column '%s'", path, want);
+    }
   }
-  if (ci < 0) {
+  size_t cap = 256, n = 0, stride = (size_t)ny + 1;
+  double *rows = kpcn_alloc(cap * stride * sizeof(double), "plot data");
+  if (!rows) {
     fclose(in);
-    return kpcn_fail(KPCN_ERR_FORMAT, "CSV '%s' has no 'iter' column", csv_path);
+    return kpcn_last_status();
   }
-  size_t cap = 1024, n = 0;
-  double *buf = kpcn_alloc(cap * 4 * sizeof(double), "plot data");
-  kpcn_status st = buf ? KPCN_OK : kpcn_last_status();
-  while (st == KPCN_OK && fgets(line, sizeof line, in)) {
+  while (fgets(line, sizeof line, in)) {
     int k = split(line, f, 32);
     if (n == cap) {
-      double *nb = realloc(buf, cap * 8 * sizeof(double));
-      if (!nb) {
-        st = kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "plot data");
-        break;
+      double *nr = realloc(rows, 2 * cap * stride * sizeof(double));
+      if (!nr) {
+        free(rows);
+        fclose(in);
+        return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "plot data of '%s'", path);
       }
-      /* re-layout: 4 arrays of cap -> 4 arrays of 2cap */
-      for (int a = 3; a >= 1; a--) memmove(nb + a * 2 * cap, nb + a * cap, cap * sizeof(double));
-      buf = nb, cap *= 2;
+      rows = nr, cap *= 2;
     }
-    buf[n] = field(f, k, ci);
-    buf[cap + n] = field(f, k, cl);
-    buf[2 * cap + n] = field(f, k, cr);
-    double s = field(f, k, cs);
-    buf[3 * cap + n] = 1.0 - s;
+    for (size_t c = 0; c < stride; c++)
+      rows[n * stride + c] = field(f, k, col[c]);
     n++;
   }
   fclose(in);
+  /* transpose to column blocks */
+  double *o = kpcn_alloc((n ? n : 1) * stride * sizeof(double), "plot data");
+  if (!o) {
+    free(rows);
+    return kpcn_last_status();
+  }
+  for (size_t r = 0; r < n; r++)
+    for (size_t c = 0; c < stride; c++)
+      o[c * n + r] = rows[r * stride + c];
+  free(rows);
+  *out = o;
+  *n_out = n;
+  return KPCN_OK;
+}
+
+kpcn_status kpcn_train_plot_csv(const char *csv_path, const char *png_path, const char *title) {
+  if (!csv_path || !png_path)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_train_plot_csv: NULL path");
+  static const char *cols[3] = {"loss", "val_relmse", "val_ssim"};
+  double *d;
+  size_t n;
+  KPCN_TRY(read_columns(csv_path, "iter", cols, 3, &d, &n));
+  for (size_t i = 0; i < n; i++)
+    d[3 * n + i] = 1.0 - d[3 * n + i]; /* 1 - SSIM */
+  kpcn_plot_series ser[3] = {{"train loss", d, d + n, (int)n},
+                             {"val relmse", d, d + 2 * n, (int)n},
+                             {"val 1-ssim", d, d + 3 * n, (int)n}};
+  kpcn_plot_settings ps;
+  kpcn_plot_settings_defaults(&ps);
+  ps.log_y = 1;
+  ps.title = title;
+  ps.xlabel = "iteration";
+  ps.ylabel = "loss / error";
+  kpcn_status st = kpcn_plot_png(png_path, &ps, ser, 3);
+  free(d);
+  return st;
+}
+
+kpcn_status kpcn_train_plot_compare(const char *png_path, const char *title, const char *xcol,
+                                    const char *ycol, int log_y, int nruns,
+                                    const char *const *labels, const char *const *csv_paths) {
+  if (!png_path || !xcol || !ycol || nruns < 1 || nruns > KPCN_PLOT_MAX_SERIES || !labels ||
+      !csv_paths)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "kpcn_train_plot_compare: bad arguments (%d runs, at most %d)", nruns,
+                     KPCN_PLOT_MAX_SERIES);
+  double *d[KPCN_PLOT_MAX_SERIES] = {0};
+  kpcn_plot_series ser[KPCN_PLOT_MAX_SERIES];
+  kpcn_status st = KPCN_OK;
+  for (int r = 0; r < nruns && st == KPCN_OK; r++) {
+    size_t n = 0;
+    st = read_columns(csv_paths[r], xcol, &ycol, 1, &d[r], &n);
+    if (st == KPCN_OK) {
+      if (!strcmp(ycol, "val_ssim"))
+        for (size_t i = 0; i < n; i++)
+          d[r][n + i] = 1.0 - d[r][n + i];
+      ser[r].label = labels[r];
+      ser[r].x = d[r];
+      ser[r].y = d[r] + n;
+      ser[r].n = (int)n;
+    }
+  }
   if (st == KPCN_OK) {
-    kpcn_plot_series ser[3] = {{"train loss", buf, buf + cap, (int)n},
-                               {"val relmse", buf, buf + 2 * cap, (int)n},
-                               {"val 1-ssim", buf, buf + 3 * cap, (int)n}};
     kpcn_plot_settings ps;
     kpcn_plot_settings_defaults(&ps);
-    ps.log_y = 1;
+    ps.log_y = log_y;
     ps.title = title;
-    ps.xlabel = "iteration";
-    ps.ylabel = "loss / error";
-    st = kpcn_plot_png(png_path, &ps, ser, 3);
+    ps.xlabel = !strcmp(xcol, "elapsed_s") ? "seconds" : xcol;
+    ps.ylabel = !strcmp(ycol, "val_ssim") ? "1 - val ssim" : ycol;
+    st = kpcn_plot_png(png_path, &ps, ser, nruns);
   }
-  free(buf);
+  for (int r = 0; r < nruns; r++)
+    free(d[r]);
   return st;
 }

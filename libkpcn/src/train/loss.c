@@ -56,7 +56,8 @@ void kpcn_loss_settings_defaults(kpcn_loss_settings *s) {
 /* Sum of row partials in a fixed order. */
 static double ordered_sum(const double *p, size_t n) {
   double s = 0.0;
-  for (size_t i = 0; i < n; i++) s += p[i];
+  for (size_t i = 0; i < n; i++)
+    s += p[i];
   return s;
 }
 
@@ -122,7 +123,8 @@ static void gauss_weights(int win, double sigma, double *g) {
     g[i] = exp(-(double)((i - r) * (i - r)) / (2.0 * sigma * sigma));
     sum += g[i];
   }
-  for (int i = 0; i < win; i++) g[i] /= sum;
+  for (int i = 0; i < win; i++)
+    g[i] /= sum;
 }
 
 /* Valid correlation: out[(h-win+1) x (w-win+1)] = sum_ij g_i g_j in[y+i][x+j].
@@ -133,13 +135,15 @@ static void filt_valid(const double *in, int h, int w, const double *g, int win,
   for (int yy = 0; yy < h; yy++)
     for (int xx = 0; xx < ow; xx++) {
       double a = 0.0;
-      for (int j = 0; j < win; j++) a += g[j] * in[(size_t)yy * w + xx + j];
+      for (int j = 0; j < win; j++)
+        a += g[j] * in[(size_t)yy * w + xx + j];
       tmp[(size_t)yy * ow + xx] = a;
     }
   for (int yy = 0; yy < oh; yy++)
     for (int xx = 0; xx < ow; xx++) {
       double a = 0.0;
-      for (int i = 0; i < win; i++) a += g[i] * tmp[(size_t)(yy + i) * ow + xx];
+      for (int i = 0; i < win; i++)
+        a += g[i] * tmp[(size_t)(yy + i) * ow + xx];
       out[(size_t)yy * ow + xx] = a;
     }
 }
@@ -153,14 +157,16 @@ static void filt_adjoint(const double *in, int h, int w, const double *g, int wi
     for (int xx = 0; xx < w; xx++) {
       double a = 0.0;
       int j0 = xx - (ow - 1) > 0 ? xx - (ow - 1) : 0, j1 = xx < win - 1 ? xx : win - 1;
-      for (int j = j0; j <= j1; j++) a += g[j] * in[(size_t)yy * ow + (xx - j)];
+      for (int j = j0; j <= j1; j++)
+        a += g[j] * in[(size_t)yy * ow + (xx - j)];
       tmp[(size_t)yy * w + xx] = a;
     }
   for (int yy = 0; yy < h; yy++) {
     int i0 = yy - (oh - 1) > 0 ? yy - (oh - 1) : 0, i1 = yy < win - 1 ? yy : win - 1;
     for (int xx = 0; xx < w; xx++) {
       double a = 0.0;
-      for (int i = i0; i <= i1; i++) a += g[i] * tmp[(size_t)(yy - i) * w + xx];
+      for (int i = i0; i <= i1; i++)
+        a += g[i] * tmp[(size_t)(yy - i) * w + xx];
       out[(size_t)yy * w + xx] = a;
     }
   }
@@ -198,8 +204,7 @@ static double ssim_plane(const float *x, const float *y, int h, int w, const dou
   for (size_t p = 0; p < m; p++) {
     double ux = mx[p], uy = my[p];
     double vx = sxx[p] - ux * ux, vy = syy[p] - uy * uy, cxy = sxy[p] - ux * uy;
-    double A1 = 2 * ux * uy + c1, A2 = 2 * cxy + c2, B1 = ux * ux + uy * uy + c1,
-           B2 = vx + vy + c2;
+    double A1 = 2 * ux * uy + c1, A2 = 2 * cxy + c2, B1 = ux * ux + uy * uy + c1, B2 = vx + vy + c2;
     double S = (A1 * A2) / (B1 * B2);
     total += S;
     if (grad) {
@@ -227,8 +232,8 @@ static kpcn_status ssim_loss(const kpcn_loss_settings *s, const float *x, const 
   int win = s->ssim_window;
   if (win < 1 || win % 2 == 0 || win > w || win > h)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "SSIM loss: window %d must be odd and no larger than the %dx%d image", win,
-                     w, h);
+                     "SSIM loss: window %d must be odd and no larger than the %dx%d image", win, w,
+                     h);
   if (!(s->ssim_sigma > 0))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "SSIM loss: sigma must be > 0");
   double g[257];
@@ -251,8 +256,9 @@ static kpcn_status ssim_loss(const kpcn_loss_settings *s, const float *x, const 
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (int p = 0; p < planes; p++) {
     int t = omp_get_thread_num();
-    part[p] = ssim_plane(x + (size_t)p * n, y + (size_t)p * n, h, w, g, win, c1, c2,
-                         grad ? grad + (size_t)p * n : NULL, gscale, scr + (size_t)t * SSIM_SCRATCH * n);
+    part[p] =
+        ssim_plane(x + (size_t)p * n, y + (size_t)p * n, h, w, g, win, c1, c2,
+                   grad ? grad + (size_t)p * n : NULL, gscale, scr + (size_t)t * SSIM_SCRATCH * n);
   }
   *value = 1.0 - ordered_sum(part, (size_t)planes) / ((double)m * planes);
   free(scr);
@@ -266,8 +272,8 @@ kpcn_status kpcn_loss_compute(kpcn_loss_kind kind, const kpcn_loss_settings *set
   if (!pred || !ref || !value)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_loss_compute: NULL pred/ref/value");
   if (n <= 0 || c <= 0 || w <= 0 || h <= 0)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_loss_compute: bad shape %dx%dx%dx%d", n,
-                     c, h, w);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_loss_compute: bad shape %dx%dx%dx%d", n, c, h,
+                     w);
   kpcn_loss_settings def;
   if (!settings) {
     kpcn_loss_settings_defaults(&def);
@@ -283,6 +289,5 @@ kpcn_status kpcn_loss_compute(kpcn_loss_kind kind, const kpcn_loss_settings *set
     return pixel_loss(kind, settings, pred, ref, planes * (size_t)h, (size_t)w, grad, value, nt);
   case KPCN_LOSS_SSIM: return ssim_loss(settings, pred, ref, (int)planes, w, h, grad, value, nt);
   }
-  return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_loss_compute: unknown loss kind %d",
-                   (int)kind);
+  return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_loss_compute: unknown loss kind %d", (int)kind);
 }

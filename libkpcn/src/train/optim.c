@@ -33,10 +33,13 @@ uint32_t kpcn_rng_below(kpcn_rng *r, uint32_t n) {
  * which the seed used through TensorFlow). ---- */
 kpcn_status kpcn_xavier_uniform(float *w, size_t count, int fan_in, int fan_out, kpcn_rng *rng) {
   if (!w || !rng || fan_in <= 0 || fan_out <= 0)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_xavier_uniform: bad argument (fan_in %d, "
-                     "fan_out %d)", fan_in, fan_out);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "kpcn_xavier_uniform: bad argument (fan_in %d, "
+                     "fan_out %d)",
+                     fan_in, fan_out);
   double a = sqrt(6.0 / ((double)fan_in + (double)fan_out));
-  for (size_t i = 0; i < count; i++) w[i] = (float)((2.0 * kpcn_rng_uniform(rng) - 1.0) * a);
+  for (size_t i = 0; i < count; i++)
+    w[i] = (float)((2.0 * kpcn_rng_uniform(rng) - 1.0) * a);
   return KPCN_OK;
 }
 
@@ -118,20 +121,24 @@ double kpcn_grad_norm(const kpcn_param_block *blocks, int nblocks, int nthreads)
     for (long long c = 0; c < (long long)nch; c++) {
       size_t i0 = (size_t)c * NORM_CHUNK, i1 = i0 + NORM_CHUNK < n ? i0 + NORM_CHUNK : n;
       double acc = 0.0;
-      for (size_t i = i0; i < i1; i++) acc += (double)g[i] * g[i];
+      for (size_t i = i0; i < i1; i++)
+        acc += (double)g[i] * g[i];
       part[c] = acc;
     }
-    for (size_t c = 0; c < nch; c++) total += part[c];
+    for (size_t c = 0; c < nch; c++)
+      total += part[c];
     if (part != stackp) free(part);
   }
   return sqrt(total);
 }
 
-kpcn_status kpcn_adam_step(kpcn_adam *a, const kpcn_param_block *blocks, int nblocks,
-                           int nthreads, double *grad_norm) {
-  if (!a || (!blocks && nblocks)) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_adam_step: NULL");
+kpcn_status kpcn_adam_step(kpcn_adam *a, const kpcn_param_block *blocks, int nblocks, int nthreads,
+                           double *grad_norm) {
+  if (!a || (!blocks && nblocks))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_adam_step: NULL");
   size_t total = 0;
-  for (int b = 0; b < nblocks; b++) total += blocks[b].count;
+  for (int b = 0; b < nblocks; b++)
+    total += blocks[b].count;
   if (total != a->count)
     return kpcn_fail(KPCN_ERR_SIZE_MISMATCH,
                      "kpcn_adam_step: blocks hold %zu parameters, optimizer was created for %zu",

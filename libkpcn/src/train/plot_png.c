@@ -138,7 +138,7 @@ static void line(canvas *cv, int x0, int y0, int x1, int y1, const unsigned char
 }
 
 static const unsigned char k_colors[KPCN_PLOT_MAX_SERIES][3] = {
-    {31, 119, 180}, {214, 39, 40}, {44, 160, 44}, {255, 127, 14},
+    {31, 119, 180},  {214, 39, 40}, {44, 160, 44},   {255, 127, 14},
     {148, 103, 189}, {140, 86, 75}, {227, 119, 194}, {23, 190, 207}};
 
 void kpcn_plot_settings_defaults(kpcn_plot_settings *s) {
@@ -155,7 +155,7 @@ static double nice_step(double span, int n) {
 
 static void fmt_num(char *buf, size_t n, double v) {
   if (v != 0 && (fabs(v) >= 1e5 || fabs(v) < 1e-3))
-    snprintf(buf, n, "%.0e", v);
+    snprintf(buf, n, "%.3g", v);
   else
     snprintf(buf, n, "%g", v);
 }
@@ -171,8 +171,8 @@ kpcn_status kpcn_plot_png(const char *path, const kpcn_plot_settings *st,
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_plot_png: bad arguments (%d series)",
                      nseries);
   if (st->width < 200 || st->height < 150 || st->width > 8192 || st->height > 8192)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_plot_png: size %dx%d out of range",
-                     st->width, st->height);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_plot_png: size %dx%d out of range", st->width,
+                     st->height);
   /* data range */
   double x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
   for (int s = 0; s < nseries; s++)
@@ -206,14 +206,29 @@ kpcn_status kpcn_plot_png(const char *path, const kpcn_plot_settings *st,
     fmt_num(buf, sizeof buf, v);
     text(&cv, px - 3 * (int)strlen(buf), B + 8, buf, black, 0);
   }
-  /* y ticks + grid (log axis: ticks at integer powers when the range allows) */
-  double sy = st->log_y && y1 - y0 > 2 ? ceil(nice_step(y1 - y0, 6)) : nice_step(y1 - y0, 6);
-  for (double v = ceil(y0 / sy) * sy; v <= y1 + 1e-9 * sy; v += sy) {
-    int py = PY(v);
-    line(&cv, L, py, R, py, grey, 1);
-    line(&cv, L - 4, py, L, py, black, 1);
-    fmt_num(buf, sizeof buf, st->log_y ? pow(10.0, v) : v);
-    text(&cv, L - 7 - 6 * (int)strlen(buf), py - 3, buf, black, 0);
+  /* y ticks + grid; a log axis gets ticks at 1, 2, 5 x 10^k (only 10^k over > 4 decades) */
+  if (st->log_y) {
+    static const double mant[3] = {1, 2, 5};
+    int nm = y1 - y0 > 4 ? 1 : 3;
+    for (int k = (int)floor(y0); k <= (int)ceil(y1); k++)
+      for (int j = 0; j < nm; j++) {
+        double v = k + log10(mant[j]);
+        if (v < y0 || v > y1) continue;
+        int py = PY(v);
+        line(&cv, L, py, R, py, grey, 1);
+        line(&cv, L - 4, py, L, py, black, 1);
+        fmt_num(buf, sizeof buf, mant[j] * pow(10.0, k));
+        text(&cv, L - 7 - 6 * (int)strlen(buf), py - 3, buf, black, 0);
+      }
+  } else {
+    double sy = nice_step(y1 - y0, 6);
+    for (double v = ceil(y0 / sy) * sy; v <= y1 + 1e-9 * sy; v += sy) {
+      int py = PY(v);
+      line(&cv, L, py, R, py, grey, 1);
+      line(&cv, L - 4, py, L, py, black, 1);
+      fmt_num(buf, sizeof buf, v);
+      text(&cv, L - 7 - 6 * (int)strlen(buf), py - 3, buf, black, 0);
+    }
   }
   line(&cv, L, T, L, B, black, 1);
   line(&cv, L, B, R, B, black, 1);
@@ -222,8 +237,7 @@ kpcn_status kpcn_plot_png(const char *path, const kpcn_plot_settings *st,
   if (st->title) text(&cv, (L + R) / 2 - 3 * (int)strlen(st->title), 10, st->title, black, 0);
   if (st->xlabel)
     text(&cv, (L + R) / 2 - 3 * (int)strlen(st->xlabel), B + 24, st->xlabel, black, 0);
-  if (st->ylabel)
-    text(&cv, 6, (T + B) / 2 + 3 * (int)strlen(st->ylabel), st->ylabel, black, 1);
+  if (st->ylabel) text(&cv, 6, (T + B) / 2 + 3 * (int)strlen(st->ylabel), st->ylabel, black, 1);
   /* series */
   for (int s = 0; s < nseries; s++) {
     const unsigned char *c = k_colors[s];

@@ -109,7 +109,7 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
   KPCN_TRY(csv_open(t->csv_path, t->s.resume, t->iter, &csv));
   const double t0 = kt_now();
   double last_t = t0, acc = 0;
-  int64_t last_it = t->iter, nacc = 0;
+  int64_t last_it = t->iter, nacc = 0, last_val_it = -1, start_it = t->iter;
   int stop = 0;
   kpcn_status st = KPCN_OK;
   while (t->iter < t->s.iters && st == KPCN_OK) {
@@ -125,8 +125,7 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
     if ((st = kpcn_trainer_step(t, &loss)) != KPCN_OK) break;
     acc += loss, nacc++;
     int64_t it = t->iter;
-    int do_val = t->nval && ((t->s.val_every > 0 && it % t->s.val_every == 0) ||
-                             it == t->s.iters);
+    int do_val = t->nval && ((t->s.val_every > 0 && it % t->s.val_every == 0) || it == t->s.iters);
     int do_log = it % t->s.log_every == 0 || it == t->s.iters || do_val;
     kpcn_train_progress p;
     memset(&p, 0, sizeof p);
@@ -134,6 +133,7 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
       if ((st = kpcn_trainer_validate(t, &p.val_relmse, &p.val_ssim, &p.val_psnr)) != KPCN_OK)
         break;
       p.has_val = 1;
+      last_val_it = it;
     }
     double now = kt_now();
     elapsed = t->elapsed_prev + (now - t0);
@@ -147,8 +147,8 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
     p.eta_s = (double)(t->s.iters - it) / fmax(p.its_per_s, 1e-9);
     if (do_log) {
       if (csv) {
-        fprintf(csv, "%lld,%d,%.6g,%.9g,%.4g,%.2f", (long long)it, stage, lr, p.loss,
-                p.its_per_s, elapsed);
+        fprintf(csv, "%lld,%d,%.6g,%.9g,%.4g,%.2f", (long long)it, stage, lr, p.loss, p.its_per_s,
+                elapsed);
         if (p.has_val)
           fprintf(csv, ",%.9g,%.9g,%.6g\n", p.val_relmse, p.val_ssim, p.val_psnr);
         else
@@ -162,6 +162,21 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
     if (t->s.progress && t->s.progress(t->s.progress_user, &p)) {
       stop = 1;
       break;
+    }
+  }
+  /* a run that stopped early (time limit, request) still ends with a validation row, so
+   * equal-time comparisons have a final figure */
+  if (st == KPCN_OK && t->nval && last_val_it != t->iter && t->iter > start_it) {
+    double v[3];
+    st = kpcn_trainer_validate(t, &v[0], &v[1], &v[2]);
+    if (st == KPCN_OK && csv) {
+      double now = kt_now();
+      fprintf(csv, "%lld,%d,%.6g,", (long long)t->iter, t->iter - 1 < t->s.stage1_iters ? 1 : 2,
+              kpcn_adam_lr_at(&t->s.adam, t->iter - 1));
+      if (nacc) fprintf(csv, "%.9g", acc / (double)nacc);
+      fprintf(csv, ",%.4g,%.2f,%.9g,%.9g,%.6g\n",
+              (double)(t->iter - last_it) / fmax(now - last_t, 1e-9), t->elapsed_prev + (now - t0),
+              v[0], v[1], v[2]);
     }
   }
   if (csv) fclose(csv);

@@ -17,9 +17,9 @@ struct kpcn_trainer {
 
   /* patch store */
   kpcn_patchstore *ps;
-  int S, nch;                               /* store patch size and channel count */
-  int ch_buf[KPCN_BUF_COUNT][3];            /* store channel of noisy buffer planes, -1 absent */
-  int ch_var[KPCN_BUF_COUNT];               /* store channel of noisy variances, -1 absent */
+  int S, nch;                    /* store patch size and channel count */
+  int ch_buf[KPCN_BUF_COUNT][3]; /* store channel of noisy buffer planes, -1 absent */
+  int ch_var[KPCN_BUF_COUNT];    /* store channel of noisy variances, -1 absent */
   int ch_ref_color[3], ch_ref_diff[3], ch_ref_spec[3];
   uint64_t *train_idx; /* patches drawn for training (split "train") */
   uint64_t ntrain;

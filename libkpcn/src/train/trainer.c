@@ -79,13 +79,13 @@ static kpcn_status check_inputs(const kpcn_trainer *t, const kpcn_arch *a, const
   int n = kpcn_features_channel_names(KPCN_BRANCH_DIFFUSE, names, KPCN_NN_MAX_INPUTS);
   if (a->n_inputs != n)
     return kpcn_fail(KPCN_ERR_FORMAT,
-                     "%s has %d input channels but the feature builder (version %d) makes %d",
-                     what, a->n_inputs, KPCN_FEATURES_VERSION, n);
+                     "%s has %d input channels but the feature builder (version %d) makes %d", what,
+                     a->n_inputs, KPCN_FEATURES_VERSION, n);
   for (int i = 0; i < n; i++)
     if (strcmp(a->inputs[i], names[i]) != 0)
       return kpcn_fail(KPCN_ERR_FORMAT,
-                       "%s input channel %d is '%s', the feature builder makes '%s' there", what,
-                       i, a->inputs[i], names[i]);
+                       "%s input channel %d is '%s', the feature builder makes '%s' there", what, i,
+                       a->inputs[i], names[i]);
   (void)t;
   return KPCN_OK;
 }
@@ -101,8 +101,8 @@ static kpcn_status load_validation(kpcn_trainer *t) {
     KPCN_TRY(kpcn_exr_read_aov(t->s.val_noisy[i], &t->val_aov[i]));
     KPCN_TRY(kpcn_exr_read_aov(t->s.val_ref[i], &ref));
     kpcn_status st = kpcn_aov_require(ref, KPCN_BUF_COLOR, 0, t->s.val_ref[i]);
-    if (st == KPCN_OK && (ref->width != t->val_aov[i]->width ||
-                          ref->height != t->val_aov[i]->height))
+    if (st == KPCN_OK &&
+        (ref->width != t->val_aov[i]->width || ref->height != t->val_aov[i]->height))
       st = kpcn_fail(KPCN_ERR_SIZE_MISMATCH, "validation pair '%s' (%dx%d) / '%s' (%dx%d)",
                      t->s.val_noisy[i], t->val_aov[i]->width, t->val_aov[i]->height,
                      t->s.val_ref[i], ref->width, ref->height);
@@ -162,7 +162,8 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "batch %d out of range 1..256", s->batch);
   if (s->patch < 8 || s->patch > 1024)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch %d out of range 8..1024", s->patch);
-  if (s->iters < 0) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "iters %lld < 0", (long long)s->iters);
+  if (s->iters < 0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "iters %lld < 0", (long long)s->iters);
   if (s->loss_margin < 0 || 2 * s->loss_margin >= s->patch)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "loss margin %d too large for patch %d",
                      s->loss_margin, s->patch);
@@ -273,8 +274,8 @@ static kpcn_status branch_forward(kpcn_trainer *t, int b) {
 
 /* backward of one branch from dL/dout in t->grad[b], then its Adam step */
 static kpcn_status branch_backward_step(kpcn_trainer *t, int b) {
-  KPCN_TRY(kpcn_kpa_backward(t->arch.kernel_size, t->N, 3, t->P, t->P, t->logits[b],
-                             t->noisy[b], t->grad[b], t->logits[b], NULL, t->nt));
+  KPCN_TRY(kpcn_kpa_backward(t->arch.kernel_size, t->N, 3, t->P, t->P, t->logits[b], t->noisy[b],
+                             t->grad[b], t->logits[b], NULL, t->nt));
   KPCN_TRY(kpcn_net_backward(t->net[b], t->logits[b], NULL));
   return kpcn_adam_step(t->adam[b], t->blocks[b], t->nparams[b], t->nt, NULL);
 }
@@ -293,12 +294,13 @@ kpcn_status kpcn_trainer_step(kpcn_trainer *t, double *loss) {
     }
   } else {
     size_t n = (size_t)t->N * 3 * t->P * t->P;
-    for (int b = 0; b < KT_NB; b++) KPCN_TRY(branch_forward(t, b));
+    for (int b = 0; b < KT_NB; b++)
+      KPCN_TRY(branch_forward(t, b));
     kpcn_recombine(t->out[0], t->out[1], t->albedo, t->arch.eps, n, t->comb);
     KPCN_TRY(kt_loss(t, t->s.loss2, t->comb, t->refc, t->gcomb, &total));
-    kpcn_recombine_backward(t->gcomb, t->out[1], t->albedo, t->arch.eps, n, t->grad[0],
-                            t->grad[1]);
-    for (int b = 0; b < KT_NB; b++) KPCN_TRY(branch_backward_step(t, b));
+    kpcn_recombine_backward(t->gcomb, t->out[1], t->albedo, t->arch.eps, n, t->grad[0], t->grad[1]);
+    for (int b = 0; b < KT_NB; b++)
+      KPCN_TRY(branch_backward_step(t, b));
   }
   if (!isfinite(total))
     return kpcn_fail(KPCN_ERR_NONFINITE, "training loss is %g at iteration %lld", total,
@@ -340,7 +342,8 @@ kpcn_status kpcn_trainer_validate(kpcn_trainer *t, double *relmse, double *ssim,
   }
   kpcn_denoiser_destroy(d);
   KPCN_TRY(st);
-  for (int m = 0; m < 3; m++) t->last_val[m] = acc[m] / t->nval;
+  for (int m = 0; m < 3; m++)
+    t->last_val[m] = acc[m] / t->nval;
   t->have_val = 1;
   if (relmse) *relmse = t->last_val[0];
   if (ssim) *ssim = t->last_val[1];
