@@ -7,7 +7,7 @@ for disp in linear srgb; do
     --rell1:display=$disp --psnr:display=$disp --ssim:display=$disp --json
   cp out.txt got_$disp.json
   for m in l1 mse relmse rell1 psnr ssim; do
-    want=$(python3 -c 'import json,sys; d=json.load(open(sys.argv[1]))
+    want=$($PY -c 'import json,sys; d=json.load(open(sys.argv[1]))
 print(repr([c for c in d["cases"] if c["name"]==sys.argv[2]][0]["values"][sys.argv[3]]))' \
       "$REFJSON" "cornell_$disp" $m)
     got=$(json_get got_$disp.json $m)
@@ -16,7 +16,7 @@ print(repr([c for c in d["cases"] if c["name"]==sys.argv[2]][0]["values"][sys.ar
 done
 # The exact command of the issue.
 run_ok "$NOISY" "$REF" --ssim --relmse --json
-python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); assert set(d)=={"ssim","relmse"}' out.txt \
+$PY -c 'import json,sys; d=json.load(open(sys.argv[1])); assert set(d)=={"ssim","relmse"}' out.txt \
   && pass "json has ssim, relmse" || fail "json keys: $(cat out.txt)"
 # Human-readable form prints name: value.
 run_ok "$NOISY" "$REF" --relmse

@@ -7,7 +7,7 @@ oiiotool --pattern constant:color=1.0,2.0,-0.3 4x4 3 -o c2.exr
 oiiotool --pattern constant:color=0.002,0.04,8.0 4x4 3 -o c3.exr
 # expected VIEW X: analytic display value of linear X
 expected() {
-  python3 - "$1" "$2" <<'PY'
+  $PY - "$1" "$2" <<'PY'
 import sys
 view, x = sys.argv[1], float(sys.argv[2])
 def s(v):

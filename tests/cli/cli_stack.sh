@@ -14,7 +14,7 @@ for s in "256x256" "16 channels" "buffer color: R,G,B  variance: color.var" "buf
 done
 pass "--info text"
 run_ok "$NOISY" --info --json
-python3 -c 'import json,sys; d=json.load(open(sys.argv[1]))["info"]
+$PY -c 'import json,sys; d=json.load(open(sys.argv[1]))["info"]
 assert d["width"]==256 and d["height"]==256 and d["kpcn:spp"]==16, d
 assert set(d["buffers"])=={"color","albedo","normal","depth","visibility"}, d["buffers"]' out.txt \
   && pass "--info json" || fail "--info json: $(cat out.txt)"

@@ -9,6 +9,9 @@ cd "$WD" || exit 1
 NOISY=$TD/tungsten-cornell/noisy_16spp.exr
 REF=$TD/tungsten-cornell/reference_2048spp.exr
 fails=0
+# Debian's interpreter starts fast; a pyenv shim on PATH can take half a second per call.
+PY=python3
+[ -x /usr/bin/python3 ] && PY=/usr/bin/python3
 pass() { echo "ok: $*"; }
 fail() {
   echo "FAIL: $*"
@@ -48,9 +51,9 @@ expect_fail() {
   pass "fails (rc $rc) naming '$pat': kpcntool $*"
 }
 # json_get FILE KEY: prints the value of KEY in the JSON object in FILE.
-json_get() { python3 -c 'import json,sys; print(repr(json.load(open(sys.argv[1]))[sys.argv[2]]))' "$1" "$2"; }
+json_get() { $PY -c 'import json,sys; print(repr(json.load(open(sys.argv[1]))[sys.argv[2]]))' "$1" "$2"; }
 # near A B TOL: true if |A-B| <= TOL.
-near() { python3 -c 'import sys; a,b,t=map(float,sys.argv[1:]); sys.exit(0 if abs(a-b)<=t else 1)' "$1" "$2" "$3"; }
+near() { $PY -c 'import sys; a,b,t=map(float,sys.argv[1:]); sys.exit(0 if abs(a-b)<=t else 1)' "$1" "$2" "$3"; }
 finish() {
   if [ $fails -eq 0 ]; then
     echo "all passed"

@@ -52,7 +52,8 @@ int main(int argc, char **argv) {
      * the idle-machine rate (threads <= cores) */
     double sps_cpu = st.samples / cpu * threads;
     double e = rt_relmse(a->buf[KPCN_BUF_COLOR], ref->buf[KPCN_BUF_COLOR], kpcn_aov_plane_size(a));
-    printf("bench_render cornell-box 256x256 spp %d threads %d: %.3f s, %.3f M samples/s, %.2f M rays/s "
+    printf("bench_render cornell-box 256x256 spp %d threads %d: %.3f s, %.3f M samples/s, %.2f M "
+           "rays/s "
            "(%.2f rays/sample); CPU %.3f s -> idle estimate %.3f M samples/s, %.2f M rays/s; "
            "relMSE vs Tungsten 2048spp %.3e\n",
            spp, threads, st.seconds, sps * 1e-6, rps * 1e-6, (double)st.rays / st.samples, cpu,
@@ -60,7 +61,8 @@ int main(int argc, char **argv) {
     if (sps_cpu > best) best = sps_cpu;
     kpcn_aov_destroy(a);
   }
-  printf("bench_render best (idle estimate from CPU time): %.3f M samples/s (target >= 2.8, Tungsten ~1.42); machine load disturbs figures\n",
+  printf("bench_render best (idle estimate from CPU time): %.3f M samples/s (target >= 2.8, "
+         "Tungsten ~1.42); machine load disturbs figures\n",
          best * 1e-6);
   kpcn_aov_destroy(ref);
   kpcn_scene_destroy(s);

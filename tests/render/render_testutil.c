@@ -91,6 +91,7 @@ double rt_predicted_relmse(const float *var, const float *ref, size_t plane) {
 
 double rt_mean(const float *p, size_t n) {
   double acc = 0.0;
-  for (size_t i = 0; i < n; i++) acc += p[i];
+  for (size_t i = 0; i < n; i++)
+    acc += p[i];
   return acc / (double)n;
 }

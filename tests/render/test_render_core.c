@@ -52,7 +52,8 @@ static void test_split(const char *path) {
     size_t n = 3 * kpcn_aov_plane_size(a);
     double maxerr = 0, sd = 0, ss = 0;
     for (size_t i = 0; i < n; i++) {
-      double c = a->buf[KPCN_BUF_COLOR][i], d = a->buf[KPCN_BUF_DIFFUSE][i], sp = a->buf[KPCN_BUF_SPECULAR][i];
+      double c = a->buf[KPCN_BUF_COLOR][i], d = a->buf[KPCN_BUF_DIFFUSE][i],
+             sp = a->buf[KPCN_BUF_SPECULAR][i];
       maxerr = fmax(maxerr, fabs(c - (d + sp)) / (1.0 + fabs(c)));
       sd += d, ss += sp;
     }
@@ -80,9 +81,10 @@ static void test_aovs(const kpcn_scene *s) {
     double x = -1.0 + (px + 0.5) * 2.0 / W, y = 1.0 - (py + 0.5) * 2.0 / W;
     double len = sqrt(x * x + y * y + (double)pd * pd);
     double depth = 7.8 * len / pd;
-    printf("back wall depth %.4f (analytic %.4f), N %.3f %.3f %.3f, albedo %.3f\n", a->buf[KPCN_BUF_DEPTH][i],
-           depth, a->buf[KPCN_BUF_NORMAL][i], a->buf[KPCN_BUF_NORMAL][plane + i],
-           a->buf[KPCN_BUF_NORMAL][2 * plane + i], a->buf[KPCN_BUF_ALBEDO][i]);
+    printf("back wall depth %.4f (analytic %.4f), N %.3f %.3f %.3f, albedo %.3f\n",
+           a->buf[KPCN_BUF_DEPTH][i], depth, a->buf[KPCN_BUF_NORMAL][i],
+           a->buf[KPCN_BUF_NORMAL][plane + i], a->buf[KPCN_BUF_NORMAL][2 * plane + i],
+           a->buf[KPCN_BUF_ALBEDO][i]);
     CHECK_NEAR(a->buf[KPCN_BUF_DEPTH][i], depth, 2e-3 * depth);
     CHECK_NEAR(a->buf[KPCN_BUF_NORMAL][i], 0.0, 1e-4);
     CHECK_NEAR(a->buf[KPCN_BUF_NORMAL][plane + i], 0.0, 1e-4);
@@ -100,15 +102,17 @@ static void test_aovs(const kpcn_scene *s) {
     double x = -1.0 + (px + 0.5) * 2.0 / W, y = 1.0 - (py + 0.5) * 2.0 / W;
     double len = sqrt(x * x + y * y + (double)pd * pd);
     double depth = (1.0 / -x) * len; /* reaches x = -1 after |1/x| plane units */
-    printf("left wall depth %.4f (analytic %.4f), N.X %.3f, albedo.R %.3f\n", a->buf[KPCN_BUF_DEPTH][i], depth,
-           a->buf[KPCN_BUF_NORMAL][i], a->buf[KPCN_BUF_ALBEDO][i]);
+    printf("left wall depth %.4f (analytic %.4f), N.X %.3f, albedo.R %.3f\n",
+           a->buf[KPCN_BUF_DEPTH][i], depth, a->buf[KPCN_BUF_NORMAL][i],
+           a->buf[KPCN_BUF_ALBEDO][i]);
     CHECK_NEAR(a->buf[KPCN_BUF_DEPTH][i], depth, 5e-3 * depth);
     CHECK_NEAR(a->buf[KPCN_BUF_NORMAL][i], 1.0, 1e-4);
     CHECK_NEAR(a->buf[KPCN_BUF_ALBEDO][i], 0.63, 1e-5);
     CHECK_NEAR(a->buf[KPCN_BUF_ALBEDO][2 * plane + i], 0.05, 1e-5);
   }
   /* corner pixel: the ray leaves the open box: miss -> zeros everywhere */
-  for (int k = 0; k < KPCN_BUF_COUNT; k++) CHECK(a->buf[k][0] == 0.0f);
+  for (int k = 0; k < KPCN_BUF_COUNT; k++)
+    CHECK(a->buf[k][0] == 0.0f);
   kpcn_aov_destroy(a);
 }
 
@@ -117,7 +121,9 @@ static void image_mean(const kpcn_aov_set *a, double *m, double *sd) {
   size_t plane = kpcn_aov_plane_size(a);
   double acc = 0, var = 0;
   for (size_t i = 0; i < plane; i++) {
-    acc += (a->buf[KPCN_BUF_COLOR][i] + a->buf[KPCN_BUF_COLOR][plane + i] + a->buf[KPCN_BUF_COLOR][2 * plane + i]) / 3.0;
+    acc += (a->buf[KPCN_BUF_COLOR][i] + a->buf[KPCN_BUF_COLOR][plane + i] +
+            a->buf[KPCN_BUF_COLOR][2 * plane + i]) /
+           3.0;
     var += a->var[KPCN_BUF_COLOR][i]; /* channel-averaged: conservative for the channel mean */
   }
   *m = acc / plane;
@@ -139,7 +145,8 @@ static void test_estimators(const char *path, int w, int h, int spp) {
     image_mean(a[k], &m[k], &sd[k]);
     printf("%s %-9s: image mean %.5f +- %.5f\n", path, nm[k], m[k], sd[k]);
   }
-  for (int k = 1; k < 3; k++) CHECK(fabs(m[k] - m[0]) <= 4.0 * sqrt(sd[k] * sd[k] + sd[0] * sd[0]));
+  for (int k = 1; k < 3; k++)
+    CHECK(fabs(m[k] - m[0]) <= 4.0 * sqrt(sd[k] * sd[k] + sd[0] * sd[0]));
   /* per pixel: few pixels beyond 4 sigma. Only for NEE: BSDF-only hits a small light so rarely
    * (0.3% of the samples at a ceiling pixel of the cornell box) that its per-pixel variance
    * estimate is unreliable at test sample counts; its image mean is checked above. */
@@ -148,19 +155,23 @@ static void test_estimators(const char *path, int w, int h, int spp) {
     size_t bad = 0;
     for (size_t i = 0; i < plane; i++)
       for (int c = 0; c < 3; c++) {
-        double d = a[k]->buf[KPCN_BUF_COLOR][c * plane + i] - a[0]->buf[KPCN_BUF_COLOR][c * plane + i];
+        double d =
+            a[k]->buf[KPCN_BUF_COLOR][c * plane + i] - a[0]->buf[KPCN_BUF_COLOR][c * plane + i];
         double v = a[k]->var[KPCN_BUF_COLOR][i] + a[0]->var[KPCN_BUF_COLOR][i];
         if (d * d > 16.0 * v + 1e-12) bad++;
       }
-    printf("  %s vs MIS: %.2f%% pixel channels beyond 4 sigma\n", nm[k], 100.0 * bad / (3.0 * plane));
+    printf("  %s vs MIS: %.2f%% pixel channels beyond 4 sigma\n", nm[k],
+           100.0 * bad / (3.0 * plane));
     CHECK(bad <= 0.02 * 3 * plane);
   }
   /* MIS is never much worse than the better single strategy */
   double v[3];
-  for (int k = 0; k < 3; k++) v[k] = rt_mean(a[k]->var[KPCN_BUF_COLOR], plane);
+  for (int k = 0; k < 3; k++)
+    v[k] = rt_mean(a[k]->var[KPCN_BUF_COLOR], plane);
   printf("  mean variance: MIS %.3e NEE %.3e BSDF %.3e\n", v[0], v[1], v[2]);
   CHECK(v[0] <= 1.5 * fmin(v[1], v[2]));
-  for (int k = 0; k < 3; k++) kpcn_aov_destroy(a[k]);
+  for (int k = 0; k < 3; k++)
+    kpcn_aov_destroy(a[k]);
   kpcn_scene_destroy(s);
 }
 

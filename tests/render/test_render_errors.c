@@ -12,7 +12,8 @@
 #define LIGHT "{\"type\":\"quad\",\"bsdf\":{\"type\":\"null\"},\"emission\":5}"
 
 /* Loads json and expects failure with every `needle` in the message. */
-static void expect_fail(const char *what, const char *json, const char *needle1, const char *needle2) {
+static void expect_fail(const char *what, const char *json, const char *needle1,
+                        const char *needle2) {
   kpcn_scene *s = NULL;
   kpcn_status st = kpcn_scene_load_json(json, kt_tmpdir(), "bad.json", &s);
   const char *msg = kpcn_last_error();
@@ -79,7 +80,8 @@ static void test_tool(void) {
   kpcn_exr_info_t info;
   CHECK(kpcn_exr_info(out, &info) == KPCN_OK);
   CHECK(info.width == 16 && info.height == 16 && info.spp == 1);
-  for (int b = 0; b < KPCN_BUF_COUNT; b++) CHECK(info.has_buffer[b] && info.has_variance[b]);
+  for (int b = 0; b < KPCN_BUF_COUNT; b++)
+    CHECK(info.has_buffer[b] && info.has_variance[b]);
 }
 
 int main(void) {
@@ -88,25 +90,31 @@ int main(void) {
   CHECK(strstr(kpcn_last_error(), "/nonexistent/dir/scene.json") != NULL);
 
   expect_fail("bad JSON", "{\"primitives\": [ {\"type\": \"quad\" ", "invalid JSON", "bad.json");
-  expect_fail("unknown primitive", "{\"primitives\":[{\"type\":\"teapot\",\"bsdf\":{\"type\":\"lambert\"}}]}",
+  expect_fail("unknown primitive",
+              "{\"primitives\":[{\"type\":\"teapot\",\"bsdf\":{\"type\":\"lambert\"}}]}",
               "primitives[0].type", "teapot");
   expect_fail("unknown field",
-              "{\"primitives\":[" LIGHT ",{\"type\":\"quad\",\"bsdf\":{\"type\":\"lambert\"},\"colour\":1}]}",
+              "{\"primitives\":[" LIGHT
+              ",{\"type\":\"quad\",\"bsdf\":{\"type\":\"lambert\"},\"colour\":1}]}",
               "primitives[1].colour", NULL);
-  expect_fail("unknown top-level field", "{\"primitives\":[" LIGHT "],\"volumes\":[]}", "volumes", NULL);
-  expect_fail("unknown bsdf", "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"velvet\"}}]}",
+  expect_fail("unknown top-level field", "{\"primitives\":[" LIGHT "],\"volumes\":[]}", "volumes",
+              NULL);
+  expect_fail("unknown bsdf",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"velvet\"}}]}",
               "primitives[0].bsdf", "velvet");
   expect_fail("undefined bsdf name", "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":\"nothing\"}]}",
               "primitives[0].bsdf", "nothing");
-  expect_fail("unknown camera", "{\"primitives\":[" LIGHT "],\"camera\":{\"type\":\"fisheye\"}}", "camera.type",
-              "fisheye");
+  expect_fail("unknown camera", "{\"primitives\":[" LIGHT "],\"camera\":{\"type\":\"fisheye\"}}",
+              "camera.type", "fisheye");
   expect_fail("unknown filter",
-              "{\"primitives\":[" LIGHT "],\"camera\":{\"type\":\"pinhole\",\"reconstruction_filter\":\"lanczos\"}}",
+              "{\"primitives\":[" LIGHT
+              "],\"camera\":{\"type\":\"pinhole\",\"reconstruction_filter\":\"lanczos\"}}",
               "camera.reconstruction_filter", "lanczos");
-  expect_fail("unknown integrator", "{\"primitives\":[" LIGHT "],\"integrator\":{\"type\":\"bdpt\"}}",
-              "integrator.type", "bdpt");
-  expect_fail("participating media", "{\"media\":[{\"type\":\"homogeneous\"}],\"primitives\":[" LIGHT "]}",
-              "media", NULL);
+  expect_fail("unknown integrator",
+              "{\"primitives\":[" LIGHT "],\"integrator\":{\"type\":\"bdpt\"}}", "integrator.type",
+              "bdpt");
+  expect_fail("participating media",
+              "{\"media\":[{\"type\":\"homogeneous\"}],\"primitives\":[" LIGHT "]}", "media", NULL);
   expect_fail("zero-area light",
               "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"null\"},\"emission\":5,"
               "\"transform\":{\"scale\":[0,1,1]}}]}",
@@ -119,26 +127,36 @@ int main(void) {
               "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"lambert\"},"
               "\"transform\":{\"rotation\":[0,90]}}]}",
               "primitives[0].transform.rotation", NULL);
-  expect_fail("negative emission", "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"null\"},\"emission\":-1}]}",
+  expect_fail("negative emission",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"null\"},\"emission\":-1}]}",
               "primitives[0].emission", NULL);
-  expect_fail("missing mesh", "{\"primitives\":[{\"type\":\"mesh\",\"file\":\"nope.wo3\",\"bsdf\":{\"type\":\"lambert\"}}]}",
+  expect_fail("missing mesh",
+              "{\"primitives\":[{\"type\":\"mesh\",\"file\":\"nope.wo3\",\"bsdf\":{\"type\":"
+              "\"lambert\"}}]}",
               "primitives[0].file", "nope.wo3");
   /* a truncated .wo3 (vertex count larger than the file) */
   unsigned char junk[24] = {200, 0, 0, 0, 0, 0, 0, 0, 1, 2, 3, 4};
   write_file(kt_tmpfile("junk.wo3"), junk, sizeof(junk));
-  expect_fail("bad mesh", "{\"primitives\":[{\"type\":\"mesh\",\"file\":\"junk.wo3\",\"bsdf\":{\"type\":\"lambert\"}}]}",
+  expect_fail("bad mesh",
+              "{\"primitives\":[{\"type\":\"mesh\",\"file\":\"junk.wo3\",\"bsdf\":{\"type\":"
+              "\"lambert\"}}]}",
               "primitives[0].file", "junk.wo3");
   write_file(kt_tmpfile("junk.obj"), "v 1 2\nf 1 2 9\n", 14);
-  expect_fail("bad obj", "{\"primitives\":[{\"type\":\"mesh\",\"file\":\"junk.obj\",\"bsdf\":{\"type\":\"lambert\"}}]}",
+  expect_fail("bad obj",
+              "{\"primitives\":[{\"type\":\"mesh\",\"file\":\"junk.obj\",\"bsdf\":{\"type\":"
+              "\"lambert\"}}]}",
               "primitives[0].file", "junk.obj");
   expect_fail("missing texture",
-              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"lambert\",\"albedo\":\"nope.png\"}}]}",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"lambert\",\"albedo\":"
+              "\"nope.png\"}}]}",
               "nope.png", NULL);
   expect_fail("empty scene", "{\"primitives\":[]}", "primitives", NULL);
-  expect_fail("bad resolution", "{\"primitives\":[" LIGHT "],\"camera\":{\"type\":\"pinhole\",\"resolution\":[0,5]}}",
+  expect_fail("bad resolution",
+              "{\"primitives\":[" LIGHT "],\"camera\":{\"type\":\"pinhole\",\"resolution\":[0,5]}}",
               "camera.resolution", NULL);
-  expect_fail("bad fov", "{\"primitives\":[" LIGHT "],\"camera\":{\"type\":\"pinhole\",\"fov\":180}}", "camera.fov",
-              NULL);
+  expect_fail("bad fov",
+              "{\"primitives\":[" LIGHT "],\"camera\":{\"type\":\"pinhole\",\"fov\":180}}",
+              "camera.fov", NULL);
   /* a minimal valid scene loads */
   CHECK(kpcn_scene_load_json("{\"primitives\":[" LIGHT "]}", NULL, NULL, &s) == KPCN_OK);
   kpcn_scene_destroy(s);

@@ -49,10 +49,17 @@ static void bench(const char *store, const char *preset, int iters, int threads,
       break;
     }
   double dt = now() - t0, f = kpcn_trainer_flops_per_iter(t);
+  kpcn_train_timing tm;
+  kpcn_trainer_get_timing(t, &tm); /* includes the warm-up step */
   printf("%-6s stage %d  batch 16x64x64  threads %d: %.3f it/s  %.1f patches/s  %.1f GFLOP/s "
          "(%.1f GFLOP/it; warm-up %.2f s, %d timed iterations)\n",
          preset, stage, kpcn_resolve_threads(threads), iters / dt, 16 * iters / dt,
          f * iters / dt * 1e-9, f * 1e-9, warm, iters);
+  printf("       time shares over %lld steps: convs %.0f%% (%.1f GFLOP/s inside convs), rest of "
+         "net %.0f%%, batch %.0f%%, kernel layer %.0f%%, loss %.0f%%, Adam %.0f%%\n",
+         (long long)tm.steps, 100 * tm.conv_s / tm.total_s, f * tm.steps / tm.conv_s * 1e-9,
+         100 * (tm.net_s - tm.conv_s) / tm.total_s, 100 * tm.batch_s / tm.total_s,
+         100 * tm.kpa_s / tm.total_s, 100 * tm.loss_s / tm.total_s, 100 * tm.adam_s / tm.total_s);
   fflush(stdout);
   kpcn_trainer_destroy(t);
 }

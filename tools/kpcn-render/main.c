@@ -15,10 +15,10 @@
 #include <unistd.h>
 
 static void usage(FILE *f) {
-  fprintf(f,
-          "usage: kpcn-render scene.json -o out.exr [--spp N] [--seed S] [--threads N (0=all)]\n"
-          "                   [--resolution WxH] [--crop x,y,w,h] [--color-only] [--max-bounces N]\n"
-          "                   [--half] [--quiet]\n");
+  fprintf(
+      f, "usage: kpcn-render scene.json -o out.exr [--spp N] [--seed S] [--threads N (0=all)]\n"
+         "                   [--resolution WxH] [--crop x,y,w,h] [--color-only] [--max-bounces N]\n"
+         "                   [--half] [--quiet]\n");
 }
 
 typedef struct progress_state {
@@ -90,7 +90,8 @@ int main(int argc, char **argv) {
       }
     } else if (strcmp(a, "--resolution") == 0) {
       NEED_VALUE char extra;
-      if (sscanf(v, "%dx%d%c", &rs.width, &rs.height, &extra) != 2 || rs.width <= 0 || rs.height <= 0) {
+      if (sscanf(v, "%dx%d%c", &rs.width, &rs.height, &extra) != 2 || rs.width <= 0 ||
+          rs.height <= 0) {
         fprintf(stderr, "kpcn-render: --resolution: expected WxH, got '%s'\n", v);
         return 2;
       }
@@ -159,7 +160,7 @@ int main(int argc, char **argv) {
     return 1;
   }
   if (!quiet && isatty(2))
-    fprintf(stderr, "%s: %dx%d, %.2f s, %.2f M samples/s, %.1f M rays/s\n", out_path, w, h, stats.seconds,
-            stats.samples / stats.seconds * 1e-6, stats.rays / stats.seconds * 1e-6);
+    fprintf(stderr, "%s: %dx%d, %.2f s, %.2f M samples/s, %.1f M rays/s\n", out_path, w, h,
+            stats.seconds, stats.samples / stats.seconds * 1e-6, stats.rays / stats.seconds * 1e-6);
   return 0;
 }

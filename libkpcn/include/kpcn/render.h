@@ -37,14 +37,14 @@ typedef enum kpcn_light_strategy {
 } kpcn_light_strategy;
 
 typedef struct kpcn_render_settings {
-  int spp;             /* samples per pixel; 0 = the scene's renderer.spp */
-  int64_t seed;        /* sampler seed */
-  int nthreads;        /* 0 = all cores */
-  int width, height;   /* resolution override (0 = scene's); Tungsten keeps the horizontal fov */
-  int crop_x, crop_y;  /* crop window in the (possibly overridden) resolution; */
-  int crop_w, crop_h;  /*   crop_w/crop_h 0 = whole image. Output is crop-sized. */
-  int color_only;      /* 1: only color + color.var (fast references) */
-  int max_bounces;     /* -1 = scene's integrator.max_bounces */
+  int spp;            /* samples per pixel; 0 = the scene's renderer.spp */
+  int64_t seed;       /* sampler seed */
+  int nthreads;       /* 0 = all cores */
+  int width, height;  /* resolution override (0 = scene's); Tungsten keeps the horizontal fov */
+  int crop_x, crop_y; /* crop window in the (possibly overridden) resolution; */
+  int crop_w, crop_h; /*   crop_w/crop_h 0 = whole image. Output is crop-sized. */
+  int color_only;     /* 1: only color + color.var (fast references) */
+  int max_bounces;    /* -1 = scene's integrator.max_bounces */
   kpcn_light_strategy lights;
   kpcn_progress_fn progress; /* called from the calling thread; non-zero return cancels */
   void *progress_user;
@@ -54,9 +54,9 @@ kpcn_render_settings kpcn_render_settings_defaults(void);
 
 /* Figures of the last render (optional). */
 typedef struct kpcn_render_stats {
-  double seconds;        /* wall time of the sampling loop */
-  uint64_t samples;      /* camera samples traced */
-  uint64_t rays;         /* Embree queries (intersect + occluded) */
+  double seconds;   /* wall time of the sampling loop */
+  uint64_t samples; /* camera samples traced */
+  uint64_t rays;    /* Embree queries (intersect + occluded) */
 } kpcn_render_stats;
 
 kpcn_status kpcn_render(const kpcn_scene *scene, const kpcn_render_settings *settings,

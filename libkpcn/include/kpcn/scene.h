@@ -34,18 +34,18 @@ void kpcn_scene_destroy(kpcn_scene *scene);
 
 /* Summary of what was loaded (for tools and tests). */
 typedef struct kpcn_scene_info {
-  int width, height;     /* camera resolution */
-  int spp;               /* renderer.spp (default 64) */
-  int min_bounces;       /* integrator.min_bounces */
-  int max_bounces;       /* integrator.max_bounces */
-  int light_sampling;    /* integrator.enable_light_sampling */
-  int nprimitives;       /* including infinite_sphere */
-  int nlights;           /* emissive primitives + environment */
-  long long ntriangles;  /* triangles in meshes (analytic shapes not counted) */
-  float fov_deg;         /* horizontal field of view */
-  char camera[16];       /* "pinhole" / "thinlens" */
-  char filter[16];       /* "box" / "tent" / "gaussian" */
-  char name[256];        /* file name (or the name given to kpcn_scene_load_json) */
+  int width, height;    /* camera resolution */
+  int spp;              /* renderer.spp (default 64) */
+  int min_bounces;      /* integrator.min_bounces */
+  int max_bounces;      /* integrator.max_bounces */
+  int light_sampling;   /* integrator.enable_light_sampling */
+  int nprimitives;      /* including infinite_sphere */
+  int nlights;          /* emissive primitives + environment */
+  long long ntriangles; /* triangles in meshes (analytic shapes not counted) */
+  float fov_deg;        /* horizontal field of view */
+  char camera[16];      /* "pinhole" / "thinlens" */
+  char filter[16];      /* "box" / "tent" / "gaussian" */
+  char name[256];       /* file name (or the name given to kpcn_scene_load_json) */
 } kpcn_scene_info;
 
 kpcn_status kpcn_scene_get_info(const kpcn_scene *scene, kpcn_scene_info *info);

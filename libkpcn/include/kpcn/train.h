@@ -254,6 +254,19 @@ kpcn_model *kpcn_trainer_model(kpcn_trainer *t);
  * backward-data is skipped, so this slightly over-counts). */
 double kpcn_trainer_flops_per_iter(const kpcn_trainer *t);
 
+/* Cumulative wall time of the trainer's iterations by part (seconds), for benchmarks. */
+typedef struct kpcn_train_timing {
+  double batch_s; /* patch reads, crop, augmentation, features, targets */
+  double net_s;   /* kpcn_net_forward + kpcn_net_backward, both branches */
+  double conv_s;  /* part of net_s inside oneDNN convolutions (kpcn_net_get_stats) */
+  double kpa_s;   /* kernel-prediction forward + backward */
+  double loss_s;  /* loss, recombination and their gradients */
+  double adam_s;  /* optimizer steps */
+  double total_s; /* whole kpcn_trainer_step calls */
+  int64_t steps;
+} kpcn_train_timing;
+void kpcn_trainer_get_timing(const kpcn_trainer *t, kpcn_train_timing *out);
+
 /* Writes the training-curve plot from a CSV written by the trainer (any columns named
  * loss, val_relmse, val_ssim of the header are drawn against iter). */
 kpcn_status kpcn_train_plot_csv(const char *csv_path, const char *png_path, const char *title);

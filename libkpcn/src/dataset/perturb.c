@@ -183,7 +183,16 @@ static void perturb_bsdf(cJSON *b, rng *r, const kpcn_perturb_settings *s, summa
   /* Only opaque single-layer BSDFs swap (a glass or coated object keeps its type). */
   if (opaque && u_swap < s->bsdf_swap) {
     const char *nt = g_swap_types[(int)(u_type * 5) % 5];
-    cJSON_ReplaceItemInObjectCaseSensitive(b, "type", cJSON_CreateString(nt));
+    /* The renderer rejects fields a type does not know (e.g. "ior" on a conductor), so a
+     * swapped BSDF keeps only its name and albedo and gets the new type's own fields. */
+    for (cJSON *it = b->child; it;) {
+      cJSON *next = it->next;
+      if (strcmp(it->string, "name") && strcmp(it->string, "albedo"))
+        cJSON_Delete(cJSON_DetachItemViaPointer(b, it));
+      it = next;
+    }
+    cJSON_AddStringToObject(b, "type", nt);
+    type = cJSON_GetObjectItemCaseSensitive(b, "type");
     if (strstr(nt, "conductor")) {
       cJSON_DeleteItemFromObjectCaseSensitive(b, "material");
       cJSON_AddStringToObject(b, "material", g_metals[(int)(u_metal * 5) % 5]);
@@ -193,7 +202,8 @@ static void perturb_bsdf(cJSON *b, rng *r, const kpcn_perturb_settings *s, summa
     (*nswaps)++;
   }
   if (st > 0) {
-    perturb_albedo(b, "albedo", r, st);
+    /* smooth_coat ignores its own albedo (as Tungsten): only its substrate is coloured. */
+    if (strcmp(type->valuestring, "smooth_coat")) perturb_albedo(b, "albedo", r, st);
     cJSON *ro = cJSON_GetObjectItemCaseSensitive(b, "roughness");
     double f = exp(uni(r, -0.7, 0.7) * st);
     if (cJSON_IsNumber(ro)) set_num(b, "roughness", clampd(ro->valuedouble * f, 0.01, 1.0));

@@ -41,7 +41,8 @@ void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_ve
     h->ng = kv3_scale(p->axis[dim], sgn);
     x = kv3_madd(x, p->axis[dim], sgn * hf[dim] - l[dim]); /* onto the face plane */
     float uvw[3];
-    for (int i = 0; i < 3; i++) uvw[i] = clamp01(l[i] / hf[i] * 0.5f + 0.5f);
+    for (int i = 0; i < 3; i++)
+      uvw[i] = clamp01(l[i] / hf[i] * 0.5f + 0.5f);
     h->u = uvw[(dim + 1) % 3];
     h->v = uvw[(dim + 2) % 3];
     break;
@@ -139,7 +140,8 @@ void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_p
   case KPCN_PRIM_DISK: {
     float x, y;
     kpcn_warp_concentric_disk(u1, u2, &x, &y);
-    lp->p = kv3_add(p->center, kv3_add(kv3_scale(p->frame.b, x * p->radius), kv3_scale(p->frame.t, y * p->radius)));
+    lp->p = kv3_add(p->center, kv3_add(kv3_scale(p->frame.b, x * p->radius),
+                                       kv3_scale(p->frame.t, y * p->radius)));
     lp->n = p->n;
     break;
   }
@@ -164,9 +166,7 @@ void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_p
     lp->n = ng;
     break;
   }
-  case KPCN_PRIM_INFINITE_SPHERE:
-    memset(lp, 0, sizeof(*lp));
-    break;
+  case KPCN_PRIM_INFINITE_SPHERE: memset(lp, 0, sizeof(*lp)); break;
   }
 }
 
@@ -184,8 +184,9 @@ static inline float i2f(int i) {
 kpcn_vec3 kpcn_offset_ray(kpcn_vec3 p, kpcn_vec3 n) {
   const float origin = 1.0f / 32.0f, float_scale = 1.0f / 65536.0f, int_scale = 256.0f;
   int ox = (int)(int_scale * n.x), oy = (int)(int_scale * n.y), oz = (int)(int_scale * n.z);
-  kpcn_vec3 pi = kv3(i2f(f2i(p.x) + (p.x < 0.0f ? -ox : ox)), i2f(f2i(p.y) + (p.y < 0.0f ? -oy : oy)),
-                     i2f(f2i(p.z) + (p.z < 0.0f ? -oz : oz)));
+  kpcn_vec3 pi =
+      kv3(i2f(f2i(p.x) + (p.x < 0.0f ? -ox : ox)), i2f(f2i(p.y) + (p.y < 0.0f ? -oy : oy)),
+          i2f(f2i(p.z) + (p.z < 0.0f ? -oz : oz)));
   return kv3(fabsf(p.x) < origin ? p.x + float_scale * n.x : pi.x,
              fabsf(p.y) < origin ? p.y + float_scale * n.y : pi.y,
              fabsf(p.z) < origin ? p.z + float_scale * n.z : pi.z);

@@ -36,7 +36,8 @@ void kpcn_filter_table_init(kpcn_filter_table *t, kpcn_filter_type type) {
   int j = 0;
   for (int k = 0; k <= KPCN_FILTER_TABLE; k++) {
     double target = acc * k / KPCN_FILTER_TABLE;
-    while (j < N && cdf[j + 1] < target) j++;
+    while (j < N && cdf[j + 1] < target)
+      j++;
     double seg = cdf[j + 1] - cdf[j];
     double f = seg > 0 ? (target - cdf[j]) / seg : 0.0;
     t->inv_cdf[k] = (float)(-2.0 + 4.0 * (j + f) / N);
@@ -62,7 +63,8 @@ static float filter_sample(const kpcn_filter_table *t, float u) {
 
 /* ---- Embree queries ---- */
 
-static int intersect(const kpcn_scene *s, kpcn_vec3 o, kpcn_vec3 d, float tfar, struct RTCRayHit *rh) {
+static int intersect(const kpcn_scene *s, kpcn_vec3 o, kpcn_vec3 d, float tfar,
+                     struct RTCRayHit *rh) {
   struct RTCIntersectContext ic;
   rtcInitIntersectContext(&ic);
   rh->ray.org_x = o.x, rh->ray.org_y = o.y, rh->ray.org_z = o.z;
@@ -175,8 +177,8 @@ static void camera_ray(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler 
   kpcn_sampler_2d(smp, &fu, &fv);
   float ox = filter_sample(&ctx->filter, fu), oy = filter_sample(&ctx->filter, fv);
   float pix = 2.0f / (float)ctx->width;
-  kpcn_vec3 l = kv3(-1.0f + ((float)px + 0.5f + ox) * pix, ctx->ratio - ((float)py + 0.5f + oy) * pix,
-                    c->plane_dist);
+  kpcn_vec3 l = kv3(-1.0f + ((float)px + 0.5f + ox) * pix,
+                    ctx->ratio - ((float)py + 0.5f + oy) * pix, c->plane_dist);
   kpcn_vec3 lens = kv3s(0.0f);
   if (c->thinlens && c->aperture > 0.0f) {
     float lu, lv, ax, ay;
@@ -187,7 +189,8 @@ static void camera_ray(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler 
     l = kv3_sub(l, lens);
   }
   l = kv3_normalize(l);
-  *d = kv3_normalize(kv3_add(kv3_add(kv3_scale(c->right, l.x), kv3_scale(c->up, l.y)), kv3_scale(c->fwd, l.z)));
+  *d = kv3_normalize(
+      kv3_add(kv3_add(kv3_scale(c->right, l.x), kv3_scale(c->up, l.y)), kv3_scale(c->fwd, l.z)));
   *o = kv3_add(c->pos, kv3_add(kv3_scale(c->right, lens.x), kv3_scale(c->up, lens.y)));
 }
 
@@ -215,7 +218,8 @@ void kpcn_trace_sample(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler 
           if (!ctx->bsdf_emission)
             w = 0.0f;
           else if (ctx->mis)
-            w = power_heuristic(prev_pdf, s->lights[s->env_light].select_pdf * kpcn_envmap_pdf(s->env, d));
+            w = power_heuristic(prev_pdf,
+                                s->lights[s->env_light].select_pdf * kpcn_envmap_pdf(s->env, d));
         }
         Ls = kv3_add(Ls, kv3_scale(kv3_mul(tp_s, Le), w));
         Ld = kv3_add(Ld, kv3_scale(kv3_mul(tp_d, Le), w));

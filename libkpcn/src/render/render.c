@@ -61,7 +61,8 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   ctx.width = st.width > 0 ? st.width : scene->cam.width;
   ctx.height = st.height > 0 ? st.height : scene->cam.height;
   if ((st.width > 0) != (st.height > 0) || st.width < 0 || st.height < 0)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "resolution override: give both width and height (> 0)");
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "resolution override: give both width and height (> 0)");
   KPCN_TRY(kpcn_check_size(ctx.width, ctx.height, "render resolution"));
   int spp = st.spp > 0 ? st.spp : scene->spp;
   if (st.spp < 0 || spp > (1 << 24))
@@ -70,8 +71,8 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   if (st.crop_w > 0 || st.crop_h > 0 || st.crop_x || st.crop_y) {
     cx = st.crop_x, cy = st.crop_y, cw = st.crop_w, chh = st.crop_h;
     if (cx < 0 || cy < 0 || cw <= 0 || chh <= 0 || cx + cw > ctx.width || cy + chh > ctx.height)
-      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "crop %d,%d,%d,%d lies outside the %dx%d image", cx, cy,
-                       cw, chh, ctx.width, ctx.height);
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "crop %d,%d,%d,%d lies outside the %dx%d image",
+                       cx, cy, cw, chh, ctx.width, ctx.height);
   }
   ctx.ratio = (float)ctx.height / (float)ctx.width;
   ctx.max_bounces = st.max_bounces >= 0 ? st.max_bounces : scene->max_bounces;
@@ -131,7 +132,8 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
           float v[NCH];
           sample_to_channels(&so, v);
           int ok = 1;
-          for (int c = 0; c < NCH; c++) ok &= isfinite(v[c]) != 0;
+          for (int c = 0; c < NCH; c++)
+            ok &= isfinite(v[c]) != 0;
           if (!ok) { /* a NaN/Inf sample (should not happen) counts as black */
             nonfinite++;
             memset(v, 0, sizeof(v));

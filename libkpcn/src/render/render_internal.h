@@ -11,17 +11,17 @@
 /* Everything known about a surface hit. */
 typedef struct kpcn_hit {
   const kpcn_prim *prim;
-  kpcn_vec3 p;   /* position */
-  kpcn_vec3 ng;  /* unit geometric normal, the primitive's outward/front orientation */
-  kpcn_vec3 ns;  /* unit shading normal, same hemisphere as ng */
-  float u, v;    /* texture coordinates */
-  float t;       /* ray distance */
+  kpcn_vec3 p;  /* position */
+  kpcn_vec3 ng; /* unit geometric normal, the primitive's outward/front orientation */
+  kpcn_vec3 ns; /* unit shading normal, same hemisphere as ng */
+  float u, v;   /* texture coordinates */
+  float t;      /* ray distance */
 } kpcn_hit;
 
 /* A point sampled on an area light. */
 typedef struct kpcn_light_point {
-  kpcn_vec3 p, n;    /* position and front normal */
-  float pdf_area;    /* area density (1/area for uniform sampling) */
+  kpcn_vec3 p, n; /* position and front normal */
+  float pdf_area; /* area density (1/area for uniform sampling) */
 } kpcn_light_point;
 
 /* Filter importance sampling tables (Gaussian uses an inverted tabulated CDF). */
@@ -33,11 +33,11 @@ typedef struct kpcn_filter_table {
 
 typedef struct kpcn_render_ctx {
   const kpcn_scene *scene;
-  int width, height;        /* full image (after override) */
-  float ratio;              /* height / width */
+  int width, height; /* full image (after override) */
+  float ratio;       /* height / width */
   int max_bounces, min_bounces;
-  int nee, bsdf_emission;   /* what direct light estimators are active */
-  int mis;                  /* power-heuristic weights (both estimators on) */
+  int nee, bsdf_emission; /* what direct light estimators are active */
+  int mis;                /* power-heuristic weights (both estimators on) */
   int color_only;
   uint64_t seed;
   kpcn_filter_table filter;

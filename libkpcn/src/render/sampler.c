@@ -10,7 +10,8 @@ static pthread_once_t once = PTHREAD_ONCE_INIT;
 static void build(void) {
   uint32_t v[32];
   v[0] = 0x80000000U;
-  for (int k = 1; k < 32; k++) v[k] = v[k - 1] ^ (v[k - 1] >> 1);
+  for (int k = 1; k < 32; k++)
+    v[k] = v[k - 1] ^ (v[k - 1] >> 1);
   for (int b = 0; b < 4; b++)
     for (int x = 0; x < 256; x++) {
       uint32_t r = 0;

@@ -31,7 +31,8 @@ static inline uint32_t kpcn_hash_combine(uint32_t seed, uint32_t v) {
 
 extern uint8_t kpcn_rev8_table[256];
 static inline uint32_t kpcn_reverse_bits(uint32_t x) {
-  return ((uint32_t)kpcn_rev8_table[x & 255U] << 24) | ((uint32_t)kpcn_rev8_table[(x >> 8) & 255U] << 16) |
+  return ((uint32_t)kpcn_rev8_table[x & 255U] << 24) |
+         ((uint32_t)kpcn_rev8_table[(x >> 8) & 255U] << 16) |
          ((uint32_t)kpcn_rev8_table[(x >> 16) & 255U] << 8) | (uint32_t)kpcn_rev8_table[x >> 24];
 }
 
@@ -63,7 +64,9 @@ static inline uint32_t kpcn_sobol1_reversed(uint32_t index) {
 
 /* Cheap independent uniform for decisions that need no stratification (Russian roulette). */
 static inline float kpcn_sampler_random(const kpcn_sampler *s, uint32_t salt) {
-  return (float)(kpcn_hash32(kpcn_hash_combine(s->pixel_seed ^ 0x5bd1e995U, s->index * 0x9e3779b9U + salt)) >> 8) *
+  return (float)(kpcn_hash32(kpcn_hash_combine(s->pixel_seed ^ 0x5bd1e995U,
+                                               s->index * 0x9e3779b9U + salt)) >>
+                 8) *
          (1.0f / 16777216.0f);
 }
 
@@ -87,7 +90,8 @@ static inline void kpcn_sampler_2d(kpcn_sampler *s, float *u, float *v) {
   uint32_t ir = kpcn_lk_permute(kpcn_reverse_bits(s->index), seed); /* reversed shuffled index */
   uint32_t i = kpcn_reverse_bits(ir);
   uint32_t x = kpcn_reverse_bits(kpcn_lk_permute(i, kpcn_hash32(seed ^ 0x68bc21ebU)));
-  uint32_t y = kpcn_reverse_bits(kpcn_lk_permute(kpcn_sobol1_reversed(i), kpcn_hash32(seed ^ 0x02e5be93U)));
+  uint32_t y =
+      kpcn_reverse_bits(kpcn_lk_permute(kpcn_sobol1_reversed(i), kpcn_hash32(seed ^ 0x02e5be93U)));
   *u = kpcn_u32_to_unit(x);
   *v = kpcn_u32_to_unit(y);
 }

@@ -29,15 +29,17 @@ void kpcn_mesh_free(kpcn_mesh *m) {
 static kpcn_status alloc_mesh(kpcn_mesh *m, uint64_t nv, uint64_t nt, int with_nrm, int with_uv,
                               const char *path) {
   if (nv == 0 || nt == 0 || nv > (1u << 28) || nt > (1u << 28))
-    return kpcn_fail(KPCN_ERR_FORMAT, "mesh '%s': absurd or empty counts (%llu vertices, %llu triangles)",
-                     path, (unsigned long long)nv, (unsigned long long)nt);
+    return kpcn_fail(KPCN_ERR_FORMAT,
+                     "mesh '%s': absurd or empty counts (%llu vertices, %llu triangles)", path,
+                     (unsigned long long)nv, (unsigned long long)nt);
   m->nverts = (int)nv;
   m->ntris = (int)nt;
   m->pos = kpcn_alloc(nv * 3 * sizeof(float), "mesh positions");
   m->idx = kpcn_alloc(nt * 3 * sizeof(unsigned), "mesh indices");
   if (with_nrm) m->nrm = kpcn_alloc(nv * 3 * sizeof(float), "mesh normals");
   if (with_uv) m->uv = kpcn_alloc(nv * 2 * sizeof(float), "mesh uvs");
-  if (!m->pos || !m->idx || (with_nrm && !m->nrm) || (with_uv && !m->uv)) return KPCN_ERR_OUT_OF_MEMORY;
+  if (!m->pos || !m->idx || (with_nrm && !m->nrm) || (with_uv && !m->uv))
+    return KPCN_ERR_OUT_OF_MEMORY;
   return KPCN_OK;
 }
 
@@ -75,8 +77,8 @@ static kpcn_status load_wo3(const char *path, const char *jp, kpcn_mesh *m) {
   for (uint64_t i = 0; i < nt; i++)
     for (int k = 0; k < 3; k++) {
       if (tbuf[4 * i + k] >= nv) {
-        st = kpcn_fail(KPCN_ERR_FORMAT, "%s: mesh '%s': triangle %llu refers to vertex %u of %llu", jp,
-                       path, (unsigned long long)i, tbuf[4 * i + k], (unsigned long long)nv);
+        st = kpcn_fail(KPCN_ERR_FORMAT, "%s: mesh '%s': triangle %llu refers to vertex %u of %llu",
+                       jp, path, (unsigned long long)i, tbuf[4 * i + k], (unsigned long long)nv);
         goto done;
       }
       m->idx[3 * i + k] = tbuf[4 * i + k];
@@ -90,19 +92,23 @@ done:
 
 static kpcn_status load_assimp(const char *path, const char *jp, kpcn_mesh *m) {
   FILE *probe = fopen(path, "rb");
-  if (!probe) return kpcn_fail(KPCN_ERR_IO, "%s: cannot open mesh '%s': %s", jp, path, strerror(errno));
+  if (!probe)
+    return kpcn_fail(KPCN_ERR_IO, "%s: cannot open mesh '%s': %s", jp, path, strerror(errno));
   fclose(probe);
-  const struct aiScene *sc = aiImportFile(
-      path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices |
-                aiProcess_SortByPType);
-  if (!sc) return kpcn_fail(KPCN_ERR_FORMAT, "%s: cannot read mesh '%s': %s", jp, path, aiGetErrorString());
+  const struct aiScene *sc =
+      aiImportFile(path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
+                             aiProcess_PreTransformVertices | aiProcess_SortByPType);
+  if (!sc)
+    return kpcn_fail(KPCN_ERR_FORMAT, "%s: cannot read mesh '%s': %s", jp, path,
+                     aiGetErrorString());
   uint64_t nv = 0, nt = 0;
   int all_nrm = 1, all_uv = 1;
   for (unsigned i = 0; i < sc->mNumMeshes; i++) {
     const struct aiMesh *am = sc->mMeshes[i];
     if (!(am->mPrimitiveTypes & aiPrimitiveType_TRIANGLE)) continue;
     nv += am->mNumVertices;
-    for (unsigned fi = 0; fi < am->mNumFaces; fi++) nt += am->mFaces[fi].mNumIndices == 3;
+    for (unsigned fi = 0; fi < am->mNumFaces; fi++)
+      nt += am->mFaces[fi].mNumIndices == 3;
     all_nrm &= am->mNormals != NULL;
     all_uv &= am->mTextureCoords[0] != NULL;
   }
@@ -132,7 +138,8 @@ static kpcn_status load_assimp(const char *path, const char *jp, kpcn_mesh *m) {
     }
     for (unsigned fi = 0; fi < am->mNumFaces; fi++) {
       if (am->mFaces[fi].mNumIndices != 3) continue;
-      for (int k = 0; k < 3; k++) m->idx[3 * to + k] = (unsigned)(vo + am->mFaces[fi].mIndices[k]);
+      for (int k = 0; k < 3; k++)
+        m->idx[3 * to + k] = (unsigned)(vo + am->mFaces[fi].mIndices[k]);
       to++;
     }
     vo += am->mNumVertices;
@@ -154,12 +161,13 @@ kpcn_status kpcn_mesh_load(const char *path, const char *jp, kpcn_mesh *m) {
                    strcasecmp(dot, ".fbx") == 0 || strcasecmp(dot, ".dae") == 0))
     st = load_assimp(path, jp, m);
   else
-    st = kpcn_fail(KPCN_ERR_UNSUPPORTED, "%s: unsupported mesh format '%s' (wo3, obj, ply, gltf, glb)",
-                   jp, path);
+    st = kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                   "%s: unsupported mesh format '%s' (wo3, obj, ply, gltf, glb)", jp, path);
   if (st == KPCN_OK) {
     for (int i = 0; i < 3 * m->nverts; i++)
       if (!isfinite(m->pos[i])) {
-        st = kpcn_fail(KPCN_ERR_NONFINITE, "%s: mesh '%s' has non-finite vertex positions", jp, path);
+        st = kpcn_fail(KPCN_ERR_NONFINITE, "%s: mesh '%s' has non-finite vertex positions", jp,
+                       path);
         break;
       }
   }

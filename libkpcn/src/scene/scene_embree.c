@@ -10,12 +10,11 @@
 #include <stdlib.h>
 #include <string.h>
 
-static void set_v3(float *dst, kpcn_vec3 v) {
-  dst[0] = v.x, dst[1] = v.y, dst[2] = v.z;
-}
+static void set_v3(float *dst, kpcn_vec3 v) { dst[0] = v.x, dst[1] = v.y, dst[2] = v.z; }
 
 static kpcn_status embree_error(RTCDevice dev, const char *what) {
-  return kpcn_fail(KPCN_ERR_INTERNAL, "Embree failed while %s (error %d)", what, (int)rtcGetDeviceError(dev));
+  return kpcn_fail(KPCN_ERR_INTERNAL, "Embree failed while %s (error %d)", what,
+                   (int)rtcGetDeviceError(dev));
 }
 
 static RTCGeometry make_geometry(RTCDevice dev, const kpcn_prim *p) {
@@ -84,8 +83,9 @@ static RTCGeometry make_geometry(RTCDevice dev, const kpcn_prim *p) {
 
 kpcn_status kpcn_scene_build_embree(kpcn_scene *s) {
   RTCDevice dev = rtcNewDevice(NULL);
-  if (!dev) return kpcn_fail(KPCN_ERR_INTERNAL, "cannot create the Embree device (error %d)",
-                             (int)rtcGetDeviceError(NULL));
+  if (!dev)
+    return kpcn_fail(KPCN_ERR_INTERNAL, "cannot create the Embree device (error %d)",
+                     (int)rtcGetDeviceError(NULL));
   s->rtc_device = dev;
   RTCScene sc = rtcNewScene(dev);
   if (!sc) return embree_error(dev, "creating the scene");
@@ -115,7 +115,8 @@ kpcn_status kpcn_scene_build_embree(kpcn_scene *s) {
   if (s->ngeoms > 0 && isfinite(b.lower_x) && b.upper_x >= b.lower_x) {
     float dx = b.upper_x - b.lower_x, dy = b.upper_y - b.lower_y, dz = b.upper_z - b.lower_z;
     r = 0.5f * sqrtf(dx * dx + dy * dy + dz * dz);
-    float m = fmaxf(fmaxf(fabsf(b.lower_x), fabsf(b.upper_x)), fmaxf(fabsf(b.lower_y), fabsf(b.upper_y)));
+    float m =
+        fmaxf(fmaxf(fabsf(b.lower_x), fabsf(b.upper_x)), fmaxf(fabsf(b.lower_y), fabsf(b.upper_y)));
     m = fmaxf(m, fmaxf(fabsf(b.lower_z), fabsf(b.upper_z)));
     r = fmaxf(r, m);
   }

@@ -26,20 +26,20 @@ typedef struct kpcn_xform {
 
 typedef struct kpcn_mesh {
   int nverts, ntris;
-  float *pos;      /* 3 * nverts, world space */
-  float *nrm;      /* 3 * nverts world-space vertex normals or NULL */
-  float *uv;       /* 2 * nverts or NULL */
-  unsigned *idx;   /* 3 * ntris */
-  int smooth;      /* interpolate nrm */
+  float *pos;              /* 3 * nverts, world space */
+  float *nrm;              /* 3 * nverts world-space vertex normals or NULL */
+  float *uv;               /* 2 * nverts or NULL */
+  unsigned *idx;           /* 3 * ntris */
+  int smooth;              /* interpolate nrm */
   kpcn_distrib1d area_cdf; /* triangle selection by area (emissive meshes only) */
 } kpcn_mesh;
 
 typedef struct kpcn_prim {
   kpcn_prim_type type;
   char name[64];
-  const kpcn_bsdf *bsdf;   /* never NULL except for infinite_sphere */
+  const kpcn_bsdf *bsdf; /* never NULL except for infinite_sphere */
   int emissive;
-  kpcn_vec3 emission;      /* constant radiance (area lights) */
+  kpcn_vec3 emission;               /* constant radiance (area lights) */
   const kpcn_texture *emission_tex; /* non-constant emission (texture at the hit uv) or NULL */
   float area;
   /* quad: base corner, edges (Tungsten: uv (l0, 1-l1)), unit normal = e1 x e0 normalised */
@@ -52,24 +52,28 @@ typedef struct kpcn_prim {
   float radius;
   kpcn_frame frame;
   kpcn_mesh mesh;
-  unsigned geom_id;        /* Embree geometry id (RTC_INVALID_GEOMETRY_ID for env) */
-  int light_index;         /* index in scene->lights or -1 */
+  unsigned geom_id; /* Embree geometry id (RTC_INVALID_GEOMETRY_ID for env) */
+  int light_index;  /* index in scene->lights or -1 */
 } kpcn_prim;
 
-typedef enum kpcn_filter_type { KPCN_FILTER_BOX, KPCN_FILTER_TENT, KPCN_FILTER_GAUSSIAN } kpcn_filter_type;
+typedef enum kpcn_filter_type {
+  KPCN_FILTER_BOX,
+  KPCN_FILTER_TENT,
+  KPCN_FILTER_GAUSSIAN
+} kpcn_filter_type;
 
 typedef struct kpcn_camera {
   int thinlens;
   kpcn_vec3 pos, right, up, fwd; /* Tungsten lookAt basis: right = fwd x up */
   float fov_deg;
-  float plane_dist;              /* 1/tan(fov/2): image plane spans x in [-1, 1] */
-  float aperture, focus_dist;    /* thinlens */
+  float plane_dist;           /* 1/tan(fov/2): image plane spans x in [-1, 1] */
+  float aperture, focus_dist; /* thinlens */
   int width, height;
   kpcn_filter_type filter;
 } kpcn_camera;
 
 typedef struct kpcn_light {
-  int prim;        /* index into prims, or -1 for the environment */
+  int prim; /* index into prims, or -1 for the environment */
   float select_pdf;
 } kpcn_light;
 
@@ -86,13 +90,13 @@ struct kpcn_scene {
   kpcn_distrib1d light_cdf; /* selection over lights[] */
   int env_prim;             /* index of the infinite_sphere or -1 */
   kpcn_envmap *env;
-  int env_light;            /* index in lights[] or -1 */
+  int env_light; /* index in lights[] or -1 */
   kpcn_camera cam;
   int spp, min_bounces, max_bounces, light_sampling;
   long long ntriangles;
-  float scene_radius;       /* bounding sphere radius of finite geometry (ray epsilons) */
-  void *rtc_device;         /* RTCDevice */
-  void *rtc_scene;          /* RTCScene */
+  float scene_radius; /* bounding sphere radius of finite geometry (ray epsilons) */
+  void *rtc_device;   /* RTCDevice */
+  void *rtc_scene;    /* RTCScene */
 };
 
 /* ---- transform.c ---- */

@@ -15,15 +15,16 @@ kpcn_status kpcn_scene_build_lights(kpcn_scene *s) {
   float *w = kpcn_calloc((size_t)s->nprims + 1, sizeof(float), "light weights");
   if (!w) return KPCN_ERR_OUT_OF_MEMORY;
   int n = 0, narea = 0;
-  for (int i = 0; i < s->nprims; i++) s->prims[i].light_index = -1;
+  for (int i = 0; i < s->nprims; i++)
+    s->prims[i].light_index = -1;
   double area_total = 0.0;
   for (int i = 0; i < s->nprims; i++) {
     kpcn_prim *p = &s->prims[i];
     if (!p->emissive || p->type == KPCN_PRIM_INFINITE_SPHERE) continue;
     if (!(p->area > 0.0f)) {
       free(w);
-      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "primitives[%d].emission: emitter '%s' has zero area", i,
-                       p->name);
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                       "primitives[%d].emission: emitter '%s' has zero area", i, p->name);
     }
     if (p->type == KPCN_PRIM_MESH) {
       /* triangle selection by area for sampling points on an emissive mesh */
@@ -68,8 +69,10 @@ kpcn_status kpcn_scene_build_lights(kpcn_scene *s) {
       return st;
     }
     double tot = 0.0;
-    for (int i = 0; i < n; i++) tot += w[i];
-    for (int i = 0; i < n; i++) s->lights[i].select_pdf = tot > 0.0 ? (float)(w[i] / tot) : 1.0f / n;
+    for (int i = 0; i < n; i++)
+      tot += w[i];
+    for (int i = 0; i < n; i++)
+      s->lights[i].select_pdf = tot > 0.0 ? (float)(w[i] / tot) : 1.0f / n;
   }
   free(w);
   return KPCN_OK;

@@ -45,8 +45,8 @@ static kpcn_status get_int(const cJSON *obj, const char *key, const char *path, 
   KPCN_TRY(get_number(obj, key, path, &d, &f));
   if (!f) return KPCN_OK;
   if (d != floor(d) || d < lo || d > hi)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.%s: expected an integer in [%d, %d], got %g", path,
-                     key, lo, hi, d);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.%s: expected an integer in [%d, %d], got %g",
+                     path, key, lo, hi, d);
   *v = (int)d;
   return KPCN_OK;
 }
@@ -54,7 +54,8 @@ static kpcn_status get_int(const cJSON *obj, const char *key, const char *path, 
 static kpcn_status get_bool(const cJSON *obj, const char *key, const char *path, int *v) {
   const cJSON *it = cJSON_GetObjectItemCaseSensitive(obj, key);
   if (!it) return KPCN_OK;
-  if (!cJSON_IsBool(it)) return kpcn_fail(KPCN_ERR_FORMAT, "%s.%s: expected true or false", path, key);
+  if (!cJSON_IsBool(it))
+    return kpcn_fail(KPCN_ERR_FORMAT, "%s.%s: expected true or false", path, key);
   *v = cJSON_IsTrue(it);
   return KPCN_OK;
 }
@@ -89,10 +90,12 @@ static kpcn_status parse_emission(kpcn_scene *s, kpcn_prim *p, const cJSON *e, c
     if (cJSON_IsNumber(e)) {
       v[0] = v[1] = v[2] = (float)e->valuedouble;
     } else {
-      if (cJSON_GetArraySize(e) != 3) return kpcn_fail(KPCN_ERR_FORMAT, "%s: expected 3 numbers", path);
+      if (cJSON_GetArraySize(e) != 3)
+        return kpcn_fail(KPCN_ERR_FORMAT, "%s: expected 3 numbers", path);
       for (int i = 0; i < 3; i++) {
         const cJSON *c = cJSON_GetArrayItem(e, i);
-        if (!cJSON_IsNumber(c)) return kpcn_fail(KPCN_ERR_FORMAT, "%s[%d]: expected a number", path, i);
+        if (!cJSON_IsNumber(c))
+          return kpcn_fail(KPCN_ERR_FORMAT, "%s[%d]: expected a number", path, i);
         v[i] = (float)c->valuedouble;
       }
     }
@@ -105,16 +108,45 @@ static kpcn_status parse_emission(kpcn_scene *s, kpcn_prim *p, const cJSON *e, c
   }
   if (p->type != KPCN_PRIM_INFINITE_SPHERE)
     return kpcn_fail(KPCN_ERR_UNSUPPORTED,
-                     "%s: textured emission is only supported on infinite_sphere (use a colour)", path);
+                     "%s: textured emission is only supported on infinite_sphere (use a colour)",
+                     path);
   KPCN_TRY(kpcn_texture_parse(s->mats, e, path, 0, &p->emission_tex));
   p->emissive = 1;
+  return KPCN_OK;
+}
+
+/* Smooth vertex normals: area-weighted sum of the adjacent face normals (object space; the
+ * transform is applied later like for file normals). */
+static kpcn_status compute_vertex_normals(kpcn_mesh *m) {
+  if (!m->nrm) {
+    m->nrm = kpcn_alloc((size_t)m->nverts * 3 * sizeof(float), "mesh normals");
+    if (!m->nrm) return KPCN_ERR_OUT_OF_MEMORY;
+  }
+  memset(m->nrm, 0, (size_t)m->nverts * 3 * sizeof(float));
+  for (int t = 0; t < m->ntris; t++) {
+    const unsigned *id = m->idx + 3 * t;
+    kpcn_vec3 a = kv3(m->pos[3 * id[0]], m->pos[3 * id[0] + 1], m->pos[3 * id[0] + 2]);
+    kpcn_vec3 b = kv3(m->pos[3 * id[1]], m->pos[3 * id[1] + 1], m->pos[3 * id[1] + 2]);
+    kpcn_vec3 c = kv3(m->pos[3 * id[2]], m->pos[3 * id[2] + 1], m->pos[3 * id[2] + 2]);
+    kpcn_vec3 n = kv3_cross(kv3_sub(b, a), kv3_sub(c, a)); /* length = 2 x area */
+    for (int k = 0; k < 3; k++) {
+      m->nrm[3 * id[k]] += n.x;
+      m->nrm[3 * id[k] + 1] += n.y;
+      m->nrm[3 * id[k] + 2] += n.z;
+    }
+  }
+  for (int i = 0; i < m->nverts; i++) {
+    kpcn_vec3 n = kv3_normalize(kv3(m->nrm[3 * i], m->nrm[3 * i + 1], m->nrm[3 * i + 2]));
+    m->nrm[3 * i] = n.x, m->nrm[3 * i + 1] = n.y, m->nrm[3 * i + 2] = n.z;
+  }
   return KPCN_OK;
 }
 
 /* Fills the analytic description of p from its transform. */
 static kpcn_status setup_shape(kpcn_prim *p, const kpcn_xform *x, const char *path) {
   kpcn_vec3 c = kpcn_xform_point(x, kv3s(0));
-  kpcn_vec3 cx = kpcn_xform_column(x, 0), cy = kpcn_xform_column(x, 1), cz = kpcn_xform_column(x, 2);
+  kpcn_vec3 cx = kpcn_xform_column(x, 0), cy = kpcn_xform_column(x, 1),
+            cz = kpcn_xform_column(x, 2);
   p->center = c;
   switch (p->type) {
   case KPCN_PRIM_QUAD: {
@@ -123,7 +155,8 @@ static kpcn_status setup_shape(kpcn_prim *p, const kpcn_xform *x, const char *pa
     p->base = kv3_sub(kv3_sub(c, kv3_scale(cx, 0.5f)), kv3_scale(cz, 0.5f));
     kpcn_vec3 n = kv3_cross(p->e1, p->e0);
     p->area = kv3_length(n);
-    if (!(p->area > 0.0f)) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.transform: quad has zero area", path);
+    if (!(p->area > 0.0f))
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.transform: quad has zero area", path);
     p->n = kv3_scale(n, 1.0f / p->area);
     p->inv_e0sq = 1.0f / kv3_length2(p->e0);
     p->inv_e1sq = 1.0f / kv3_length2(p->e1);
@@ -134,7 +167,8 @@ static kpcn_status setup_shape(kpcn_prim *p, const kpcn_xform *x, const char *pa
     float h[3];
     for (int i = 0; i < 3; i++) {
       h[i] = 0.5f * kv3_length(cols[i]);
-      if (!(h[i] > 0.0f)) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.transform: cube has zero size", path);
+      if (!(h[i] > 0.0f))
+        return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.transform: cube has zero size", path);
       p->axis[i] = kv3_normalize(cols[i]);
     }
     p->half = kv3(h[0], h[1], h[2]);
@@ -146,7 +180,8 @@ static kpcn_status setup_shape(kpcn_prim *p, const kpcn_xform *x, const char *pa
   }
   case KPCN_PRIM_SPHERE:
     p->radius = fmaxf(kv3_length(cx), fmaxf(kv3_length(cy), kv3_length(cz)));
-    if (!(p->radius > 0.0f)) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.transform: sphere has zero radius", path);
+    if (!(p->radius > 0.0f))
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.transform: sphere has zero radius", path);
     p->area = 4.0f * KPCN_PI * p->radius * p->radius;
     p->frame.t = kv3_normalize(cx);
     p->frame.b = kv3_normalize(cy);
@@ -154,7 +189,8 @@ static kpcn_status setup_shape(kpcn_prim *p, const kpcn_xform *x, const char *pa
     break;
   case KPCN_PRIM_DISK:
     p->radius = fmaxf(kv3_length(cx), kv3_length(cz));
-    if (!(p->radius > 0.0f)) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.transform: disk has zero radius", path);
+    if (!(p->radius > 0.0f))
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.transform: disk has zero radius", path);
     p->n = kv3_normalize(cy);
     if (kv3_length2(p->n) == 0.0f) p->n = kpcn_xform_normal(x, kv3(0, 1, 0));
     p->frame = kpcn_frame_from_normal(p->n);
@@ -167,7 +203,8 @@ static kpcn_status setup_shape(kpcn_prim *p, const kpcn_xform *x, const char *pa
       kpcn_vec3 v = kpcn_xform_point(x, kv3(m->pos[3 * i], m->pos[3 * i + 1], m->pos[3 * i + 2]));
       m->pos[3 * i] = v.x, m->pos[3 * i + 1] = v.y, m->pos[3 * i + 2] = v.z;
       if (m->nrm) {
-        kpcn_vec3 n = kpcn_xform_normal(x, kv3(m->nrm[3 * i], m->nrm[3 * i + 1], m->nrm[3 * i + 2]));
+        kpcn_vec3 n =
+            kpcn_xform_normal(x, kv3(m->nrm[3 * i], m->nrm[3 * i + 1], m->nrm[3 * i + 2]));
         m->nrm[3 * i] = n.x, m->nrm[3 * i + 1] = n.y, m->nrm[3 * i + 2] = n.z;
       }
     }
@@ -197,9 +234,19 @@ static kpcn_status parse_primitive(kpcn_scene *s, const cJSON *pj, int index) {
   p->geom_id = ~0u;
   const char *name = get_string(pj, "name");
   snprintf(p->name, sizeof(p->name), "%s", name ? name : "");
-  static const char *common[] = {"name", "type", "transform", "bsdf", "emission", "bump_strength",
-                                 "file", "smooth", "backface_culling", "recompute_normals",
-                                 "sample", "cone_angle", NULL};
+  static const char *common[] = {"name",
+                                 "type",
+                                 "transform",
+                                 "bsdf",
+                                 "emission",
+                                 "bump_strength",
+                                 "file",
+                                 "smooth",
+                                 "backface_culling",
+                                 "recompute_normals",
+                                 "sample",
+                                 "cone_angle",
+                                 NULL};
   KPCN_TRY(check_fields(pj, path, common));
   if (strcmp(type, "quad") == 0)
     p->type = KPCN_PRIM_QUAD;
@@ -216,14 +263,17 @@ static kpcn_status parse_primitive(kpcn_scene *s, const cJSON *pj, int index) {
   else
     return kpcn_fail(KPCN_ERR_UNSUPPORTED,
                      "%s.type: unsupported primitive type '%s' (quad, cube, sphere, disk, mesh, "
-                     "infinite_sphere)", path, type);
+                     "infinite_sphere)",
+                     path, type);
   /* type-specific fields present on the wrong type are errors too */
   const char *mesh_only[] = {"file", "smooth", "backface_culling", "recompute_normals"};
   for (int i = 0; i < 4; i++)
     if (p->type != KPCN_PRIM_MESH && cJSON_GetObjectItemCaseSensitive(pj, mesh_only[i]))
-      return kpcn_fail(KPCN_ERR_UNSUPPORTED, "%s.%s: unsupported field for type '%s'", path, mesh_only[i], type);
+      return kpcn_fail(KPCN_ERR_UNSUPPORTED, "%s.%s: unsupported field for type '%s'", path,
+                       mesh_only[i], type);
   if (p->type != KPCN_PRIM_INFINITE_SPHERE && cJSON_GetObjectItemCaseSensitive(pj, "sample"))
-    return kpcn_fail(KPCN_ERR_UNSUPPORTED, "%s.sample: unsupported field for type '%s'", path, type);
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED, "%s.sample: unsupported field for type '%s'", path,
+                     type);
   if (cJSON_GetObjectItemCaseSensitive(pj, "cone_angle")) {
     double ca = 90.0;
     snprintf(sub, sizeof(sub), "%s", path);
@@ -250,7 +300,7 @@ static kpcn_status parse_primitive(kpcn_scene *s, const cJSON *pj, int index) {
     KPCN_TRY(require_bool(pj, "backface_culling", path, 0));
     int recompute = 0;
     KPCN_TRY(get_bool(pj, "recompute_normals", path, &recompute));
-    if (recompute || !p->mesh.nrm) p->mesh.smooth = p->mesh.smooth && p->mesh.nrm && !recompute;
+    if (p->mesh.smooth && (recompute || !p->mesh.nrm)) KPCN_TRY(compute_vertex_normals(&p->mesh));
     s->ntriangles += p->mesh.ntris;
   }
   KPCN_TRY(setup_shape(p, &x, path));
@@ -261,15 +311,18 @@ static kpcn_status parse_primitive(kpcn_scene *s, const cJSON *pj, int index) {
     int sample = 1;
     KPCN_TRY(get_bool(pj, "sample", path, &sample));
     const cJSON *e = cJSON_GetObjectItemCaseSensitive(pj, "emission");
-    if (!e) return kpcn_fail(KPCN_ERR_FORMAT, "%s.emission: infinite_sphere needs an emission", path);
+    if (!e)
+      return kpcn_fail(KPCN_ERR_FORMAT, "%s.emission: infinite_sphere needs an emission", path);
     snprintf(sub, sizeof(sub), "%s.emission", path);
     KPCN_TRY(parse_emission(s, p, e, sub));
     if (!p->emission_tex) {
-      KPCN_TRY(kpcn_texture_constant(kpcn_material_lib_textures(s->mats), p->emission, &p->emission_tex));
+      KPCN_TRY(kpcn_texture_constant(kpcn_material_lib_textures(s->mats), p->emission,
+                                     &p->emission_tex));
     }
     float rot[9];
     for (int r = 0; r < 3; r++)
-      for (int c = 0; c < 3; c++) rot[3 * r + c] = x.m[r][c];
+      for (int c = 0; c < 3; c++)
+        rot[3 * r + c] = x.m[r][c];
     KPCN_TRY(kpcn_envmap_create(p->emission_tex, rot, sample, &s->env));
     s->env_prim = s->nprims;
     s->nprims++;
@@ -284,7 +337,7 @@ static kpcn_status parse_primitive(kpcn_scene *s, const cJSON *pj, int index) {
   if (e) {
     snprintf(sub, sizeof(sub), "%s.emission", path);
     KPCN_TRY(parse_emission(s, p, e, sub));
-    if (p->emissive && !(p->area > 0.0f) )
+    if (p->emissive && !(p->area > 0.0f))
       return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.emission: emitter has zero area", path);
   }
   s->nprims++;
@@ -304,32 +357,48 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
   kpcn_vec3 pos = kv3(0, 0, 2), look = kv3(0, 0, -1), up = kv3(0, 1, 0);
   if (!cj) goto finish;
   if (!cJSON_IsObject(cj)) return kpcn_fail(KPCN_ERR_FORMAT, "camera: expected an object");
-  static const char *known[] = {"type", "resolution", "fov", "transform", "reconstruction_filter",
-                                "tonemap", "file", "focus_distance", "aperture_size", "cateye",
-                                "position", "lookAt", "up", "spp", NULL};
+  static const char *known[] = {"type",
+                                "resolution",
+                                "fov",
+                                "transform",
+                                "reconstruction_filter",
+                                "tonemap",
+                                "file",
+                                "focus_distance",
+                                "aperture_size",
+                                "cateye",
+                                "position",
+                                "lookAt",
+                                "up",
+                                "spp",
+                                NULL};
   KPCN_TRY(check_fields(cj, path, known));
   const char *type = get_string(cj, "type");
   if (!type) return kpcn_fail(KPCN_ERR_FORMAT, "camera.type: missing or not a string");
   if (strcmp(type, "thinlens") == 0)
     c->thinlens = 1;
   else if (strcmp(type, "pinhole") != 0)
-    return kpcn_fail(KPCN_ERR_UNSUPPORTED, "camera.type: unsupported camera '%s' (pinhole, thinlens)", type);
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                     "camera.type: unsupported camera '%s' (pinhole, thinlens)", type);
   if (!c->thinlens && (cJSON_GetObjectItemCaseSensitive(cj, "focus_distance") ||
                        cJSON_GetObjectItemCaseSensitive(cj, "aperture_size")))
-    return kpcn_fail(KPCN_ERR_UNSUPPORTED, "camera: focus_distance/aperture_size need type thinlens");
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                     "camera: focus_distance/aperture_size need type thinlens");
   const cJSON *res = cJSON_GetObjectItemCaseSensitive(cj, "resolution");
   if (res) {
     double w, h;
     if (cJSON_IsNumber(res)) {
       w = h = res->valuedouble;
     } else if (cJSON_IsArray(res) && cJSON_GetArraySize(res) == 2 &&
-               cJSON_IsNumber(cJSON_GetArrayItem(res, 0)) && cJSON_IsNumber(cJSON_GetArrayItem(res, 1))) {
+               cJSON_IsNumber(cJSON_GetArrayItem(res, 0)) &&
+               cJSON_IsNumber(cJSON_GetArrayItem(res, 1))) {
       w = cJSON_GetArrayItem(res, 0)->valuedouble;
       h = cJSON_GetArrayItem(res, 1)->valuedouble;
     } else {
       return kpcn_fail(KPCN_ERR_FORMAT, "camera.resolution: expected a number or [width, height]");
     }
-    if (!(w >= 1 && h >= 1 && w <= KPCN_MAX_DIM && h <= KPCN_MAX_DIM) || w != floor(w) || h != floor(h))
+    if (!(w >= 1 && h >= 1 && w <= KPCN_MAX_DIM && h <= KPCN_MAX_DIM) || w != floor(w) ||
+        h != floor(h))
       return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera.resolution: invalid size %gx%g", w, h);
     c->width = (int)w, c->height = (int)h;
   }
@@ -349,8 +418,9 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
     else if (strcmp(filt, "gaussian") == 0)
       c->filter = KPCN_FILTER_GAUSSIAN;
     else
-      return kpcn_fail(KPCN_ERR_UNSUPPORTED,
-                       "camera.reconstruction_filter: unsupported filter '%s' (box, tent, gaussian)", filt);
+      return kpcn_fail(
+          KPCN_ERR_UNSUPPORTED,
+          "camera.reconstruction_filter: unsupported filter '%s' (box, tent, gaussian)", filt);
   }
   double fd = c->focus_dist, ap = c->aperture, ce = 0.0;
   KPCN_TRY(get_number(cj, "focus_distance", path, &fd, NULL));
@@ -358,7 +428,8 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
   KPCN_TRY(get_number(cj, "cateye", path, &ce, NULL));
   if (ce != 0.0) return kpcn_fail(KPCN_ERR_UNSUPPORTED, "camera.cateye: only 0 is supported");
   if (!(fd > 0.0) || ap < 0.0)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera: focus_distance must be > 0 and aperture_size >= 0");
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "camera: focus_distance must be > 0 and aperture_size >= 0");
   c->focus_dist = (float)fd, c->aperture = (float)ap;
   const cJSON *tj = cJSON_GetObjectItemCaseSensitive(cj, "transform");
   if (tj) {
@@ -400,13 +471,19 @@ static kpcn_status parse_integrator(kpcn_scene *s, const cJSON *ij) {
   s->min_bounces = 0, s->max_bounces = 64, s->light_sampling = 1;
   if (!ij) return KPCN_OK;
   if (!cJSON_IsObject(ij)) return kpcn_fail(KPCN_ERR_FORMAT, "integrator: expected an object");
-  static const char *known[] = {"type", "min_bounces", "max_bounces", "enable_light_sampling",
-                                "enable_volume_light_sampling", "enable_consistency_checks",
-                                "enable_two_sided_shading", NULL};
+  static const char *known[] = {"type",
+                                "min_bounces",
+                                "max_bounces",
+                                "enable_light_sampling",
+                                "enable_volume_light_sampling",
+                                "enable_consistency_checks",
+                                "enable_two_sided_shading",
+                                NULL};
   KPCN_TRY(check_fields(ij, "integrator", known));
   const char *type = get_string(ij, "type");
   if (!type || strcmp(type, "path_tracer") != 0)
-    return kpcn_fail(KPCN_ERR_UNSUPPORTED, "integrator.type: unsupported integrator '%s' (path_tracer)",
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                     "integrator.type: unsupported integrator '%s' (path_tracer)",
                      type ? type : "(missing)");
   KPCN_TRY(get_int(ij, "min_bounces", "integrator", &s->min_bounces, 0, 100000));
   KPCN_TRY(get_int(ij, "max_bounces", "integrator", &s->max_bounces, 0, 100000));
@@ -423,17 +500,28 @@ static kpcn_status parse_renderer(kpcn_scene *s, const cJSON *rj) {
   if (!rj) return KPCN_OK;
   if (!cJSON_IsObject(rj)) return kpcn_fail(KPCN_ERR_FORMAT, "renderer: expected an object");
   /* Everything but spp concerns Tungsten's own output/scheduling; accepted, without effect. */
-  static const char *known[] = {"spp", "output_file", "hdr_output_file", "resume_render_file",
-                                "overwrite_output_files", "adaptive_sampling", "enable_resume_render",
-                                "stratified_sampler", "scene_bvh", "spp_step", "checkpoint_interval",
-                                "timeout", "output_buffers", NULL};
+  static const char *known[] = {"spp",
+                                "output_file",
+                                "hdr_output_file",
+                                "resume_render_file",
+                                "overwrite_output_files",
+                                "adaptive_sampling",
+                                "enable_resume_render",
+                                "stratified_sampler",
+                                "scene_bvh",
+                                "spp_step",
+                                "checkpoint_interval",
+                                "timeout",
+                                "output_buffers",
+                                NULL};
   KPCN_TRY(check_fields(rj, "renderer", known));
   return get_int(rj, "spp", "renderer", &s->spp, 1, 1 << 24);
 }
 
 static kpcn_status parse_document(kpcn_scene *s, const cJSON *root) {
   if (!cJSON_IsObject(root)) return kpcn_fail(KPCN_ERR_FORMAT, "(root): expected a JSON object");
-  static const char *known[] = {"media", "bsdfs", "primitives", "camera", "integrator", "renderer", NULL};
+  static const char *known[] = {"media",      "bsdfs",    "primitives", "camera",
+                                "integrator", "renderer", NULL};
   KPCN_TRY(check_fields(root, "(root)", known));
   const cJSON *media = cJSON_GetObjectItemCaseSensitive(root, "media");
   if (media && (!cJSON_IsArray(media) || cJSON_GetArraySize(media) != 0))
@@ -443,12 +531,14 @@ static kpcn_status parse_document(kpcn_scene *s, const cJSON *root) {
   if (bsdfs && !cJSON_IsArray(bsdfs)) return kpcn_fail(KPCN_ERR_FORMAT, "bsdfs: expected an array");
   KPCN_TRY(kpcn_material_lib_parse_bsdfs(s->mats, bsdfs, "bsdfs"));
   const cJSON *prims = cJSON_GetObjectItemCaseSensitive(root, "primitives");
-  if (!cJSON_IsArray(prims)) return kpcn_fail(KPCN_ERR_FORMAT, "primitives: missing or not an array");
+  if (!cJSON_IsArray(prims))
+    return kpcn_fail(KPCN_ERR_FORMAT, "primitives: missing or not an array");
   int n = cJSON_GetArraySize(prims);
   s->prims = kpcn_calloc((size_t)n + 1, sizeof(kpcn_prim), "primitives");
   if (!s->prims) return KPCN_ERR_OUT_OF_MEMORY;
   int i = 0;
-  for (const cJSON *pj = prims->child; pj; pj = pj->next, i++) KPCN_TRY(parse_primitive(s, pj, i));
+  for (const cJSON *pj = prims->child; pj; pj = pj->next, i++)
+    KPCN_TRY(parse_primitive(s, pj, i));
   KPCN_TRY(parse_camera(s, cJSON_GetObjectItemCaseSensitive(root, "camera")));
   KPCN_TRY(parse_integrator(s, cJSON_GetObjectItemCaseSensitive(root, "integrator")));
   KPCN_TRY(parse_renderer(s, cJSON_GetObjectItemCaseSensitive(root, "renderer")));
@@ -462,7 +552,8 @@ static kpcn_status parse_document(kpcn_scene *s, const cJSON *root) {
 void kpcn_scene_destroy(kpcn_scene *s) {
   if (!s) return;
   kpcn_scene_release_embree(s);
-  for (int i = 0; i < s->nprims; i++) kpcn_mesh_free(&s->prims[i].mesh);
+  for (int i = 0; i < s->nprims; i++)
+    kpcn_mesh_free(&s->prims[i].mesh);
   free(s->prims);
   free(s->geom_to_prim);
   free(s->lights);
@@ -483,8 +574,10 @@ kpcn_status kpcn_scene_load_json(const char *text, const char *base_dir, const c
     const char *err = cJSON_GetErrorPtr();
     long off = err ? (long)(err - text) : -1;
     int line = 1;
-    for (long k = 0; k < off; k++) line += text[k] == '\n';
-    return kpcn_fail(KPCN_ERR_FORMAT, "scene '%s': invalid JSON near line %d (byte %ld)", name, line, off);
+    for (long k = 0; k < off; k++)
+      line += text[k] == '\n';
+    return kpcn_fail(KPCN_ERR_FORMAT, "scene '%s': invalid JSON near line %d (byte %ld)", name,
+                     line, off);
   }
   kpcn_scene *s = kpcn_calloc(1, sizeof(*s), "scene");
   if (!s) {
@@ -539,7 +632,8 @@ kpcn_status kpcn_scene_load(const char *path, kpcn_scene **out) {
 }
 
 kpcn_status kpcn_scene_get_info(const kpcn_scene *s, kpcn_scene_info *info) {
-  if (!s || !info) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_scene_get_info: NULL argument");
+  if (!s || !info)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_scene_get_info: NULL argument");
   memset(info, 0, sizeof(*info));
   info->width = s->cam.width;
   info->height = s->cam.height;

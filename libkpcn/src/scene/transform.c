@@ -35,7 +35,8 @@ kpcn_vec3 kpcn_xform_column(const kpcn_xform *x, int i) {
 
 kpcn_vec3 kpcn_xform_normal(const kpcn_xform *x, kpcn_vec3 n) {
   /* inverse transpose applied to n == cofactor matrix times n (scale irrelevant: we normalise) */
-  kpcn_vec3 c0 = kpcn_xform_column(x, 0), c1 = kpcn_xform_column(x, 1), c2 = kpcn_xform_column(x, 2);
+  kpcn_vec3 c0 = kpcn_xform_column(x, 0), c1 = kpcn_xform_column(x, 1),
+            c2 = kpcn_xform_column(x, 2);
   kpcn_vec3 r0 = kv3_cross(c1, c2), r1 = kv3_cross(c2, c0), r2 = kv3_cross(c0, c1);
   kpcn_vec3 out = kv3_add(kv3_add(kv3_scale(r0, n.x), kv3_scale(r1, n.y)), kv3_scale(r2, n.z));
   return kv3_normalize(out);
@@ -105,7 +106,8 @@ static void rot_yxz(kpcn_vec3 rot, float R[3][3]) {
 }
 
 static kpcn_vec3 mul3(float R[3][3], kpcn_vec3 v) {
-  return kv3(R[0][0] * v.x + R[0][1] * v.y + R[0][2] * v.z, R[1][0] * v.x + R[1][1] * v.y + R[1][2] * v.z,
+  return kv3(R[0][0] * v.x + R[0][1] * v.y + R[0][2] * v.z,
+             R[1][0] * v.x + R[1][1] * v.y + R[1][2] * v.z,
              R[2][0] * v.x + R[2][1] * v.y + R[2][2] * v.z);
 }
 
@@ -119,7 +121,8 @@ kpcn_status kpcn_xform_parse(const void *node_, const char *path, kpcn_xform *ou
                        cJSON_GetArraySize(node));
     for (int i = 0; i < 12; i++) {
       const cJSON *e = cJSON_GetArrayItem(node, i);
-      if (!cJSON_IsNumber(e)) return kpcn_fail(KPCN_ERR_FORMAT, "%s[%d]: expected a number", path, i);
+      if (!cJSON_IsNumber(e))
+        return kpcn_fail(KPCN_ERR_FORMAT, "%s[%d]: expected a number", path, i);
       if (!isfinite(e->valuedouble))
         return kpcn_fail(KPCN_ERR_NONFINITE, "%s[%d]: non-finite value", path, i);
       out->m[i / 4][i % 4] = (float)e->valuedouble;
@@ -128,8 +131,8 @@ kpcn_status kpcn_xform_parse(const void *node_, const char *path, kpcn_xform *ou
   }
   if (!cJSON_IsObject(node))
     return kpcn_fail(KPCN_ERR_FORMAT, "%s: expected a transform object or 16 numbers", path);
-  static const char *known[] = {"position", "scale", "rotation", "look_at", "up",
-                                "x_axis",   "y_axis", "z_axis"};
+  static const char *known[] = {"position", "scale",  "rotation", "look_at",
+                                "up",       "x_axis", "y_axis",   "z_axis"};
   for (const cJSON *it = node->child; it; it = it->next) {
     int ok = 0;
     for (size_t i = 0; i < sizeof(known) / sizeof(known[0]); i++)
@@ -155,7 +158,8 @@ kpcn_status kpcn_xform_parse(const void *node_, const char *path, kpcn_xform *ou
   if (f) y = tmp, ey = 1;
   KPCN_TRY(get_vec3(node, "z_axis", path, &tmp, 0, &f));
   if (f) z = tmp, ez = 1;
-  if ((ex && kv3_length2(x) == 0.0f) || (ey && kv3_length2(y) == 0.0f) || (ez && kv3_length2(z) == 0.0f))
+  if ((ex && kv3_length2(x) == 0.0f) || (ey && kv3_length2(y) == 0.0f) ||
+      (ez && kv3_length2(z) == 0.0f))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: zero-length axis", path);
   switch ((ez ? 4 : 0) + (ey ? 2 : 0) + (ex ? 1 : 0)) {
   case 1: gram_schmidt(&x, &z, &y); break;

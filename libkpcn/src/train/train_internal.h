@@ -53,6 +53,7 @@ struct kpcn_trainer {
   int nval;
   kpcn_aov_set **val_aov;
   float **val_ref; /* 3 planes each (reference color) */
+  kpcn_train_timing timing;
   double last_val[3];
   int have_val;
 };

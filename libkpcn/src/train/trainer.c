@@ -265,11 +265,26 @@ double kpcn_trainer_flops_per_iter(const kpcn_trainer *t) {
   return KT_NB * (double)t->N * t->P * t->P * (3 * f - first);
 }
 
+void kpcn_trainer_get_timing(const kpcn_trainer *t, kpcn_train_timing *out) {
+  *out = t->timing;
+  out->conv_s = 0;
+  for (int b = 0; b < KT_NB; b++) {
+    kpcn_net_stats ns;
+    kpcn_net_get_stats(t->net[b], &ns);
+    out->conv_s += ns.fwd_conv_s + ns.bwd_conv_s;
+  }
+}
+
 /* forward of one branch: logits -> softmax weights in place -> out */
 static kpcn_status branch_forward(kpcn_trainer *t, int b) {
+  double t0 = kt_now();
   KPCN_TRY(kpcn_net_forward(t->net[b], t->feat[b], t->logits[b]));
-  return kpcn_kpa_forward(t->arch.kernel_size, t->N, 3, t->P, t->P, t->logits[b], t->noisy[b],
-                          t->out[b], t->logits[b], t->nt);
+  double t1 = kt_now();
+  kpcn_status st = kpcn_kpa_forward(t->arch.kernel_size, t->N, 3, t->P, t->P, t->logits[b],
+                                    t->noisy[b], t->out[b], t->logits[b], t->nt);
+  t->timing.net_s += t1 - t0;
+  t->timing.kpa_s += kt_now() - t1;
+  return st;
 }
 
 /* backward of one branch from dL/dout in t->grad[b], then its Adam step */
@@ -282,13 +297,17 @@ static kpcn_status branch_backward_step(kpcn_trainer *t, int b) {
 
 kpcn_status kpcn_trainer_step(kpcn_trainer *t, double *loss) {
   if (!t) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_trainer_step: NULL trainer");
+  double t_start = kt_now();
   KPCN_TRY(kt_batch_assemble(t));
-  double total = 0;
+  t->timing.batch_s += kt_now() - t_start;
+  double total = 0, tl;
   if (t->iter < t->s.stage1_iters) {
     for (int b = 0; b < KT_NB; b++) {
       double v;
       KPCN_TRY(branch_forward(t, b));
+      tl = kt_now();
       KPCN_TRY(kt_loss(t, t->s.loss1, t->out[b], t->target[b], t->grad[b], &v));
+      t->timing.loss_s += kt_now() - tl;
       KPCN_TRY(branch_backward_step(t, b));
       total += v;
     }
@@ -306,6 +325,8 @@ kpcn_status kpcn_trainer_step(kpcn_trainer *t, double *loss) {
     return kpcn_fail(KPCN_ERR_NONFINITE, "training loss is %g at iteration %lld", total,
                      (long long)t->iter);
   t->iter++;
+  t->timing.total_s += kt_now() - t_start;
+  t->timing.steps++;
   if (loss) *loss = total;
   return KPCN_OK;
 }
