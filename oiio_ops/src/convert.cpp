@@ -53,17 +53,17 @@ static bool check_source(const ImageBuf &src, ROI &roi, std::string &err) {
   // (read_plane names the file).
   if (!roi.defined()) roi = src.roi();
   if (roi.width() <= 0 || roi.height() <= 0 || roi.depth() != 1) {
-    err = desc(src) + " has an unsupported size " + std::to_string(roi.width()) +
-          "x" + std::to_string(roi.height()) + "x" + std::to_string(roi.depth());
+    err = desc(src) + " has an unsupported size " + std::to_string(roi.width()) + "x" +
+          std::to_string(roi.height()) + "x" + std::to_string(roi.depth());
     return false;
   }
   return true;
 }
 
-static ImagePtr make_image(int w, int h, const std::vector<std::string> &names,
-                           std::string &err) {
+static ImagePtr make_image(int w, int h, const std::vector<std::string> &names, std::string &err) {
   std::vector<const char *> cn;
-  for (auto &n : names) cn.push_back(n.c_str());
+  for (auto &n : names)
+    cn.push_back(n.c_str());
   kpcn_image *img = nullptr;
   if (kpcn_image_create(&img, w, h, (int)cn.size(), cn.data()) != KPCN_OK) {
     err = kpcn_last_error();
@@ -83,7 +83,8 @@ ImagePtr to_kpcn_image(const ImageBuf &src, std::string &err, ROI roi) {
   roi.chend = std::min(roi.chend, spec.nchannels);
   std::vector<std::string> names;
   for (int c = roi.chbegin; c < roi.chend; ++c)
-    names.push_back(std::string(spec.channel_name(c)).empty() ? std::to_string(c) : std::string(spec.channel_name(c)));
+    names.push_back(std::string(spec.channel_name(c)).empty() ? std::to_string(c)
+                                                              : std::string(spec.channel_name(c)));
   if (names.empty()) {
     err = desc(src) + " has no channels in the requested range";
     return nullptr;
@@ -91,8 +92,7 @@ ImagePtr to_kpcn_image(const ImageBuf &src, std::string &err, ROI roi) {
   ImagePtr img = make_image(roi.width(), roi.height(), names, err);
   if (!img) return nullptr;
   for (int c = roi.chbegin; c < roi.chend; ++c)
-    if (!read_plane(src, roi, c, kpcn_image_plane(img.get(), c - roi.chbegin), err))
-      return nullptr;
+    if (!read_plane(src, roi, c, kpcn_image_plane(img.get(), c - roi.chbegin), err)) return nullptr;
   return img;
 }
 

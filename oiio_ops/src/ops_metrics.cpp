@@ -29,8 +29,8 @@ static std::string size_str(const ROI &r) {
 }
 
 // Shared body of compare() and errormap(): map != nullptr requests the error image.
-static MetricResult run(const ImageBuf &x, const ImageBuf &ref, Metric m,
-                        const CompareOptions &opt, ROI roi, int nthreads, ImagePtr *map) {
+static MetricResult run(const ImageBuf &x, const ImageBuf &ref, Metric m, const CompareOptions &opt,
+                        ROI roi, int nthreads, ImagePtr *map) {
   MetricResult r;
   const char *what = metric_name(m);
   if ((int)m < 0 || (int)m >= KPCN_METRIC_COUNT) {
@@ -39,14 +39,13 @@ static MetricResult run(const ImageBuf &x, const ImageBuf &ref, Metric m,
   }
   ROI rx = roi.defined() ? roi : x.roi(), ry = roi.defined() ? roi : ref.roi();
   if (rx.width() != ry.width() || rx.height() != ry.height()) {
-    r.error = std::string(what) + ": image sizes differ (" + label(x, "the test image") +
-              " is " + size_str(rx) + ", " + label(ref, "the reference image") + " is " +
-              size_str(ry) + ")";
+    r.error = std::string(what) + ": image sizes differ (" + label(x, "the test image") + " is " +
+              size_str(rx) + ", " + label(ref, "the reference image") + " is " + size_str(ry) + ")";
     return r;
   }
   std::string err;
-  ImagePtr ix = opt.channels.empty() ? to_kpcn_image(x, err, rx)
-                                     : to_kpcn_image(x, opt.channels, err, rx);
+  ImagePtr ix =
+      opt.channels.empty() ? to_kpcn_image(x, err, rx) : to_kpcn_image(x, opt.channels, err, rx);
   if (!ix) {
     r.error = std::string(what) + ": test image: " + err;
     return r;
@@ -79,7 +78,8 @@ static MetricResult run(const ImageBuf &x, const ImageBuf &ref, Metric m,
   r.nonfinite = res.nonfinite;
   r.nchannels = res.nchannels;
   // Compared channels: the reference's (matched by name in kpcn_metric_image).
-  for (int c = 0; c < iy->nchannels; ++c) r.channel_names.push_back(iy->names[c]);
+  for (int c = 0; c < iy->nchannels; ++c)
+    r.channel_names.push_back(iy->names[c]);
   return r;
 }
 

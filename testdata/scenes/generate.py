@@ -162,6 +162,20 @@ def main():
           {"type": "infinite_sphere", "emission": [0.6, 0.75, 1.0]}]
     scene("sky-plastics", bs, ps, cam([0, 1.0, 3.0], [0, 0.35, 0], 40, [160, 120], filt="gaussian"))
 
+def extra_scenes():
+    # 10. textured emitter: a bitmap "screen" lighting a dark room, checker-textured floor light
+    bs = [lam("wall", [0.6, 0.6, 0.6]), {"name": "screen", "type": "null"},
+          {"name": "glossy", "type": "rough_conductor", "material": "Al", "roughness": 0.25}]
+    ps = [quad("wall", [0, 0, 0], [6, 1, 6]), quad("wall", [0, 1.5, -1.5], [6, 1, 3], (90, 0, 0)),
+          quad("screen", [0, 0.9, -1.45], [1.6, 1, 0.9], (90, 0, 0),
+               emission={"type": "bitmap", "file": "../textures/gradient.png"}),
+          sphere("glossy", [-0.6, 0.3, -0.3], 0.3), cube("wall", [0.6, 0.25, -0.4], [0.4, 0.5, 0.4], (0, 20, 0)),
+          {"type": "disk", "bsdf": "screen", "transform": {"position": [0.8, 2.2, 0.8], "scale": 0.4,
+                                                          "rotation": [0, 0, 180]},
+           "emission": {"type": "checker", "on_color": [3, 3, 3], "off_color": [0.3, 0.3, 0.3],
+                        "res_u": 8, "res_v": 4}}]
+    scene("textured-emitters", bs, ps, cam([0, 1.1, 3.0], [0, 0.6, -0.5], 45, [160, 120]))
+
 def write_icosphere(path, subdiv):
     t = (1 + 5 ** 0.5) / 2
     v = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
@@ -195,3 +209,4 @@ def write_icosphere(path, subdiv):
 
 if __name__ == "__main__":
     main()
+    extra_scenes()

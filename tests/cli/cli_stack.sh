@@ -47,4 +47,8 @@ run_ok mosaic.exr --info
 grep -qF "768x256, 3 channels" out.txt && pass "mosaic size" || fail "mosaic: $(cat out.txt)"
 run_ok "$NOISY" --ch R,G,B "$REF" --mosaic:n=2 --info
 grep -qF "512x256" out.txt && pass "mosaic n=2" || fail "$(cat out.txt)"
+# A missing font only costs the labels: warning, exit 0, mosaic written.
+run_ok "$REF" "$REF" --mosaic:labels=a,b:font=NoSuchFont -o nofont.exr
+grep -q "warning: --mosaic: labels not drawn" err.txt && [ -f nofont.exr ] && pass "font fallback" ||
+  fail "font fallback: $(cat err.txt)"
 finish

@@ -50,8 +50,8 @@ static int valid_px(const float *x, const float *y, size_t n, int nch, size_t i)
   return 1;
 }
 
-static double naive_pointwise(kpcn_metric m, const float *x, const float *y, int w, int h,
-                              int nch, int srgb, double range) {
+static double naive_pointwise(kpcn_metric m, const float *x, const float *y, int w, int h, int nch,
+                              int srgb, double range) {
   size_t n = (size_t)w * h;
   double s = 0;
   long cnt = 0;
@@ -76,12 +76,14 @@ static int refl(int i, int n) { return i < 0 ? -i - 1 : i >= n ? 2 * n - 1 - i :
 
 /* Direct 11x11 window; non-finite values zeroed, pixels excluded (the documented policy).
  * map (optional) gets the per-pixel SSIM of every channel. */
-static double naive_ssim(const float *x, const float *y, int w, int h, int nch, int srgb,
-                         double R, double *map) {
+static double naive_ssim(const float *x, const float *y, int w, int h, int nch, int srgb, double R,
+                         double *map) {
   size_t n = (size_t)w * h;
   double g[11], gs = 0;
-  for (int k = 0; k < 11; ++k) gs += g[k] = exp(-0.5 * (k - 5) * (k - 5) / 2.25);
-  for (int k = 0; k < 11; ++k) g[k] /= gs;
+  for (int k = 0; k < 11; ++k)
+    gs += g[k] = exp(-0.5 * (k - 5) * (k - 5) / 2.25);
+  for (int k = 0; k < 11; ++k)
+    g[k] /= gs;
   double C1 = 0.0001 * R * R, C2 = 0.0009 * R * R, total = 0;
   for (int c = 0; c < nch; ++c) {
     double s = 0;
@@ -98,7 +100,8 @@ static double naive_ssim(const float *x, const float *y, int w, int h, int nch, 
             mx += wt * p, my += wt * q, mxx += wt * p * p, myy += wt * q * q, mxy += wt * p * q;
           }
         double vx = mxx - mx * mx, vy = myy - my * my, vxy = mxy - mx * my;
-        double S = (2 * mx * my + C1) * (2 * vxy + C2) / ((mx * mx + my * my + C1) * (vx + vy + C2));
+        double S =
+            (2 * mx * my + C1) * (2 * vxy + C2) / ((mx * mx + my * my + C1) * (vx + vy + C2));
         size_t i = (size_t)py * w + px;
         int ok = valid_px(x, y, n, nch, i);
         if (map) map[c * n + i] = ok ? S : NAN;
@@ -109,14 +112,14 @@ static double naive_ssim(const float *x, const float *y, int w, int h, int nch, 
   return total / nch;
 }
 
-static double naive(kpcn_metric m, const float *x, const float *y, int w, int h, int nch,
-                    int srgb, double range) {
+static double naive(kpcn_metric m, const float *x, const float *y, int w, int h, int nch, int srgb,
+                    double range) {
   return m == KPCN_METRIC_SSIM ? naive_ssim(x, y, w, h, nch, srgb, range, NULL)
                                : naive_pointwise(m, x, y, w, h, nch, srgb, range);
 }
 
-static double run(kpcn_metric m, const float *x, const float *y, int w, int h, int nch,
-                  int srgb, double range, int nthreads, kpcn_metric_result *res, float *map) {
+static double run(kpcn_metric m, const float *x, const float *y, int w, int h, int nch, int srgb,
+                  double range, int nthreads, kpcn_metric_result *res, float *map) {
   kpcn_metric_options o;
   kpcn_metric_options_defaults(&o);
   o.display = srgb ? KPCN_DISPLAY_SRGB : KPCN_DISPLAY_LINEAR;
@@ -244,7 +247,7 @@ static void test_reference(void) {
 
 /* Error maps equal the naive per-pixel terms; SSIM's equals the naive 2-D window map. */
 static void test_errormaps(void) {
-  int w = 19, h = 14, nch = 2;
+  int w = 270, h = 14, nch = 2; /* wider than one 256-column SSIM strip */
   size_t n = (size_t)w * h;
   float *x = malloc(sizeof(float) * n * nch), *y = malloc(sizeof(float) * n * nch);
   float *map = malloc(sizeof(float) * n * nch);
@@ -277,24 +280,26 @@ static void test_nonfinite(void) {
   float *x = malloc(sizeof(float) * n * nch), *y = malloc(sizeof(float) * n * nch);
   float *map = malloc(sizeof(float) * n * nch);
   synthetic(w, h, nch, 5, 1.0f, x, y);
-  x[0 * n + 3] = NAN;             /* pixel 3 */
-  y[2 * n + 50] = INFINITY;       /* pixel 50 */
-  x[1 * n + 200] = -INFINITY;     /* pixel 200 */
-  y[1 * n + 200] = NAN;           /* same pixel: counted once */
-  x[0 * n + 12 * w + 12] = NAN;   /* interior pixel, matters for SSIM */
+  x[0 * n + 3] = NAN;           /* pixel 3 */
+  y[2 * n + 50] = INFINITY;     /* pixel 50 */
+  x[1 * n + 200] = -INFINITY;   /* pixel 200 */
+  y[1 * n + 200] = NAN;         /* same pixel: counted once */
+  x[0 * n + 12 * w + 12] = NAN; /* interior pixel, matters for SSIM */
   for (int m = 0; m < KPCN_METRIC_COUNT; ++m) {
     kpcn_metric_result r;
     double v = run((kpcn_metric)m, x, y, w, h, nch, m == KPCN_METRIC_RELL1, 1.0, 0, &r, map);
     CHECK(r.nonfinite == 4);
     CHECK(isfinite(v));
-    CHECK_CLOSE(v, naive((kpcn_metric)m, x, y, w, h, nch, m == KPCN_METRIC_RELL1, 1.0), 1e-7,
-                1e-9);
+    CHECK_CLOSE(v, naive((kpcn_metric)m, x, y, w, h, nch, m == KPCN_METRIC_RELL1, 1.0), 1e-7, 1e-9);
     CHECK(isnan(map[3]) && isnan(map[2 * n + 50]) && isnan(map[n + 200]));
     CHECK(!isnan(map[4]));
-    if (m != KPCN_METRIC_SSIM) CHECK(r.npixels == (int64_t)n - 4);
-    else CHECK(r.npixels == (int64_t)(w - 10) * (h - 10) - 2); /* pixels 200 and 12*w+12 */
+    if (m != KPCN_METRIC_SSIM)
+      CHECK(r.npixels == (int64_t)n - 4);
+    else
+      CHECK(r.npixels == (int64_t)(w - 10) * (h - 10) - 2); /* pixels 200 and 12*w+12 */
   }
-  for (size_t i = 0; i < n; ++i) x[i] = NAN;
+  for (size_t i = 0; i < n; ++i)
+    x[i] = NAN;
   kpcn_metric_options o;
   kpcn_metric_options_defaults(&o);
   kpcn_metric_result r;
@@ -305,7 +310,7 @@ static void test_nonfinite(void) {
 
 /* Same bits for 1, 2, 3 and 7 threads (fixed-order reductions). */
 static void test_determinism(void) {
-  int w = 97, h = 131, nch = 3;
+  int w = 601, h = 131, nch = 3; /* 3 column strips x 3 row blocks for SSIM */
   size_t n = (size_t)w * h;
   float *x = malloc(sizeof(float) * n * nch), *y = malloc(sizeof(float) * n * nch);
   synthetic(w, h, nch, 9, 2.0f, x, y);
@@ -331,8 +336,10 @@ static void test_image_form_and_errors(void) {
   if (!a || !b || !small || !other) return;
   size_t n = 16 * 12;
   unsigned st = 7;
-  for (size_t i = 0; i < 4 * n; ++i) a->data[i] = kt_randf(&st);
-  for (size_t i = 0; i < 3 * n; ++i) b->data[i] = kt_randf(&st);
+  for (size_t i = 0; i < 4 * n; ++i)
+    a->data[i] = kt_randf(&st);
+  for (size_t i = 0; i < 3 * n; ++i)
+    b->data[i] = kt_randf(&st);
   kpcn_metric_options o;
   kpcn_metric_options_defaults(&o);
   kpcn_metric_result r;

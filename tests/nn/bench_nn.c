@@ -34,7 +34,8 @@ static kpcn_model *make_model(const char *preset) {
   if (kpcn_arch_preset(preset, &a) != KPCN_OK) return NULL;
   char nm[N_INPUTS][16];
   const char *names[N_INPUTS];
-  for (int i = 0; i < N_INPUTS; i++) snprintf(nm[i], 16, "f%d", i), names[i] = nm[i];
+  for (int i = 0; i < N_INPUTS; i++)
+    snprintf(nm[i], 16, "f%d", i), names[i] = nm[i];
   kpcn_arch_set_inputs(&a, N_INPUTS, names);
   kpcn_model *m = NULL;
   if (kpcn_model_create(&a, 1, &m) != KPCN_OK) fprintf(stderr, "%s\n", kpcn_last_error());
@@ -131,8 +132,8 @@ static int train(const char *preset, int iters, int nt) {
   }
   /* conv FLOPs: forward + backward-weights for every layer, backward-data except layer 0 */
   double f_fwd = kpcn_arch_flops_per_pixel(a), f0 = 2.0 * kpcn_arch_layer_in(a, 0) *
-                                                       kpcn_arch_layer_out(a, 0) *
-                                                       a->conv_size[0] * a->conv_size[0];
+                                                    kpcn_arch_layer_out(a, 0) * a->conv_size[0] *
+                                                    a->conv_size[0];
   double flops_it = (3 * f_fwd - f0) * (double)px;
   double t0 = 0, kpa = 0;
   kpcn_net_stats s0;
@@ -170,20 +171,31 @@ int main(int argc, char **argv) {
   int W = 1024, H = 1024, T = 512, nt = 0, iters = 3, bf16 = 1, do_train = 1, do_infer = 1;
   char presets[128] = "cpu,paper";
   for (int i = 1; i < argc; i++) {
-    if (!strcmp(argv[i], "--size") && i + 1 < argc) sscanf(argv[++i], "%dx%d", &W, &H);
-    else if (!strcmp(argv[i], "--tile") && i + 1 < argc) T = atoi(argv[++i]);
-    else if (!strcmp(argv[i], "--threads") && i + 1 < argc) nt = atoi(argv[++i]);
-    else if (!strcmp(argv[i], "--iters") && i + 1 < argc) iters = atoi(argv[++i]);
-    else if (!strcmp(argv[i], "--presets") && i + 1 < argc) snprintf(presets, sizeof presets, "%s", argv[++i]);
-    else if (!strcmp(argv[i], "--no-bf16")) bf16 = 0;
+    if (!strcmp(argv[i], "--size") && i + 1 < argc)
+      sscanf(argv[++i], "%dx%d", &W, &H);
+    else if (!strcmp(argv[i], "--tile") && i + 1 < argc)
+      T = atoi(argv[++i]);
+    else if (!strcmp(argv[i], "--threads") && i + 1 < argc)
+      nt = atoi(argv[++i]);
+    else if (!strcmp(argv[i], "--iters") && i + 1 < argc)
+      iters = atoi(argv[++i]);
+    else if (!strcmp(argv[i], "--presets") && i + 1 < argc)
+      snprintf(presets, sizeof presets, "%s", argv[++i]);
+    else if (!strcmp(argv[i], "--no-bf16"))
+      bf16 = 0;
     else if (!strcmp(argv[i], "--layout") && i + 1 < argc)
-      g_layout = !strcmp(argv[++i], "nhwc") ? KPCN_LAYOUT_NHWC
-                 : !strcmp(argv[i], "nchw16c") ? KPCN_LAYOUT_NCHW16C : KPCN_LAYOUT_AUTO;
-    else if (!strcmp(argv[i], "--no-train")) do_train = 0;
-    else if (!strcmp(argv[i], "--no-infer")) do_infer = 0;
+      g_layout = !strcmp(argv[++i], "nhwc")    ? KPCN_LAYOUT_NHWC
+                 : !strcmp(argv[i], "nchw16c") ? KPCN_LAYOUT_NCHW16C
+                                               : KPCN_LAYOUT_AUTO;
+    else if (!strcmp(argv[i], "--no-train"))
+      do_train = 0;
+    else if (!strcmp(argv[i], "--no-infer"))
+      do_infer = 0;
     else {
-      fprintf(stderr, "usage: %s [--size WxH] [--tile T] [--threads N] [--presets paper,cpu] "
-                      "[--iters N] [--layout auto|nchw16c|nhwc] [--no-bf16] [--no-train] [--no-infer]\n", argv[0]);
+      fprintf(stderr,
+              "usage: %s [--size WxH] [--tile T] [--threads N] [--presets paper,cpu] "
+              "[--iters N] [--layout auto|nchw16c|nhwc] [--no-bf16] [--no-train] [--no-infer]\n",
+              argv[0]);
       return 2;
     }
   }

@@ -21,8 +21,10 @@ void nn_ref_init(nn_ref *r, kpcn_model *m, kpcn_branch b, int n, int h, int w) {
     kpcn_model_layer(m, b, l, &v);
     size_t nw = wcount(r->a, l);
     double *wt = malloc(nw * sizeof(double)), *bs = malloc((size_t)v.out_ch * sizeof(double));
-    for (size_t i = 0; i < nw; i++) wt[i] = v.weight[i];
-    for (int i = 0; i < v.out_ch; i++) bs[i] = v.bias[i];
+    for (size_t i = 0; i < nw; i++)
+      wt[i] = v.weight[i];
+    for (int i = 0; i < v.out_ch; i++)
+      bs[i] = v.bias[i];
     r->wt[l] = wt, r->bs[l] = bs;
     r->act[l + 1] = calloc(px * v.out_ch, sizeof(double));
     r->gw[l] = calloc(nw, sizeof(double));
@@ -50,7 +52,8 @@ double nn_ref_get_param(nn_ref *r, int l, int isb, size_t i) {
 const double *nn_ref_forward(nn_ref *r, const float *input) {
   const kpcn_arch *a = r->a;
   const int N = r->n, H = r->h, W = r->w;
-  for (size_t i = 0; i < (size_t)N * H * W * a->n_inputs; i++) r->act[0][i] = input[i];
+  for (size_t i = 0; i < (size_t)N * H * W * a->n_inputs; i++)
+    r->act[0][i] = input[i];
   for (int l = 0; l < r->nl; l++) {
     const int ci = kpcn_arch_layer_in(a, l), co = kpcn_arch_layer_out(a, l);
     const int k = a->conv_size[l], d = a->dilation[l], p = d * (k - 1) / 2;
@@ -81,7 +84,8 @@ void nn_ref_backward(nn_ref *r, const float *dlogits) {
   size_t px = (size_t)N * H * W;
   int cl = kpcn_arch_layer_out(a, r->nl - 1);
   double *g = malloc(px * cl * sizeof(double));
-  for (size_t i = 0; i < px * cl; i++) g[i] = dlogits[i];
+  for (size_t i = 0; i < px * cl; i++)
+    g[i] = dlogits[i];
   for (int l = r->nl - 1; l >= 0; l--) {
     const int ci = kpcn_arch_layer_in(a, l), co = kpcn_arch_layer_out(a, l);
     const int k = a->conv_size[l], d = a->dilation[l], p = d * (k - 1) / 2;

@@ -19,10 +19,12 @@ static void make_arch(const cfg *c, kpcn_arch *a) {
   a->n_hidden = c->n_hidden;
   a->channels = c->ch;
   a->kernel_size = c->K;
-  for (int l = 0; l <= c->n_hidden; l++) a->conv_size[l] = c->size[l], a->dilation[l] = c->dil[l];
+  for (int l = 0; l <= c->n_hidden; l++)
+    a->conv_size[l] = c->size[l], a->dilation[l] = c->dil[l];
   char nm[KPCN_NN_MAX_INPUTS][16];
   const char *names[KPCN_NN_MAX_INPUTS];
-  for (int i = 0; i < c->n_in; i++) snprintf(nm[i], sizeof nm[i], "in%d", i), names[i] = nm[i];
+  for (int i = 0; i < c->n_in; i++)
+    snprintf(nm[i], sizeof nm[i], "in%d", i), names[i] = nm[i];
   kpcn_arch_set_inputs(a, c->n_in, names);
 }
 
@@ -33,12 +35,14 @@ static void randomize_bias(kpcn_model *m, unsigned *rs) {
     for (int l = 0; l <= a->n_hidden; l++) {
       kpcn_layer_view v;
       kpcn_model_layer(m, (kpcn_branch)b, l, &v);
-      for (int i = 0; i < v.out_ch; i++) v.bias[i] = 0.2f * (kt_randf(rs) - 0.5f);
+      for (int i = 0; i < v.out_ch; i++)
+        v.bias[i] = 0.2f * (kt_randf(rs) - 0.5f);
     }
 }
 
 static void fill(float *p, size_t n, unsigned *rs, float scale) {
-  for (size_t i = 0; i < n; i++) p[i] = scale * (2.f * kt_randf(rs) - 1.f);
+  for (size_t i = 0; i < n; i++)
+    p[i] = scale * (2.f * kt_randf(rs) - 1.f);
 }
 
 /* max |got - ref| <= rtol * max |ref| (normwise relative error) */
@@ -82,8 +86,8 @@ static void check_vs_ref(const cfg *c, int seed) {
   if (net) {
     CHECK(kpcn_net_forward(net, in, lg) == KPCN_OK);
     double e = rel_err(lg, rl, nout);
-    printf("cfg in=%d L=%d C=%d K=%d N=%d %dx%d: fwd %.2e", c->n_in, c->n_hidden, c->ch, c->K,
-           c->N, c->H, c->W, e);
+    printf("cfg in=%d L=%d C=%d K=%d N=%d %dx%d: fwd %.2e", c->n_in, c->n_hidden, c->ch, c->K, c->N,
+           c->H, c->W, e);
     CHECK(e <= 1e-5);
     CHECK(kpcn_net_backward(net, dl, din) == KPCN_OK);
     kpcn_param P[2 * KPCN_NN_MAX_LAYERS];
@@ -146,7 +150,8 @@ static void fd_reference(void) {
       nn_ref_set_param(&r, l, isb, i, v + (sgn ? -h : h));
       const double *o = nn_ref_forward(&r, in);
       L[sgn] = 0;
-      for (size_t j = 0; j < nout; j++) L[sgn] += dl[j] * o[j];
+      for (size_t j = 0; j < nout; j++)
+        L[sgn] += dl[j] * o[j];
     }
     nn_ref_set_param(&r, l, isb, i, v);
     double fd = (L[0] - L[1]) / (2 * h), an = isb ? r.gb[l][i] : r.gw[l][i];
@@ -165,7 +170,8 @@ static void fd_reference(void) {
       in[i] = v + (float)(sgn ? -h : h);
       const double *o = nn_ref_forward(&r, in);
       L[sgn] = 0;
-      for (size_t j = 0; j < nout; j++) L[sgn] += dl[j] * o[j];
+      for (size_t j = 0; j < nout; j++)
+        L[sgn] += dl[j] * o[j];
     }
     in[i] = v;
     double fd = (L[0] - L[1]) / (2 * h);
@@ -179,13 +185,66 @@ static void fd_reference(void) {
   free(in), free(dl);
 }
 
+/* Central differences directly on the oneDNN net (fp32, so a loose tolerance): perturb the
+ * model's weights in place (the net re-reads them each forward) and compare with backward. */
+static void fd_onednn(void) {
+  cfg c = {3, 2, 8, 3, 1, 8, 9, {3, 3, 3}, {1, 2, 1}};
+  kpcn_arch a;
+  make_arch(&c, &a);
+  kpcn_model *m = NULL;
+  kpcn_model_create(&a, 11, &m);
+  unsigned rs = 5;
+  randomize_bias(m, &rs);
+  size_t px = (size_t)c.H * c.W, nin = px * c.n_in, nout = px * c.K * c.K;
+  float *in = malloc(nin * 4), *dl = malloc(nout * 4), *lg = malloc(nout * 4);
+  fill(in, nin, &rs, 1.f);
+  fill(dl, nout, &rs, 1.f);
+  kpcn_net_options o;
+  kpcn_net_options_defaults(&o);
+  o.height = c.H, o.width = c.W, o.training = 1;
+  kpcn_net *net = NULL;
+  CHECK(kpcn_net_create(m, KPCN_BRANCH_SPECULAR, &o, &net) == KPCN_OK);
+  if (!net) return;
+  kpcn_net_forward(net, in, lg);
+  kpcn_net_backward(net, dl, NULL);
+  kpcn_param P[2 * KPCN_NN_MAX_LAYERS];
+  kpcn_net_params(net, P, 2 * KPCN_NN_MAX_LAYERS);
+  /* copy the analytic gradients: later forwards do not touch them, but be explicit */
+  int bad = 0;
+  for (int t = 0; t < 40; t++) {
+    kpcn_param *p = &P[t % (2 * (c.n_hidden + 1))];
+    size_t i = (size_t)(kt_randf(&rs) * p->count) % p->count;
+    float v = p->value[i], h = 2e-3f;
+    double L[2];
+    for (int sg = 0; sg < 2; sg++) {
+      p->value[i] = v + (sg ? -h : h);
+      kpcn_net_forward(net, in, lg);
+      L[sg] = 0;
+      for (size_t j = 0; j < nout; j++)
+        L[sg] += (double)dl[j] * lg[j];
+    }
+    p->value[i] = v;
+    double fd = (L[0] - L[1]) / ((double)(float)(v + h) - (double)(float)(v - h));
+    if (fabs(fd - p->grad[i]) > 1e-3 + 1e-2 * fabs(p->grad[i])) {
+      bad++;
+      fprintf(stderr, "onednn fd %s[%zu]: fd %.6g analytic %.6g\n", p->name, i, fd, p->grad[i]);
+    }
+  }
+  printf("finite differences on the oneDNN net: %d/40 bad\n", bad);
+  CHECK(bad <= 2); /* a ReLU kink within +-h may flip a sample */
+  kpcn_net_destroy(net);
+  kpcn_model_destroy(m);
+  free(in), free(dl), free(lg);
+}
+
 /* bf16 inference vs fp32 on the cpu preset: bounded difference. */
 static void bf16_vs_f32(void) {
   kpcn_arch a;
   kpcn_arch_preset("cpu", &a);
   char nm[27][16];
   const char *names[27];
-  for (int i = 0; i < 27; i++) snprintf(nm[i], 16, "f%d", i), names[i] = nm[i];
+  for (int i = 0; i < 27; i++)
+    snprintf(nm[i], 16, "f%d", i), names[i] = nm[i];
   kpcn_arch_set_inputs(&a, 27, names);
   kpcn_model *m = NULL;
   kpcn_model_create(&a, 3, &m);
@@ -229,7 +288,45 @@ static void bf16_vs_f32(void) {
   free(in), free(l32), free(l16);
 }
 
+/* The presets must run on optimized oneDNN kernels in every mode we use (a layout mix-up once
+ * sent a dilated layer to oneDNN's reference kernel, 100x slower). Creation only. */
+static void presets_fast(void) {
+  const char *ps[2] = {"cpu", "paper"};
+  char nm[36][16];
+  const char *names[36];
+  for (int i = 0; i < 36; i++)
+    snprintf(nm[i], 16, "f%d", i), names[i] = nm[i];
+  for (int p = 0; p < 2; p++) {
+    kpcn_arch a;
+    kpcn_arch_preset(ps[p], &a);
+    kpcn_arch_set_inputs(&a, 36, names);
+    kpcn_model *m = NULL;
+    kpcn_model_create(&a, 1, &m);
+    for (int mode = 0; mode < 3; mode++) {
+      kpcn_net_options o;
+      kpcn_net_options_defaults(&o);
+      o.batch = mode == 0 ? 16 : 1;
+      o.height = o.width = mode == 0 ? 64 : 256;
+      o.training = mode == 0;
+      o.precision = mode == 2 ? KPCN_PREC_BF16 : KPCN_PREC_F32;
+      kpcn_net *n = NULL;
+      CHECK(kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &n) == KPCN_OK);
+      kpcn_net_stats st;
+      kpcn_net_get_stats(n, &st);
+      printf("preset %-5s %-9s: %d slow primitives, layer-1 %s\n", ps[p],
+             mode == 0   ? "train"
+             : mode == 1 ? "infer f32"
+                         : "infer bf16",
+             st.n_slow, kpcn_net_impl_name(n, 1));
+      CHECK(st.n_slow == 0);
+      kpcn_net_destroy(n);
+    }
+    kpcn_model_destroy(m);
+  }
+}
+
 int main(void) {
+  presets_fast();
   const cfg cs[] = {
       {3, 1, 16, 3, 2, 12, 10, {3, 3}, {1, 1}},
       {7, 2, 20, 5, 3, 13, 17, {5, 3, 1}, {1, 2, 1}},
@@ -237,8 +334,10 @@ int main(void) {
       {5, 0, 0, 3, 2, 8, 8, {5}, {3}},
       {27, 3, 48, 7, 2, 16, 16, {3, 3, 3, 3}, {1, 2, 4, 1}},
   };
-  for (size_t i = 0; i < sizeof cs / sizeof cs[0]; i++) check_vs_ref(&cs[i], (int)i + 1);
+  for (size_t i = 0; i < sizeof cs / sizeof cs[0]; i++)
+    check_vs_ref(&cs[i], (int)i + 1);
   fd_reference();
+  fd_onednn();
   bf16_vs_f32();
   return kt_summary("test_nn_conv");
 }

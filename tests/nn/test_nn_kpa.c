@@ -10,8 +10,8 @@
 static int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
 
 /* Naive reference: out[b][c][y][x] = sum_t softmax(l)[t] * noisy[clamp(y+dy-r)][clamp(x+dx-r)] */
-static double ref_pixel(int K, int nc, int h, int w, const float *lg, const float *nz, int b,
-                        int c, int y, int x) {
+static double ref_pixel(int K, int nc, int h, int w, const float *lg, const float *nz, int b, int c,
+                        int y, int x) {
   const int K2 = K * K, r = K / 2;
   const size_t pl = (size_t)h * w;
   double mx = -1e300, s = 0, o = 0;
@@ -19,7 +19,8 @@ static double ref_pixel(int K, int nc, int h, int w, const float *lg, const floa
     double v = lg[((size_t)b * K2 + t) * pl + (size_t)y * w + x];
     mx = v > mx ? v : mx;
   }
-  for (int t = 0; t < K2; t++) s += exp(lg[((size_t)b * K2 + t) * pl + (size_t)y * w + x] - mx);
+  for (int t = 0; t < K2; t++)
+    s += exp(lg[((size_t)b * K2 + t) * pl + (size_t)y * w + x] - mx);
   for (int dy = 0; dy < K; dy++)
     for (int dx = 0; dx < K; dx++) {
       int t = dy * K + dx;
@@ -31,7 +32,8 @@ static double ref_pixel(int K, int nc, int h, int w, const float *lg, const floa
 }
 
 static void fill(float *p, size_t n, unsigned *rs, float lo, float hi) {
-  for (size_t i = 0; i < n; i++) p[i] = lo + (hi - lo) * kt_randf(rs);
+  for (size_t i = 0; i < n; i++)
+    p[i] = lo + (hi - lo) * kt_randf(rs);
 }
 
 static void forward_vs_naive(int K, int n, int nc, int h, int w, float scale) {
@@ -48,7 +50,8 @@ static void forward_vs_naive(int K, int n, int nc, int h, int w, float scale) {
       for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
           double r = ref_pixel(K, nc, h, w, lg, nz, b, c, y, x);
-          double d = fabs(out[((size_t)b * nc + c) * pl + (size_t)y * w + x] - r) / (fabs(r) + 1e-3);
+          double d =
+              fabs(out[((size_t)b * nc + c) * pl + (size_t)y * w + x] - r) / (fabs(r) + 1e-3);
           e = d > e ? d : e;
         }
   /* softmax weights sum to 1 per pixel */
@@ -56,11 +59,12 @@ static void forward_vs_naive(int K, int n, int nc, int h, int w, float scale) {
   for (int b = 0; b < n; b++)
     for (size_t p = 0; p < pl; p++) {
       double s = 0;
-      for (int t = 0; t < K2; t++) s += wt[((size_t)b * K2 + t) * pl + p];
+      for (int t = 0; t < K2; t++)
+        s += wt[((size_t)b * K2 + t) * pl + p];
       es = fabs(s - 1) > es ? fabs(s - 1) : es;
     }
-  printf("kpa fwd K=%d n=%d nc=%d %dx%d logit scale %g: rel err %.2e, |sum w - 1| %.2e\n", K, n,
-         nc, h, w, (double)scale, e, es);
+  printf("kpa fwd K=%d n=%d nc=%d %dx%d logit scale %g: rel err %.2e, |sum w - 1| %.2e\n", K, n, nc,
+         h, w, (double)scale, e, es);
   CHECK(e <= 1e-5);
   CHECK(es <= 1e-5);
   /* in place (weights aliasing logits) and other thread counts: bit-identical */
@@ -101,7 +105,8 @@ static void backward_fd(int K, int n, int nc, int h, int w) {
       p[i] = v + (s ? -hh : hh);
       kpcn_kpa_forward(K, n, nc, h, w, lg, nz, out, NULL, 1);
       L[s] = 0;
-      for (size_t j = 0; j < nn; j++) L[s] += (double)r[j] * out[j];
+      for (size_t j = 0; j < nn; j++)
+        L[s] += (double)r[j] * out[j];
     }
     p[i] = v;
     double step = (double)(float)(v + hh) - (double)(float)(v - hh); /* the float step taken */
@@ -112,12 +117,13 @@ static void backward_fd(int K, int n, int nc, int h, int w) {
     tot++;
     if (err > 2e-4 + 2e-3 * fabs(an)) {
       bad++;
-      if (bad < 5) fprintf(stderr, "kpa fd %s[%zu]: fd %.7g analytic %.7g\n",
-                           wrt_noisy ? "noisy" : "logits", i, fd, an);
+      if (bad < 5)
+        fprintf(stderr, "kpa fd %s[%zu]: fd %.7g analytic %.7g\n", wrt_noisy ? "noisy" : "logits",
+                i, fd, an);
     }
   }
-  printf("kpa bwd K=%d n=%d nc=%d %dx%d: %d/%d finite-difference mismatches, max abs err %.2e\n",
-         K, n, nc, h, w, bad, tot, emax);
+  printf("kpa bwd K=%d n=%d nc=%d %dx%d: %d/%d finite-difference mismatches, max abs err %.2e\n", K,
+         n, nc, h, w, bad, tot, emax);
   CHECK(bad == 0);
   /* dnoisy: sum over all pixels equals sum over outputs of dout (weights sum to 1) */
   for (int b = 0; b < n; b++)
@@ -139,7 +145,7 @@ static void backward_fd(int K, int n, int nc, int h, int w) {
 int main(void) {
   forward_vs_naive(3, 1, 3, 5, 4, 2.f);
   forward_vs_naive(5, 2, 3, 9, 13, 4.f);
-  forward_vs_naive(11, 1, 3, 16, 7, 3.f);  /* K larger than the image height: clamping */
+  forward_vs_naive(11, 1, 3, 16, 7, 3.f);   /* K larger than the image height: clamping */
   forward_vs_naive(21, 1, 1, 30, 33, 50.f); /* large logits: the stable softmax path */
   backward_fd(3, 2, 3, 6, 5);
   backward_fd(5, 1, 3, 7, 9);

@@ -38,7 +38,8 @@ static void write_st(const char *path, uint64_t declared, const char *json, cons
                      size_t dn) {
   FILE *f = fopen(path, "wb");
   unsigned char l8[8];
-  for (int i = 0; i < 8; i++) l8[i] = (unsigned char)(declared >> (8 * i));
+  for (int i = 0; i < 8; i++)
+    l8[i] = (unsigned char)(declared >> (8 * i));
   fwrite(l8, 1, 8, f);
   fwrite(json, 1, strlen(json), f);
   fwrite(data, 1, dn, f);
@@ -47,7 +48,8 @@ static void write_st(const char *path, uint64_t declared, const char *json, cons
 
 static uint64_t hlen(const blob *b) {
   uint64_t h = 0;
-  for (int i = 0; i < 8; i++) h |= (uint64_t)b->p[i] << (8 * i);
+  for (int i = 0; i < 8; i++)
+    h |= (uint64_t)b->p[i] << (8 * i);
   return h;
 }
 
@@ -225,7 +227,8 @@ static void test_roundtrip(blob *good) {
     for (int l = 0; l <= a.n_hidden; l++) {
       kpcn_layer_view v;
       kpcn_model_layer(m, (kpcn_branch)b, l, &v);
-      for (int i = 0; i < v.out_ch; i++) v.bias[i] = (float)(i + 1) / 3.0f * (b ? -1.f : 1.f);
+      for (int i = 0; i < v.out_ch; i++)
+        v.bias[i] = (float)(i + 1) / 3.0f * (b ? -1.f : 1.f);
     }
   CHECK(kpcn_model_set_meta(m, "train.iterations", "1200") == KPCN_OK);
   CHECK(kpcn_model_set_meta(m, "kpcn.bad", "x") == KPCN_ERR_INVALID_ARGUMENT);
@@ -266,10 +269,12 @@ static void test_malformed(const blob *good) {
   expect_reject("shorter than 8 bytes", p, "too short");
   blob b = {malloc(good->n), good->n};
   memcpy(b.p, good->p, good->n);
-  for (int i = 0; i < 8; i++) b.p[i] = (unsigned char)(((uint64_t)1 << 62) >> (8 * i));
+  for (int i = 0; i < 8; i++)
+    b.p[i] = (unsigned char)(((uint64_t)1 << 62) >> (8 * i));
   spit(p, b.p, b.n);
   expect_reject("huge header length", p, "header length");
-  for (int i = 0; i < 8; i++) b.p[i] = 0;
+  for (int i = 0; i < 8; i++)
+    b.p[i] = 0;
   spit(p, b.p, b.n);
   expect_reject("zero header length", p, "header length");
   /* NaN in a weight */

@@ -213,6 +213,9 @@ int main(void) {
   test_split(KPCN_TESTDATA "/scenes/glossy-mirror/scene.json");
   test_estimators(CORNELL, 32, 32, 256);
   test_estimators(KPCN_TESTDATA "/scenes/sky-plastics/scene.json", 32, 24, 128);
+  test_estimators(KPCN_TESTDATA "/scenes/glossy-mirror/scene.json", 32, 32, 256);
+  /* textured emitters (bitmap quad, checker disk): NEE must look emission up where BSDF hits do */
+  test_estimators(KPCN_TESTDATA "/scenes/textured-emitters/scene.json", 32, 24, 256);
   test_convergence(cb);
   kpcn_scene_destroy(cb);
   return kt_summary("render_core");

@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -17,6 +18,16 @@ static double now(void) {
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* CPU seconds used by this process (all threads): with other jobs on the machine, wall-clock
+ * rates understate the code's speed; FLOPs per CPU-second x threads is the idle-machine
+ * estimate (it still counts spin-waiting as work, so it errs low). */
+static double cpu_s(void) {
+  struct rusage r;
+  getrusage(RUSAGE_SELF, &r);
+  return (double)r.ru_utime.tv_sec + 1e-6 * (double)r.ru_utime.tv_usec + (double)r.ru_stime.tv_sec +
+         1e-6 * (double)r.ru_stime.tv_usec;
 }
 
 static void bench(const char *store, const char *preset, int iters, int threads, int stage) {
@@ -43,18 +54,23 @@ static void bench(const char *store, const char *preset, int iters, int threads,
   }
   double warm = now() - t0;
   t0 = now();
+  double c0 = cpu_s();
   for (int i = 0; i < iters; i++)
     if (kpcn_trainer_step(t, &loss) != KPCN_OK) {
       fprintf(stderr, "bench_train: %s\n", kpcn_last_error());
       break;
     }
-  double dt = now() - t0, f = kpcn_trainer_flops_per_iter(t);
+  double dt = now() - t0, f = kpcn_trainer_flops_per_iter(t), dc = cpu_s() - c0;
   kpcn_train_timing tm;
   kpcn_trainer_get_timing(t, &tm); /* includes the warm-up step */
   printf("%-6s stage %d  batch 16x64x64  threads %d: %.3f it/s  %.1f patches/s  %.1f GFLOP/s "
          "(%.1f GFLOP/it; warm-up %.2f s, %d timed iterations)\n",
          preset, stage, kpcn_resolve_threads(threads), iters / dt, 16 * iters / dt,
          f * iters / dt * 1e-9, f * 1e-9, warm, iters);
+  int nt = kpcn_resolve_threads(threads);
+  printf("       CPU obtained %.2f of %d cores; per CPU-second %.1f GFLOP -> %.1f GFLOP/s if the "
+         "%d cores were ours\n",
+         dc / dt, nt, f * iters / dc * 1e-9, f * iters / dc * nt * 1e-9, nt);
   printf("       time shares over %lld steps: convs %.0f%% (%.1f GFLOP/s inside convs), rest of "
          "net %.0f%%, batch %.0f%%, kernel layer %.0f%%, loss %.0f%%, Adam %.0f%%\n",
          (long long)tm.steps, 100 * tm.conv_s / tm.total_s, f * tm.steps / tm.conv_s * 1e-9,

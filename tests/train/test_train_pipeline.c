@@ -26,8 +26,8 @@ static void settings(kpcn_train_settings *s, const char *out) {
   s->out_path = out;
   s->batch = 3;
   s->patch = 16;
-  s->iters = 8;
-  s->stage1_iters = 4;
+  s->iters = 6;
+  s->stage1_iters = 3;
   s->nthreads = 2;
   s->seed = 5;
   s->adam.lr = 1e-2;
@@ -69,7 +69,7 @@ static float *run_full(const char *out, size_t *n) {
   }
   int stopped = -1;
   CHECK(kpcn_trainer_run(t, &stopped) == KPCN_OK);
-  CHECK(stopped == 0 && kpcn_trainer_iteration(t) == 8);
+  CHECK(stopped == 0 && kpcn_trainer_iteration(t) == 6);
   CHECK(kpcn_trainer_validate(t, NULL, NULL, NULL) == KPCN_ERR_INVALID_ARGUMENT);
   float *w = weights(t, n);
   kpcn_trainer_destroy(t);
@@ -89,24 +89,24 @@ static void test_determinism_and_resume(void) {
   size_t n0;
   float *w0 = weights(t, &n0);
   CHECK(n0 == n1 && memcmp(w0, w1, n0 * sizeof(float)) != 0);
-  /* interrupted at iteration 3 (stage 1), resumed to 8 (through stage 2) */
-  stop_at = 3;
+  /* interrupted at iteration 2 (stage 1), resumed to 6 (through stage 2) */
+  stop_at = 2;
   s.progress = stop_cb;
   kpcn_trainer_destroy(t);
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
   int stopped = 0;
   CHECK(kpcn_trainer_run(t, &stopped) == KPCN_OK);
-  CHECK(stopped == 1 && kpcn_trainer_iteration(t) == 3);
+  CHECK(stopped == 1 && kpcn_trainer_iteration(t) == 2);
   kpcn_trainer_destroy(t);
   s.progress = NULL;
   s.resume = 1;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
-  CHECK(kpcn_trainer_iteration(t) == 3);
+  CHECK(kpcn_trainer_iteration(t) == 2);
   CHECK(kpcn_trainer_run(t, &stopped) == KPCN_OK && stopped == 0);
   float *w3 = weights(t, &n3);
   CHECK(n3 == n1 && memcmp(w3, w1, n1 * sizeof(float)) == 0);
   kpcn_trainer_destroy(t);
-  /* the resumed CSV reads as one run: rows 2,4,6,8 */
+  /* the resumed CSV reads as one run: rows 2,4,6 */
   FILE *f = fopen(tf_tmp("c.safetensors.csv"), "r");
   CHECK(f != NULL);
   if (f) {
@@ -119,14 +119,14 @@ static void test_determinism_and_resume(void) {
         last = it, rows++;
       }
     fclose(f);
-    CHECK(rows == 4 && ordered && last == 8);
+    CHECK(rows == 3 && ordered && last == 6);
   }
   /* outputs: model loads, plot exists */
   kpcn_model *m = NULL;
   CHECK(kpcn_model_load(tf_tmp("c.safetensors"), &m) == KPCN_OK);
   if (m)
     CHECK(kpcn_model_get_meta(m, "train.iterations") &&
-          !strcmp(kpcn_model_get_meta(m, "train.iterations"), "8"));
+          !strcmp(kpcn_model_get_meta(m, "train.iterations"), "6"));
   kpcn_model_destroy(m);
   FILE *p = fopen(tf_tmp("c.safetensors.png"), "rb");
   CHECK(p != NULL);
@@ -164,7 +164,8 @@ static void test_validation(void) {
   kpcn_train_settings s;
   settings(&s, tf_tmp("v.safetensors"));
   const char *vn[1] = {np}, *vr[1] = {rp};
-  s.nval = 1, s.val_noisy = vn, s.val_ref = vr, s.val_every = 4;
+  s.nval = 1, s.val_noisy = vn, s.val_ref = vr, s.val_every = 3;
+  s.nthreads = 1;
   kpcn_trainer *t;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
   if (!t) {
@@ -184,7 +185,7 @@ static void test_validation(void) {
     if (line[0] != 'i' && last && last[1] != '\n' && last[1] != 0) vrows++;
   }
   if (f) fclose(f);
-  CHECK(vrows == 2); /* iterations 4 and 8 */
+  CHECK(vrows == 2); /* iterations 3 and 6 */
   /* a missing validation file is named */
   const char *bad[1] = {"/nonexistent/val.exr"};
   s.val_noisy = bad;

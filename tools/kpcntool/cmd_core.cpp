@@ -28,7 +28,8 @@ static std::string lower_ext(const std::string &path) {
   size_t slash = path.find_last_of('/');
   if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
   std::string e = path.substr(dot + 1);
-  for (char &c : e) c = (char)std::tolower((unsigned char)c);
+  for (char &c : e)
+    c = (char)std::tolower((unsigned char)c);
   return e;
 }
 
@@ -93,8 +94,7 @@ std::string img_desc(const ImageBuf &b, const char *role = "the top image") {
   return n.empty() ? std::string(role) : "image '" + n + "'";
 }
 
-bool cmd_output(Context &ctx, const Modifiers &, const std::vector<std::string> &a,
-                std::string &) {
+bool cmd_output(Context &ctx, const Modifiers &, const std::vector<std::string> &a, std::string &) {
   ctx.outputs.emplace_back(a[0], ctx.top()); // a deep copy: later commands may change the top
   return true;
 }
@@ -131,20 +131,26 @@ bool cmd_info(Context &ctx, const Modifiers &, const std::vector<std::string> &,
   const ImageSpec &sp = b.spec();
   std::vector<std::string> names;
   std::vector<const char *> cn;
-  for (int c = 0; c < sp.nchannels; ++c) names.push_back(std::string(sp.channel_name(c)));
-  for (auto &n : names) cn.push_back(n.c_str());
+  for (int c = 0; c < sp.nchannels; ++c)
+    names.push_back(std::string(sp.channel_name(c)));
+  for (auto &n : names)
+    cn.push_back(n.c_str());
   int chan[KPCN_BUF_COUNT][3], var[KPCN_BUF_COUNT];
   std::string aov_error;
-  if (kpcn_aov_map_channels(cn.data(), (int)cn.size(), chan, var, std::string(b.name()).c_str()) != KPCN_OK)
+  if (kpcn_aov_map_channels(cn.data(), (int)cn.size(), chan, var, std::string(b.name()).c_str()) !=
+      KPCN_OK)
     aov_error = kpcn_last_error();
   std::ostringstream txt, js;
   std::string chlist;
-  for (auto &n : names) chlist += (chlist.empty() ? "" : ",") + n;
-  txt << (b.name().empty() ? std::string("(top image)") : std::string(b.name())) << ": " << sp.width << "x" << sp.height << ", " << sp.nchannels
-      << " channels (" << chlist << "), " << b.nativespec().format.c_str() << "\n";
+  for (auto &n : names)
+    chlist += (chlist.empty() ? "" : ",") + n;
+  txt << (b.name().empty() ? std::string("(top image)") : std::string(b.name())) << ": " << sp.width
+      << "x" << sp.height << ", " << sp.nchannels << " channels (" << chlist << "), "
+      << b.nativespec().format.c_str() << "\n";
   js << "{\"file\": " << quote(std::string(b.name())) << ", \"width\": " << sp.width
      << ", \"height\": " << sp.height << ", \"channels\": [";
-  for (size_t i = 0; i < names.size(); ++i) js << (i ? ", " : "") << quote(names[i]);
+  for (size_t i = 0; i < names.size(); ++i)
+    js << (i ? ", " : "") << quote(names[i]);
   js << "], \"buffers\": {";
   bool first = true;
   for (int bi = 0; bi < KPCN_BUF_COUNT && aov_error.empty(); ++bi) {
@@ -156,8 +162,8 @@ bool cmd_info(Context &ctx, const Modifiers &, const std::vector<std::string> &,
     std::string vs = var[bi] >= 0 ? names[var[bi]] : "";
     txt << "  buffer " << kpcn_buffer_name(buf) << ": " << src
         << (vs.empty() ? "" : "  variance: " + vs) << "\n";
-    js << (first ? "" : ", ") << quote(kpcn_buffer_name(buf)) << ": {\"channels\": "
-       << quote(src) << ", \"variance\": " << (vs.empty() ? "null" : quote(vs)) << "}";
+    js << (first ? "" : ", ") << quote(kpcn_buffer_name(buf)) << ": {\"channels\": " << quote(src)
+       << ", \"variance\": " << (vs.empty() ? "null" : quote(vs)) << "}";
     first = false;
   }
   js << "}";
@@ -182,8 +188,7 @@ bool cmd_info(Context &ctx, const Modifiers &, const std::vector<std::string> &,
 }
 
 // --ch R,G,B | R=albedo.R,G=albedo.G,B=albedo.B | A=1.0 (like oiiotool's --ch).
-bool cmd_ch(Context &ctx, const Modifiers &, const std::vector<std::string> &a,
-            std::string &err) {
+bool cmd_ch(Context &ctx, const Modifiers &, const std::vector<std::string> &a, std::string &err) {
   const ImageBuf &src = ctx.top();
   std::vector<std::string> items = kpcn::ops::split_names(a[0]);
   if (items.empty()) {
@@ -247,7 +252,8 @@ bool cmd_ociodisplay(Context &ctx, const Modifiers &m, const std::vector<std::st
   }
   std::string display = m.str("display", cc->getDefaultDisplayName());
   bool found = false;
-  for (int i = 0; i < cc->getNumDisplays(); ++i) found = found || display == cc->getDisplayNameByIndex(i);
+  for (int i = 0; i < cc->getNumDisplays(); ++i)
+    found = found || display == cc->getDisplayNameByIndex(i);
   if (!found) {
     err = "display '" + display + "' is not in OCIO config '" + path + "'";
     return false;
@@ -350,20 +356,36 @@ bool cmd_mosaic(Context &ctx, const Modifiers &m, const std::vector<std::string>
   return true;
 }
 
-bool r1 = register_command({"o", 1, {}, "queue the top image for writing to a file (EXR float, "
+bool r1 = register_command({"o",
+                            1,
+                            {},
+                            "queue the top image for writing to a file (EXR float, "
                             "PNG/JPEG 8 bit; written atomically after all commands succeed)",
                             cmd_output});
-bool r2 = register_command({"threads", 1, {}, "threads for the following commands (0 = all)",
-                            cmd_threads});
+bool r2 = register_command(
+    {"threads", 1, {}, "threads for the following commands (0 = all)", cmd_threads});
 bool r3 = register_command({"json", 0, {}, "print results as one JSON object", cmd_json});
-bool r4 = register_command({"info", 0, {}, "describe the top image: size, channels, AOV "
-                            "buffers, kpcn:* attributes", cmd_info});
-bool r5 = register_command({"ch", 1, {}, "select/rename channels of the top image: R,G,B or "
-                            "R=albedo.R,... or A=1", cmd_ch});
-bool r6 = register_command({"ociodisplay", 0, {"display", "view", "config", "from", "looks"},
+bool r4 = register_command({"info",
+                            0,
+                            {},
+                            "describe the top image: size, channels, AOV "
+                            "buffers, kpcn:* attributes",
+                            cmd_info});
+bool r5 = register_command({"ch",
+                            1,
+                            {},
+                            "select/rename channels of the top image: R,G,B or "
+                            "R=albedo.R,... or A=1",
+                            cmd_ch});
+bool r6 = register_command({"ociodisplay",
+                            0,
+                            {"display", "view", "config", "from", "looks"},
                             "OCIO display transform of the top image (default config: "
-                            "$OCIO or testdata/ocio/config.ocio)", cmd_ociodisplay});
-bool r7 = register_command({"mosaic", 0, {"n", "labels", "font", "fontsize"},
+                            "$OCIO or testdata/ocio/config.ocio)",
+                            cmd_ociodisplay});
+bool r7 = register_command({"mosaic",
+                            0,
+                            {"n", "labels", "font", "fontsize"},
                             "pop n images, push them side by side (left = deepest), with labels",
                             cmd_mosaic});
 

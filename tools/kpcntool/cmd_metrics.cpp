@@ -10,8 +10,7 @@ namespace {
 
 using kpcn::ops::Metric;
 
-const std::vector<std::string> kMods = {"channels", "display", "range", "eps",
-                                        "allow_nonfinite"};
+const std::vector<std::string> kMods = {"channels", "display", "range", "eps", "allow_nonfinite"};
 
 bool options(const kpcntool::Modifiers &m, kpcn::ops::CompareOptions &o, std::string &err) {
   o.channels = kpcn::ops::split_names(m.str("channels"));
@@ -97,8 +96,8 @@ bool run_errormap(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
 }
 
 template <Metric M>
-bool run_one(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
-             const std::vector<std::string> &, std::string &err) {
+bool run_one(kpcntool::Context &ctx, const kpcntool::Modifiers &m, const std::vector<std::string> &,
+             std::string &err) {
   return run_metric(M, ctx, m, err);
 }
 
@@ -119,9 +118,9 @@ bool r4 = kpcntool::register_command(
     {"rell1", 0, kMods, "mean |x-y|/(|y|+eps) of the two top images", run_one<Metric::RelL1>});
 bool r5 = kpcntool::register_command(
     {"psnr", 0, kMods, "10 log10(range^2/MSE) of the two top images", run_one<Metric::PSNR>});
-bool r6 = kpcntool::register_command(
-    {"ssim", 0, kMods, "SSIM (Wang 2004, 11x11 Gaussian 1.5) of the two top images",
-     run_one<Metric::SSIM>});
+bool r6 = kpcntool::register_command({"ssim", 0, kMods,
+                                      "SSIM (Wang 2004, 11x11 Gaussian 1.5) of the two top images",
+                                      run_one<Metric::SSIM>});
 bool r7 = kpcntool::register_command(
     {"errormap", 0, with_metric(),
      "pop the two top images, push the per-pixel error image (metric=relmse|l1|...|ssim)",

@@ -39,11 +39,13 @@ void print_help() {
   std::printf("  %-14s %s\n", "--help", "print this help");
   for (const kpcntool::Command *c : kpcntool::all_commands()) {
     std::string name = (c->name.size() == 1 ? "-" : "--") + c->name;
-    for (int i = 0; i < c->nargs; ++i) name += " ARG";
+    for (int i = 0; i < c->nargs; ++i)
+      name += " ARG";
     std::printf("  %-14s %s\n", name.c_str(), c->help.c_str());
     if (!c->modifiers.empty()) {
       std::string m;
-      for (auto &k : c->modifiers) m += (m.empty() ? "" : ", ") + k;
+      for (auto &k : c->modifiers)
+        m += (m.empty() ? "" : ", ") + k;
       std::printf("  %-14s   modifiers: %s\n", "", m.c_str());
     }
   }
@@ -87,7 +89,8 @@ bool parse(int argc, char **argv, std::vector<Step> &steps, std::string &err) {
     std::string body = a.substr(a[1] == '-' ? 2 : 1);
     std::vector<std::string> parts;
     std::stringstream ss(body);
-    for (std::string p; std::getline(ss, p, ':');) parts.push_back(p);
+    for (std::string p; std::getline(ss, p, ':');)
+      parts.push_back(p);
     if (parts.empty() || parts[0].empty()) {
       err = "malformed command '" + a + "'";
       return false;
@@ -101,10 +104,12 @@ bool parse(int argc, char **argv, std::vector<Step> &steps, std::string &err) {
       size_t eq = parts[k].find('=');
       std::string key = parts[k].substr(0, eq);
       bool known = false;
-      for (auto &m : st.cmd->modifiers) known = known || m == key;
+      for (auto &m : st.cmd->modifiers)
+        known = known || m == key;
       if (!known) {
         std::string accepted;
-        for (auto &m : st.cmd->modifiers) accepted += (accepted.empty() ? "" : ", ") + m;
+        for (auto &m : st.cmd->modifiers)
+          accepted += (accepted.empty() ? "" : ", ") + m;
         err = "unknown modifier '" + key + "' for --" + st.cmd->name +
               (accepted.empty() ? " (it takes none)" : " (accepted: " + accepted + ")");
         return false;
@@ -142,7 +147,8 @@ void print_results(const kpcntool::Context &ctx) {
     std::printf("%s}\n", o.c_str());
     return;
   }
-  for (auto &r : ctx.results) std::printf("%-16s %.9g\n", (r.first + ":").c_str(), r.second);
+  for (auto &r : ctx.results)
+    std::printf("%-16s %.9g\n", (r.first + ":").c_str(), r.second);
 }
 
 } // namespace

@@ -27,7 +27,8 @@ const Command *find_command(const std::string &name) {
 
 std::vector<const Command *> all_commands() {
   std::vector<const Command *> v;
-  for (auto &kv : registry()) v.push_back(&kv.second);
+  for (auto &kv : registry())
+    v.push_back(&kv.second);
   return v;
 }
 

@@ -84,8 +84,8 @@ double kpcn_srgb_encode(double v);
  * (plane c at x + c*w*h). errormap (may be NULL) receives nch planes of w*h floats.
  * Fails on NULL pointers, bad sizes, SSIM on images smaller than 11x11, or when no finite
  * pixel is left. */
-kpcn_status kpcn_metric_planar(kpcn_metric m, const float *x, const float *y, int w, int h,
-                               int nch, const kpcn_metric_options *opt, kpcn_metric_result *res,
+kpcn_status kpcn_metric_planar(kpcn_metric m, const float *x, const float *y, int w, int h, int nch,
+                               const kpcn_metric_options *opt, kpcn_metric_result *res,
                                float *errormap);
 
 /* Image form: compares the channels named in `channels` (nnames entries; NULL = every

@@ -138,9 +138,9 @@ const char *kpcn_model_meta_key(const kpcn_model *m, int i);
 
 typedef enum kpcn_precision { KPCN_PREC_F32 = 0, KPCN_PREC_BF16 = 1 } kpcn_precision;
 
-/* Activation layout between layers. AUTO: nChw16c for f32 (jit:avx512_core), nhwc for bf16
- * (brgconv / AMX). The others exist for benchmarking. All give the same results up to
- * summation order. */
+/* Activation layout between layers. AUTO: nhwc (brgconv / AMX kernels), or nChw16c when
+ * oneDNN has no optimized nhwc kernel for some layer (kpcn_net_stats.n_slow). The others
+ * exist for benchmarking; all give the same results up to summation order. */
 typedef enum kpcn_layout {
   KPCN_LAYOUT_AUTO = 0,
   KPCN_LAYOUT_NCHW16C = 1,
@@ -212,8 +212,8 @@ kpcn_status kpcn_kpa_forward(int K, int n, int nc, int h, int w, const float *lo
  * writes dL/dlogits [N][K²][H][W] (may alias weights) and, if dnoisy is non-NULL,
  * dL/dnoisy [N][nc][H][W] (overwritten; clamped reads accumulate onto edge pixels). */
 kpcn_status kpcn_kpa_backward(int K, int n, int nc, int h, int w, const float *weights,
-                              const float *noisy, const float *dout, float *dlogits,
-                              float *dnoisy, int nthreads);
+                              const float *noisy, const float *dout, float *dlogits, float *dnoisy,
+                              int nthreads);
 
 #ifdef __cplusplus
 }

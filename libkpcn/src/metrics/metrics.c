@@ -21,7 +21,8 @@ int kpcn_metric_from_name(const char *name) {
   if (!name) return -1;
   for (int m = 0; m < KPCN_METRIC_COUNT; ++m) {
     const char *a = g_names[m], *b = name;
-    while (*a && *b && tolower((unsigned char)*b) == *a) ++a, ++b;
+    while (*a && *b && tolower((unsigned char)*b) == *a)
+      ++a, ++b;
     if (!*a && !*b) return m;
   }
   return -1;
@@ -40,8 +41,8 @@ double kpcn_srgb_encode(double v) {
   return v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1.0 / 2.4) - 0.055;
 }
 
-uint8_t *kpcn_metric_valid_mask(const float *x, const float *y, int w, int h, int nch,
-                                int nthreads, int64_t *nonfinite) {
+uint8_t *kpcn_metric_valid_mask(const float *x, const float *y, int w, int h, int nch, int nthreads,
+                                int64_t *nonfinite) {
   size_t n = (size_t)w * (size_t)h;
   uint8_t *mask = kpcn_alloc(n, "metric validity mask");
   if (!mask) return NULL;
@@ -115,7 +116,8 @@ static kpcn_status pointwise(kpcn_metric m, const float *x, const float *y, int 
     rows[r] = rowsum;
   }
   double total = 0.0;
-  for (int r = 0; r < h; ++r) total += rows[r];
+  for (int r = 0; r < h; ++r)
+    total += rows[r];
   free(rows);
   free(mask);
   int64_t valid = (int64_t)n - nonfinite;
@@ -135,9 +137,9 @@ static kpcn_status pointwise(kpcn_metric m, const float *x, const float *y, int 
   return KPCN_OK;
 }
 
-kpcn_status kpcn_metric_planar(kpcn_metric m, const float *x, const float *y, int w, int h,
-                               int nch, const kpcn_metric_options *opt_in,
-                               kpcn_metric_result *res, float *errormap) {
+kpcn_status kpcn_metric_planar(kpcn_metric m, const float *x, const float *y, int w, int h, int nch,
+                               const kpcn_metric_options *opt_in, kpcn_metric_result *res,
+                               float *errormap) {
   kpcn_metric_options opt;
   if (opt_in)
     opt = *opt_in;
@@ -251,7 +253,8 @@ kpcn_status kpcn_metric_image(kpcn_metric m, const kpcn_image *x, const kpcn_ima
       s = kpcn_last_status();
       goto done;
     }
-    for (int k = 0; k < nch; ++k) names[k] = y->names[iy[k]];
+    for (int k = 0; k < nch; ++k)
+      names[k] = y->names[iy[k]];
     s = kpcn_image_create(&em, x->width, x->height, nch, names);
     free(names);
     if (s != KPCN_OK) goto done;

@@ -7,9 +7,10 @@
  * crop equals the filter radius, the averaged pixels never touch the boundary rule; the
  * 'reflect' rule is reproduced anyway so the error map equals skimage's full map.
  *
- * Work is done in blocks of output rows; each thread filters the rows its block needs
- * horizontally into thread-local double buffers, then vertically. Per-row sums in double are
- * added in row order, so the result does not depend on the thread count. */
+ * Work items are column strips x row blocks; each thread filters the rows its item needs
+ * horizontally into a thread-local ring of double rows, then vertically. Partial sums per
+ * (row, strip) in double are added in a fixed order, so the result does not depend on the
+ * thread count. */
 #include "core/internal.h"
 #include "metrics/metrics_internal.h"
 
@@ -19,7 +20,6 @@
 
 #define SSIM_R 5 /* filter radius: int(truncate * sigma + 0.5) with truncate 3.5, sigma 1.5 */
 #define SSIM_W (2 * SSIM_R + 1)
-#define SSIM_BLOCK 32 /* output rows per work item */
 
 static void gaussian_kernel(double g[SSIM_W]) {
   const double sigma = 1.5;
@@ -28,7 +28,8 @@ static void gaussian_kernel(double g[SSIM_W]) {
     g[k + SSIM_R] = exp(-0.5 / (sigma * sigma) * (double)(k * k));
     sum += g[k + SSIM_R];
   }
-  for (int k = 0; k < SSIM_W; ++k) g[k] /= sum;
+  for (int k = 0; k < SSIM_W; ++k)
+    g[k] /= sum;
 }
 
 /* scipy.ndimage 'reflect' (half-sample symmetric): d c b a | a b c d | d c b a. n >= R. */
@@ -38,100 +39,128 @@ static inline int reflect(int i, int n) {
   return i;
 }
 
-/* Thread-local scratch: padded source moments of one row, the five horizontally filtered
- * moments for SSIM_BLOCK + 2R rows, and five vertical accumulators of one output row. */
+/* Work is split into column strips x row blocks so the 11 horizontally filtered rows a
+ * vertical tap needs stay in L2 (a ring buffer of 11 rows x 5 moments x SSIM_SW doubles,
+ * ~110 KB) instead of streaming whole 4K-wide rows from memory. */
+#define SSIM_SW 256 /* output columns per strip */
+#define SSIM_BH 64  /* output rows per block */
+
 typedef struct scratch {
-  double *p[5];                      /* x, y, xx, yy, xy of one padded row, w + 2R each */
-  double *hm[5];                     /* filtered moments, (SSIM_BLOCK + 2R) rows of w */
-  double *acc[5];                    /* vertical accumulators, w each */
+  double *p[5];    /* x, y, xx, yy, xy of one padded input row segment, SSIM_SW + 2R */
+  double *ring[5]; /* filtered moments, SSIM_W rows of SSIM_SW (row r at r % SSIM_W) */
+  double *acc[5];  /* vertical accumulators, SSIM_SW */
   double *mem;
 } scratch;
 
-static int scratch_alloc(scratch *s, int w) {
-  size_t rows = SSIM_BLOCK + 2 * SSIM_R;
-  size_t pad = (size_t)w + 2 * SSIM_R;
-  s->mem = malloc(sizeof(double) * 5 * (pad + rows * (size_t)w + (size_t)w));
+static int scratch_alloc(scratch *s) {
+  const size_t pad = SSIM_SW + 2 * SSIM_R;
+  s->mem = malloc(sizeof(double) * 5 * (pad + (size_t)SSIM_W * SSIM_SW + SSIM_SW));
   if (!s->mem) return 0;
   double *q = s->mem;
-  for (int m = 0; m < 5; ++m, q += pad) s->p[m] = q;
-  for (int m = 0; m < 5; ++m, q += rows * (size_t)w) s->hm[m] = q;
-  for (int m = 0; m < 5; ++m, q += w) s->acc[m] = q;
+  for (int m = 0; m < 5; ++m, q += pad)
+    s->p[m] = q;
+  for (int m = 0; m < 5; ++m, q += (size_t)SSIM_W * SSIM_SW)
+    s->ring[m] = q;
+  for (int m = 0; m < 5; ++m, q += SSIM_SW)
+    s->acc[m] = q;
   return 1;
 }
 
-/* Horizontal pass of source row `r` into scratch row `dst`. Loops are written tap-outer,
- * pixel-inner so they vectorise; each output still sums its taps in order k = 0..10. */
-static void filter_row(scratch *s, const float *a, const float *b, int w, int r, int dst,
-                       const double g[SSIM_W]) {
+/* Horizontal pass of source row r, output columns [x0, x0+n), into ring slot `slot`. Loops
+ * are tap-outer, pixel-inner so they vectorise; each output sums its taps in order 0..10. */
+static void filter_row(scratch *s, const float *a, const float *b, int w, int r, int x0, int n,
+                       int slot, const double g[SSIM_W]) {
   const float *ar = a + (size_t)r * w, *br = b + (size_t)r * w;
   double *px = s->p[0], *py = s->p[1], *pxx = s->p[2], *pyy = s->p[3], *pxy = s->p[4];
-  for (int i = -SSIM_R; i < w + SSIM_R; ++i) {
-    int j = reflect(i, w);
+  for (int i = 0; i < n + 2 * SSIM_R; ++i) {
+    int j = reflect(x0 - SSIM_R + i, w);
     double u = ar[j], v = br[j];
-    px[i + SSIM_R] = u;
-    py[i + SSIM_R] = v;
-    pxx[i + SSIM_R] = u * u;
-    pyy[i + SSIM_R] = v * v;
-    pxy[i + SSIM_R] = u * v;
+    px[i] = u;
+    py[i] = v;
+    pxx[i] = u * u;
+    pyy[i] = v * v;
+    pxy[i] = u * v;
   }
   for (int m = 0; m < 5; ++m) {
-    double *restrict h = s->hm[m] + (size_t)dst * w;
+    double *restrict hrow = s->ring[m] + (size_t)slot * SSIM_SW;
     const double *restrict p = s->p[m];
-    for (int i = 0; i < w; ++i) h[i] = g[0] * p[i];
+    for (int i = 0; i < n; ++i)
+      hrow[i] = g[0] * p[i];
     for (int k = 1; k < SSIM_W; ++k) {
       const double gk = g[k];
-      for (int i = 0; i < w; ++i) h[i] += gk * p[i + k];
+      for (int i = 0; i < n; ++i)
+        hrow[i] += gk * p[i + k];
     }
   }
 }
 
-/* SSIM of one channel (planes a, b already encoded, non-finite values zeroed). Row sums of
- * the SSIM map over valid interior pixels go to rowsum[h]. Returns 0 on allocation failure. */
+/* Vertical pass for output row y (ring holds source rows y-R .. y+R), then the SSIM map
+ * segment. Adds the valid interior values to *sum, writes the map segment if requested. */
+static void finish_row(scratch *s, int y, int x0, int n, int w, int h, const uint8_t *mask,
+                       double C1, double C2, const double g[SSIM_W], float *map, double *sum) {
+  for (int m = 0; m < 5; ++m) {
+    double *restrict acc = s->acc[m];
+    const double *restrict hr = s->ring[m] + (size_t)((y - SSIM_R + SSIM_W) % SSIM_W) * SSIM_SW;
+    for (int i = 0; i < n; ++i)
+      acc[i] = g[0] * hr[i];
+    for (int k = 1; k < SSIM_W; ++k) {
+      const double gk = g[k];
+      hr = s->ring[m] + (size_t)((y - SSIM_R + k + SSIM_W) % SSIM_W) * SSIM_SW;
+      for (int i = 0; i < n; ++i)
+        acc[i] += gk * hr[i];
+    }
+  }
+  const double *ux = s->acc[0], *uy = s->acc[1], *uxx = s->acc[2], *uyy = s->acc[3];
+  const double *uxy = s->acc[4];
+  double *S = s->acc[0]; /* ux[i] is read before S[i] overwrites it */
+  for (int i = 0; i < n; ++i) {
+    double mx = ux[i], my = uy[i];
+    double vx = uxx[i] - mx * mx, vy = uyy[i] - my * my, vxy = uxy[i] - mx * my;
+    S[i] = ((2 * mx * my + C1) * (2 * vxy + C2)) / ((mx * mx + my * my + C1) * (vx + vy + C2));
+  }
+  const uint8_t *mrow = mask + (size_t)y * w + x0;
+  if (y >= SSIM_R && y < h - SSIM_R) {
+    int lo = x0 < SSIM_R ? SSIM_R - x0 : 0;
+    int hi = x0 + n > w - SSIM_R ? w - SSIM_R - x0 : n;
+    double t = 0.0;
+    for (int i = lo; i < hi; ++i)
+      if (mrow[i]) t += S[i];
+    *sum = t;
+  } else {
+    *sum = 0.0;
+  }
+  if (map) {
+    float *mp = map + (size_t)y * w + x0;
+    for (int i = 0; i < n; ++i)
+      mp[i] = mrow[i] ? (float)S[i] : NAN;
+  }
+}
+
+/* SSIM of one channel (planes a, b already encoded, non-finite values zeroed). Partial row
+ * sums per strip go to part[strip * h + y]. Returns 0 on allocation failure. */
 static int ssim_channel(const float *a, const float *b, const uint8_t *mask, int w, int h,
-                        double C1, double C2, int nt, double *rowsum, float *map) {
+                        double C1, double C2, int nt, double *part, float *map) {
   double g[SSIM_W];
   gaussian_kernel(g);
-  const int nblocks = (h + SSIM_BLOCK - 1) / SSIM_BLOCK;
+  const int nstrips = (w + SSIM_SW - 1) / SSIM_SW, nblocks = (h + SSIM_BH - 1) / SSIM_BH;
   int failed = 0;
 #pragma omp parallel num_threads(nt) reduction(| : failed)
   {
     scratch s = {0};
-    int ok = scratch_alloc(&s, w);
+    int ok = scratch_alloc(&s);
     if (!ok) failed = 1;
-#pragma omp for schedule(static)
-    for (int blk = 0; blk < nblocks; ++blk) {
+#pragma omp for schedule(dynamic)
+    for (int item = 0; item < nstrips * nblocks; ++item) {
       if (!ok) continue;
-      int y0 = blk * SSIM_BLOCK, y1 = y0 + SSIM_BLOCK < h ? y0 + SSIM_BLOCK : h;
-      for (int r = y0 - SSIM_R; r < y1 + SSIM_R; ++r)
-        filter_row(&s, a, b, w, reflect(r, h), r - (y0 - SSIM_R), g);
-      for (int y = y0; y < y1; ++y) {
-        for (int m = 0; m < 5; ++m) {
-          double *restrict acc = s.acc[m];
-          const double *restrict hr = s.hm[m] + (size_t)(y - y0) * w;
-          for (int x = 0; x < w; ++x) acc[x] = g[0] * hr[x];
-          for (int k = 1; k < SSIM_W; ++k) {
-            const double gk = g[k];
-            hr = s.hm[m] + (size_t)(y - y0 + k) * w;
-            for (int x = 0; x < w; ++x) acc[x] += gk * hr[x];
-          }
-        }
-        const double *ux = s.acc[0], *uy = s.acc[1], *uxx = s.acc[2], *uyy = s.acc[3];
-        const double *uxy = s.acc[4];
-        const uint8_t *mrow = mask + (size_t)y * w;
-        /* Reuse acc[0] for the map row: ux[x] is read before S is stored at x. */
-        double *S = s.acc[0];
-        for (int x = 0; x < w; ++x) {
-          double mx = ux[x], my = uy[x];
-          double vx = uxx[x] - mx * mx, vy = uyy[x] - my * my, vxy = uxy[x] - mx * my;
-          S[x] = ((2 * mx * my + C1) * (2 * vxy + C2)) / ((mx * mx + my * my + C1) * (vx + vy + C2));
-        }
-        double sum = 0.0;
-        if (y >= SSIM_R && y < h - SSIM_R)
-          for (int x = SSIM_R; x < w - SSIM_R; ++x)
-            if (mrow[x]) sum += S[x];
-        if (map)
-          for (int x = 0; x < w; ++x) map[(size_t)y * w + x] = mrow[x] ? (float)S[x] : NAN;
-        rowsum[y] = sum;
+      int strip = item % nstrips, blk = item / nstrips;
+      int x0 = strip * SSIM_SW, n = x0 + SSIM_SW < w ? SSIM_SW : w - x0;
+      int y0 = blk * SSIM_BH, y1 = y0 + SSIM_BH < h ? y0 + SSIM_BH : h;
+      /* Ring slots are indexed by (row + SSIM_W) % SSIM_W so negative rows work. */
+      for (int r = y0 - SSIM_R; r < y1 + SSIM_R; ++r) {
+        filter_row(&s, a, b, w, reflect(r, h), x0, n, (r + SSIM_W) % SSIM_W, g);
+        int y = r - SSIM_R;
+        if (y >= y0)
+          finish_row(&s, y, x0, n, w, h, mask, C1, C2, g, map, &part[(size_t)strip * h + y]);
       }
     }
     free(s.mem);
@@ -144,15 +173,15 @@ kpcn_status kpcn_ssim_planar(const float *x, const float *y, int w, int h, int n
                              float *errormap) {
   if (w < SSIM_W || h < SSIM_W)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "ssim: image of %dx%d is smaller than the %dx%d window", w, h, SSIM_W,
-                     SSIM_W);
+                     "ssim: image of %dx%d is smaller than the %dx%d window", w, h, SSIM_W, SSIM_W);
   int nt = kpcn_resolve_threads(opt->nthreads);
   int64_t nonfinite = 0;
   uint8_t *mask = kpcn_metric_valid_mask(x, y, w, h, nch, nt, &nonfinite);
   if (!mask) return kpcn_last_status();
   const size_t n = (size_t)w * (size_t)h;
   float *wa = kpcn_alloc(sizeof(float) * 2 * n, "ssim working planes");
-  double *rowsum = kpcn_calloc((size_t)h, sizeof(double), "ssim row sums");
+  const int nstrips = (w + SSIM_SW - 1) / SSIM_SW;
+  double *rowsum = kpcn_calloc((size_t)h * nstrips, sizeof(double), "ssim row sums");
   kpcn_status st = KPCN_OK;
   if (!wa || !rowsum) {
     st = kpcn_last_status();
@@ -160,7 +189,8 @@ kpcn_status kpcn_ssim_planar(const float *x, const float *y, int w, int h, int n
   }
   int64_t valid = 0;
   for (int r = SSIM_R; r < h - SSIM_R; ++r)
-    for (int c = SSIM_R; c < w - SSIM_R; ++c) valid += mask[(size_t)r * w + c];
+    for (int c = SSIM_R; c < w - SSIM_R; ++c)
+      valid += mask[(size_t)r * w + c];
   res->nonfinite = nonfinite;
   res->npixels = valid;
   res->nchannels = nch;
@@ -194,8 +224,10 @@ kpcn_status kpcn_ssim_planar(const float *x, const float *y, int w, int h, int n
       st = kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "ssim: cannot allocate filter scratch (%d wide)", w);
       goto done;
     }
-    double total = 0.0;
-    for (int r = 0; r < h; ++r) total += rowsum[r];
+    double total = 0.0; /* fixed order: rows, and strips within a row */
+    for (int r = 0; r < h; ++r)
+      for (int st = 0; st < nstrips; ++st)
+        total += rowsum[(size_t)st * h + r];
     channel_sum += total / (double)valid; /* skimage: mean per channel, then over channels */
   }
   res->value = channel_sum / nch;

@@ -36,7 +36,8 @@ kpcn_status kpcn_arch_preset(const char *name, kpcn_arch *a) {
      * K = 11 (121 logits). See docs/nn.md. */
     set_uniform(&t, 6, 48, 3, 11);
     static const int dil[7] = {1, 2, 4, 8, 4, 2, 1};
-    for (int l = 0; l < 7; l++) t.dilation[l] = dil[l];
+    for (int l = 0; l < 7; l++)
+      t.dilation[l] = dil[l];
   } else if (!strcmp(name, "tiny")) {
     set_uniform(&t, 2, 8, 3, 5);
   } else {
@@ -66,7 +67,8 @@ kpcn_status kpcn_arch_set_inputs(kpcn_arch *a, int n, const char *const *names) 
                        KPCN_NN_NAME_LEN - 1);
   }
   memset(a->inputs, 0, sizeof a->inputs);
-  for (int i = 0; i < n; i++) snprintf(a->inputs[i], KPCN_NN_NAME_LEN, "%s", names[i]);
+  for (int i = 0; i < n; i++)
+    snprintf(a->inputs[i], KPCN_NN_NAME_LEN, "%s", names[i]);
   a->n_inputs = n;
   return KPCN_OK;
 }
@@ -82,8 +84,7 @@ kpcn_status kpcn_arch_validate(const kpcn_arch *a) {
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.n_hidden = %d not in [0, %d]", a->n_hidden,
                      KPCN_NN_MAX_LAYERS - 1);
   if (a->n_hidden > 0 && (a->channels < 1 || a->channels > 1024))
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.channels = %d not in [1, 1024]",
-                     a->channels);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.channels = %d not in [1, 1024]", a->channels);
   for (int l = 0; l <= a->n_hidden; l++) {
     int k = a->conv_size[l], d = a->dilation[l];
     if (k < 1 || k > 11 || k % 2 == 0)
@@ -126,7 +127,8 @@ int kpcn_arch_layer_out(const kpcn_arch *a, int l) {
 
 int kpcn_arch_conv_radius(const kpcn_arch *a) {
   int r = 0;
-  for (int l = 0; l <= a->n_hidden; l++) r += a->dilation[l] * (a->conv_size[l] - 1) / 2;
+  for (int l = 0; l <= a->n_hidden; l++)
+    r += a->dilation[l] * (a->conv_size[l] - 1) / 2;
   return r;
 }
 
@@ -152,8 +154,9 @@ char *kpcn_arch_to_json(const kpcn_arch *a) {
   if (!o) return NULL;
   int nl = a->n_hidden + 1;
   if (nl < 1 || nl > KPCN_NN_MAX_LAYERS) nl = 1;
-  int nin = a->n_inputs < 0 ? 0 : a->n_inputs > KPCN_NN_MAX_INPUTS ? KPCN_NN_MAX_INPUTS
-                                                                     : a->n_inputs;
+  int nin = a->n_inputs < 0                    ? 0
+            : a->n_inputs > KPCN_NN_MAX_INPUTS ? KPCN_NN_MAX_INPUTS
+                                               : a->n_inputs;
   cJSON_AddStringToObject(o, "name", a->name);
   cJSON_AddNumberToObject(o, "n_hidden", a->n_hidden);
   cJSON_AddNumberToObject(o, "channels", a->channels);
@@ -161,7 +164,8 @@ char *kpcn_arch_to_json(const kpcn_arch *a) {
   cJSON_AddItemToObject(o, "dilation", cJSON_CreateIntArray(a->dilation, nl));
   cJSON_AddNumberToObject(o, "kernel_size", a->kernel_size);
   cJSON *in = cJSON_AddArrayToObject(o, "inputs");
-  for (int i = 0; in && i < nin; i++) cJSON_AddItemToArray(in, cJSON_CreateString(a->inputs[i]));
+  for (int i = 0; in && i < nin; i++)
+    cJSON_AddItemToArray(in, cJSON_CreateString(a->inputs[i]));
   char eps[32];
   snprintf(eps, sizeof eps, "%.9g", (double)a->eps);
   cJSON_AddRawToObject(o, "eps", eps);
@@ -242,7 +246,8 @@ static kpcn_status from_json_obj(const cJSON *o, kpcn_arch *t) {
 }
 
 kpcn_status kpcn_arch_from_json(const char *json, kpcn_arch *a) {
-  if (!json || !a) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_arch_from_json: NULL argument");
+  if (!json || !a)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_arch_from_json: NULL argument");
   cJSON *o = cJSON_Parse(json);
   if (!o) return kpcn_fail(KPCN_ERR_FORMAT, "architecture: not valid JSON");
   kpcn_arch t;

@@ -55,7 +55,8 @@ static uint64_t splitmix64(uint64_t *s) {
 }
 
 kpcn_status kpcn_model_create(const kpcn_arch *arch, uint64_t seed, kpcn_model **out) {
-  if (!arch || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_create: NULL argument");
+  if (!arch || !out)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_create: NULL argument");
   *out = NULL;
   kpcn_model *m;
   KPCN_TRY(kpcn_model_alloc(arch, &m));

@@ -38,7 +38,7 @@ typedef struct layer {
   dnnl_memory_desc_t src_md, dst_md, w_md, bw_md, dw_md;
   dnnl_primitive_desc_t fwd_pd, bwdd_pd, bwdw_pd, relu_pd;
   dnnl_primitive_t fwd, bwdd, bwdw, relu;
-  dnnl_memory_t src, dst, w, bias;     /* forward operands */
+  dnnl_memory_t src, dst, w, bias;      /* forward operands */
   dnnl_memory_t bw, dw, db, ddst, dsrc; /* backward operands */
   reorder w_in, bw_in, dw_out;          /* OIHW <-> primitive weight layouts */
   float *gw, *gb;                       /* gradients, OIHW f32 (net-owned) */
@@ -56,11 +56,11 @@ struct kpcn_net {
   dnnl_primitive_attr_t attr, attr_relu; /* user scratchpad; + fused ReLU post-op */
   layer L[KPCN_NN_MAX_LAYERS];
   reorder in, out, dout_in, dinput_out;
-  void *xbuf;                 /* layer-0 input in its primitive layout */
-  void *pp[2];                /* inference ping-pong activation buffers */
-  void *dbuf[2];              /* backward gradient ping-pong buffers */
-  void *wbuf;                 /* all primitive-layout weight copies */
-  float *grads;               /* all gradients */
+  void *xbuf;    /* layer-0 input in its primitive layout */
+  void *pp[2];   /* inference ping-pong activation buffers */
+  void *dbuf[2]; /* backward gradient ping-pong buffers */
+  void *wbuf;    /* all primitive-layout weight copies */
+  float *grads;  /* all gradients */
   void *scratch;
   dnnl_memory_t scratch_mem;
   size_t bytes;
@@ -121,10 +121,19 @@ static kpcn_status make_reorder(kpcn_net *n, reorder *r, const dnnl_memory_desc_
 static kpcn_status run_reorder(kpcn_net *n, reorder *r, const void *src, void *dst) {
   DN(dnnl_memory_set_data_handle(r->src, (void *)src));
   DN(dnnl_memory_set_data_handle(r->dst, dst));
-  dnnl_exec_arg_t a[3] = {{DNNL_ARG_FROM, r->src}, {DNNL_ARG_TO, r->dst},
-                          {DNNL_ARG_SCRATCHPAD, n->scratch_mem}};
+  dnnl_exec_arg_t a[3] = {
+      {DNNL_ARG_FROM, r->src}, {DNNL_ARG_TO, r->dst}, {DNNL_ARG_SCRATCHPAD, n->scratch_mem}};
   DN(dnnl_primitive_execute(r->prim, n->stream, 3, a));
   return KPCN_OK;
+}
+
+/* Weight reorders are tiny (kilobytes to a few MB); an OpenMP team costs more than the copy,
+ * especially on a loaded machine, so they run on the calling thread only. */
+static kpcn_status run_reorder_1t(kpcn_net *n, reorder *r, const void *src, void *dst) {
+  omp_set_num_threads(1);
+  kpcn_status s = run_reorder(n, r, src, dst);
+  omp_set_num_threads(n->nt);
+  return s;
 }
 
 static void free_reorder(reorder *r) {
@@ -144,8 +153,8 @@ static kpcn_status make_pd(kpcn_net *n, dnnl_primitive_desc_t *pd, const void *d
   size_t s = pd_scratch(*pd);
   if (s > *scratch) *scratch = s;
   const char *impl = NULL;
-  if (dnnl_primitive_desc_query(*pd, dnnl_query_impl_info_str, 0, &impl) == dnnl_success &&
-      impl && !strncmp(impl, "ref", 3))
+  if (dnnl_primitive_desc_query(*pd, dnnl_query_impl_info_str, 0, &impl) == dnnl_success && impl &&
+      !strncmp(impl, "ref", 3))
     n->n_slow++;
   return KPCN_OK;
 }
@@ -179,13 +188,12 @@ static kpcn_status build_layer(kpcn_net *n, int l, const dnnl_memory_desc_t *src
   DN(dnnl_memory_desc_init_by_tag(&bmd, 1, bd, dnnl_f32, dnnl_x));
   /* One fixed activation layout for every layer: with "any" oneDNN may pick different
    * layouts for consecutive layers and then find no optimized kernel for the pair. */
-  dnnl_format_tag_t tag = n->o.layout == KPCN_LAYOUT_NHWC ? dnnl_nhwc : dnnl_nChw16c;
-  if (n->o.layout == KPCN_LAYOUT_AUTO) tag = bf ? dnnl_nhwc : dnnl_nChw16c;
+  dnnl_format_tag_t tag = n->o.layout == KPCN_LAYOUT_NCHW16C ? dnnl_nChw16c : dnnl_nhwc;
   DN(dnnl_memory_desc_init_by_tag(&dany, 4, dd, ddt, tag));
   dnnl_convolution_desc_t cd;
   DN(dnnl_dilated_convolution_forward_desc_init(
-      &cd, n->o.training ? dnnl_forward_training : dnnl_forward_inference,
-      dnnl_convolution_direct, src_md, &wany, &bmd, &dany, strides, dil, pl, pr));
+      &cd, n->o.training ? dnnl_forward_training : dnnl_forward_inference, dnnl_convolution_direct,
+      src_md, &wany, &bmd, &dany, strides, dil, pl, pr));
   KPCN_TRY(make_pd(n, &y->fwd_pd, &cd, y->has_relu ? n->attr_relu : n->attr, NULL, "forward", l,
                    scratch));
   y->src_md = *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_src_md, 0);
@@ -206,9 +214,8 @@ static kpcn_status build_layer(kpcn_net *n, int l, const dnnl_memory_desc_t *src
 
   /* backward: weights (always), data (for l > 0, or l == 0 when input_grad) */
   dnnl_convolution_desc_t bwd;
-  DN(dnnl_dilated_convolution_backward_weights_desc_init(&bwd, dnnl_convolution_direct, &y->src_md,
-                                                         &wany, &bmd, &y->dst_md, strides, dil,
-                                                         pl, pr));
+  DN(dnnl_dilated_convolution_backward_weights_desc_init(
+      &bwd, dnnl_convolution_direct, &y->src_md, &wany, &bmd, &y->dst_md, strides, dil, pl, pr));
   KPCN_TRY(make_pd(n, &y->bwdw_pd, &bwd, n->attr, y->fwd_pd, "backward-weights", l, scratch));
   y->dw_md = *dnnl_primitive_desc_query_md(y->bwdw_pd, dnnl_query_diff_weights_md, 0);
   DN(dnnl_primitive_create(&y->bwdw, y->bwdw_pd));
@@ -230,8 +237,8 @@ static kpcn_status build_layer(kpcn_net *n, int l, const dnnl_memory_desc_t *src
     /* eltwise backward needs a forward hint; ReLU derivative from the stored output */
     dnnl_eltwise_desc_t ef, eb;
     dnnl_primitive_desc_t hint;
-    DN(dnnl_eltwise_forward_desc_init(&ef, dnnl_forward_training,
-                                      dnnl_eltwise_relu_use_dst_for_bwd, &y->dst_md, 0.f, 0.f));
+    DN(dnnl_eltwise_forward_desc_init(&ef, dnnl_forward_training, dnnl_eltwise_relu_use_dst_for_bwd,
+                                      &y->dst_md, 0.f, 0.f));
     KPCN_TRY(make_pd(n, &hint, &ef, n->attr, NULL, "relu-forward", l, scratch));
     DN(dnnl_eltwise_backward_desc_init(&eb, dnnl_eltwise_relu_use_dst_for_bwd, &y->dst_md,
                                        &y->dst_md, 0.f, 0.f));
@@ -332,7 +339,8 @@ static kpcn_status build(kpcn_net *n) {
   const dnnl_data_type_t adt = n->o.precision == KPCN_PREC_BF16 ? dnnl_bf16 : dnnl_f32;
   dnnl_dims_t xd = {N, a->n_inputs, H, W};
   dnnl_memory_desc_t xany, user_in;
-  DN(dnnl_memory_desc_init_by_tag(&xany, 4, xd, adt, dnnl_format_tag_any));
+  dnnl_format_tag_t tag = n->o.layout == KPCN_LAYOUT_NCHW16C ? dnnl_nChw16c : dnnl_nhwc;
+  DN(dnnl_memory_desc_init_by_tag(&xany, 4, xd, adt, tag));
   DN(dnnl_memory_desc_init_by_tag(&user_in, 4, xd, dnnl_f32, dnnl_nchw));
   for (int l = 0; l < n->nl; l++)
     KPCN_TRY(build_layer(n, l, l == 0 ? &xany : &n->L[l - 1].dst_md, &scratch));
@@ -342,12 +350,16 @@ static kpcn_status build(kpcn_net *n) {
     const dnnl_memory_desc_t *m;
     if (y->bwdd_pd && (!(m = dnnl_primitive_desc_query_md(y->bwdd_pd, dnnl_query_diff_src_md, 0)) ||
                        !dnnl_memory_desc_equal(m, &y->src_md)))
-      return kpcn_fail(KPCN_ERR_UNSUPPORTED, "oneDNN chose a different layout for the "
-                                              "backward-data gradient of conv layer %d", l);
+      return kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                       "oneDNN chose a different layout for the "
+                       "backward-data gradient of conv layer %d",
+                       l);
     if (y->bwdw_pd && (!(m = dnnl_primitive_desc_query_md(y->bwdw_pd, dnnl_query_src_md, 0)) ||
                        !dnnl_memory_desc_equal(m, &y->src_md)))
-      return kpcn_fail(KPCN_ERR_UNSUPPORTED, "oneDNN chose a different input layout for the "
-                                              "backward-weights of conv layer %d", l);
+      return kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                       "oneDNN chose a different input layout for the "
+                       "backward-weights of conv layer %d",
+                       l);
   }
   KPCN_TRY(make_reorder(n, &n->in, &user_in, &n->L[0].src_md, &scratch));
   const layer *last = &n->L[n->nl - 1];
@@ -365,7 +377,8 @@ static kpcn_status build(kpcn_net *n) {
 
 kpcn_status kpcn_net_create(kpcn_model *m, kpcn_branch b, const kpcn_net_options *o,
                             kpcn_net **out) {
-  if (!m || !o || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_create: NULL argument");
+  if (!m || !o || !out)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_create: NULL argument");
   *out = NULL;
   if ((int)b < 0 || (int)b >= KPCN_N_BRANCHES)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_create: branch %d invalid", (int)b);
@@ -383,6 +396,24 @@ kpcn_status kpcn_net_create(kpcn_model *m, kpcn_branch b, const kpcn_net_options
                      (int)o->layout);
   if (o->training && o->precision != KPCN_PREC_F32)
     return kpcn_fail(KPCN_ERR_UNSUPPORTED, "kpcn_net_create: bf16 is inference-only");
+  if (o->layout == KPCN_LAYOUT_AUTO) {
+    /* nhwc first (brgconv / AMX kernels); if oneDNN falls back to its slow reference kernel
+     * for some layer (e.g. f32 jit with large dilation), try nChw16c and keep the better. */
+    kpcn_net_options oo = *o;
+    oo.layout = KPCN_LAYOUT_NHWC;
+    KPCN_TRY(kpcn_net_create(m, b, &oo, out));
+    if ((*out)->n_slow == 0) return KPCN_OK;
+    kpcn_net *alt = NULL;
+    oo.layout = KPCN_LAYOUT_NCHW16C;
+    if (kpcn_net_create(m, b, &oo, &alt) == KPCN_OK && alt->n_slow < (*out)->n_slow) {
+      kpcn_net_destroy(*out);
+      *out = alt;
+    } else {
+      kpcn_net_destroy(alt);
+    }
+    kpcn_clear_error();
+    return KPCN_OK;
+  }
   kpcn_net *n = kpcn_calloc(1, sizeof *n, "kpcn_net");
   if (!n) return KPCN_ERR_OUT_OF_MEMORY;
   n->model = m;
@@ -446,7 +477,7 @@ static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
   KPCN_TRY(run_reorder(n, &n->in, input, n->xbuf));
   for (int l = 0; l < n->nl; l++) {
     layer *y = &n->L[l];
-    KPCN_TRY(run_reorder(n, &y->w_in, m->w[n->branch][l], y->wp));
+    KPCN_TRY(run_reorder_1t(n, &y->w_in, m->w[n->branch][l], y->wp));
     DN(dnnl_memory_set_data_handle(y->bias, m->b[n->branch][l]));
     dnnl_exec_arg_t a[5] = {{DNNL_ARG_SRC, y->src},
                             {DNNL_ARG_WEIGHTS, y->w},
@@ -498,9 +529,9 @@ static kpcn_status backward(kpcn_net *n, const float *dlogits, float *dinput) {
     DN(dnnl_primitive_execute(y->bwdw, n->stream, 5, aw));
     DN(dnnl_stream_wait(n->stream));
     n->st.bwd_conv_s += now_s() - t0;
-    KPCN_TRY(run_reorder(n, &y->dw_out, y->dwp, y->gw));
+    KPCN_TRY(run_reorder_1t(n, &y->dw_out, y->dwp, y->gw));
     if (y->bwdd) {
-      KPCN_TRY(run_reorder(n, &y->bw_in, m->w[n->branch][l], y->bwp));
+      KPCN_TRY(run_reorder_1t(n, &y->bw_in, m->w[n->branch][l], y->bwp));
       DN(dnnl_memory_set_data_handle(y->dsrc, n->dbuf[cur ^ 1]));
       dnnl_exec_arg_t ad[4] = {{DNNL_ARG_DIFF_DST, y->ddst},
                                {DNNL_ARG_WEIGHTS, y->bw},
@@ -524,7 +555,8 @@ kpcn_status kpcn_net_backward(kpcn_net *n, const float *dlogits, float *dinput) 
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
                      "kpcn_net_backward: net was created for inference (options.training = 0)");
   if (n->st.n_fwd == 0)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_backward: no forward pass to differentiate");
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "kpcn_net_backward: no forward pass to differentiate");
   if (n->o.input_grad && !dinput)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_backward: dinput is NULL but the net "
                                                 "was created with input_grad");

@@ -89,9 +89,11 @@ kpcn_status kpcn_model_save(const kpcn_model *m, const char *path) {
     return kpcn_fail(KPCN_ERR_IO, "cannot write model '%s': %s", path, strerror(errno));
   }
   uint8_t len8[8];
-  for (int i = 0; i < 8; i++) len8[i] = (uint8_t)((uint64_t)padded >> (8 * i));
+  for (int i = 0; i < 8; i++)
+    len8[i] = (uint8_t)((uint64_t)padded >> (8 * i));
   int ok = fwrite(len8, 1, 8, f) == 8 && fwrite(json, 1, jl, f) == jl;
-  for (size_t i = jl; ok && i < padded; i++) ok = fputc(' ', f) != EOF;
+  for (size_t i = jl; ok && i < padded; i++)
+    ok = fputc(' ', f) != EOF;
   free(json);
   const kpcn_arch *a = &m->arch;
   for (int b = 0; ok && b < KPCN_N_BRANCHES; b++)
@@ -132,7 +134,8 @@ static kpcn_status meta_string(const cJSON *meta, const char *key, const char **
 /* Reads the architecture and user metadata; creates the (zeroed) model. */
 static kpcn_status parse_meta(const cJSON *h, kpcn_model **out) {
   const cJSON *meta = cJSON_GetObjectItemCaseSensitive(h, "__metadata__");
-  if (!cJSON_IsObject(meta)) return kpcn_fail(KPCN_ERR_FORMAT, "__metadata__: missing or not an object");
+  if (!cJSON_IsObject(meta))
+    return kpcn_fail(KPCN_ERR_FORMAT, "__metadata__: missing or not an object");
   const char *fmt = NULL, *arch_s = NULL, *inputs_s = NULL, *eps_s = NULL, *pre_s = NULL;
   KPCN_TRY(meta_string(meta, "kpcn.format", &fmt));
   if (strcmp(fmt, KPCN_MODEL_FORMAT))
@@ -159,11 +162,15 @@ static kpcn_status parse_meta(const cJSON *h, kpcn_model **out) {
   char *end;
   double eps = strtod(eps_s, &end);
   if (end == eps_s || *end || (float)eps != a.eps)
-    return kpcn_fail(KPCN_ERR_FORMAT, "__metadata__.\"kpcn.eps\" = '%s' disagrees with "
-                     "architecture eps %.9g", eps_s, (double)a.eps);
+    return kpcn_fail(KPCN_ERR_FORMAT,
+                     "__metadata__.\"kpcn.eps\" = '%s' disagrees with "
+                     "architecture eps %.9g",
+                     eps_s, (double)a.eps);
   if (strcmp(pre_s, a.preprocess))
-    return kpcn_fail(KPCN_ERR_FORMAT, "__metadata__.\"kpcn.preprocess\" = '%s' disagrees with "
-                     "architecture '%s'", pre_s, a.preprocess);
+    return kpcn_fail(KPCN_ERR_FORMAT,
+                     "__metadata__.\"kpcn.preprocess\" = '%s' disagrees with "
+                     "architecture '%s'",
+                     pre_s, a.preprocess);
   kpcn_model *m;
   KPCN_TRY(kpcn_model_alloc(&a, &m));
   for (const cJSON *it = meta->child; it; it = it->next) {
@@ -200,10 +207,12 @@ static kpcn_status check_tensor(const cJSON *t, const char *name, const int *sha
   if (!ok) {
     char *got = sh ? cJSON_PrintUnformatted(sh) : NULL;
     char want[96];
-    if (rank == 1) snprintf(want, sizeof want, "[%d]", shape[0]);
-    else snprintf(want, sizeof want, "[%d,%d,%d,%d]", shape[0], shape[1], shape[2], shape[3]);
-    kpcn_status s = kpcn_fail(KPCN_ERR_FORMAT, "tensor '%s': shape %s, architecture needs %s",
-                              name, got ? got : "(missing)", want);
+    if (rank == 1)
+      snprintf(want, sizeof want, "[%d]", shape[0]);
+    else
+      snprintf(want, sizeof want, "[%d,%d,%d,%d]", shape[0], shape[1], shape[2], shape[3]);
+    kpcn_status s = kpcn_fail(KPCN_ERR_FORMAT, "tensor '%s': shape %s, architecture needs %s", name,
+                              got ? got : "(missing)", want);
     free(got);
     return s;
   }
@@ -213,7 +222,8 @@ static kpcn_status check_tensor(const cJSON *t, const char *name, const int *sha
   if (!cJSON_IsNumber(b) || !cJSON_IsNumber(en) || b->valuedouble < 0 || en->valuedouble < 0 ||
       b->valuedouble != floor(b->valuedouble) || en->valuedouble != floor(en->valuedouble) ||
       b->valuedouble > 9e15 || en->valuedouble > 9e15)
-    return kpcn_fail(KPCN_ERR_FORMAT, "tensor '%s': data_offsets missing or not two integers", name);
+    return kpcn_fail(KPCN_ERR_FORMAT, "tensor '%s': data_offsets missing or not two integers",
+                     name);
   e->begin = (uint64_t)b->valuedouble;
   e->end = (uint64_t)en->valuedouble;
   if (e->end < e->begin)
@@ -258,7 +268,8 @@ static kpcn_status load_tensors(const cJSON *h, kpcn_model *m, FILE *f, uint64_t
     if (it->string && !strcmp(it->string, "__metadata__")) continue;
     nkeys++;
     int known = 0;
-    for (int j = 0; j < ne && !known; j++) known = it->string && !strcmp(it->string, es[j].name);
+    for (int j = 0; j < ne && !known; j++)
+      known = it->string && !strcmp(it->string, es[j].name);
     if (!known)
       s = kpcn_fail(KPCN_ERR_FORMAT, "unexpected tensor '%s' (not in the architecture)",
                     it->string ? it->string : "?");
@@ -308,7 +319,8 @@ static kpcn_status load_file(FILE *f, const char *path, kpcn_model **out) {
     return kpcn_fail(KPCN_ERR_FORMAT, "'%s' is too short for a safetensors file (%lld bytes)", path,
                      (long long)fsz);
   uint64_t hl = 0;
-  for (int i = 0; i < 8; i++) hl |= (uint64_t)len8[i] << (8 * i);
+  for (int i = 0; i < 8; i++)
+    hl |= (uint64_t)len8[i] << (8 * i);
   if (hl < 2 || hl > MAX_HEADER || hl > (uint64_t)fsz - 8)
     return kpcn_fail(KPCN_ERR_FORMAT,
                      "'%s': header length %llu is impossible for a file of %lld bytes", path,

@@ -103,7 +103,7 @@ void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_ve
 
 kpcn_vec3 kpcn_prim_emission(const kpcn_prim *p, const kpcn_hit *h, kpcn_vec3 d) {
   if (!p->emissive || kv3_dot(d, h->ng) >= 0.0f) return kv3s(0.0f);
-  return p->emission;
+  return p->emission_tex ? kpcn_texture_eval(p->emission_tex, h->u, h->v) : p->emission;
 }
 
 void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_point *lp) {
@@ -112,6 +112,7 @@ void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_p
   case KPCN_PRIM_QUAD:
     lp->p = kv3_add(kv3_add(p->base, kv3_scale(p->e0, u1)), kv3_scale(p->e1, u2));
     lp->n = p->n;
+    lp->u = u1, lp->v = u2;
     break;
   case KPCN_PRIM_CUBE: {
     /* pick one of the 6 faces by area, reuse u1 inside it */
@@ -129,12 +130,16 @@ void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_p
     q = kv3_madd(q, p->axis[b], (2.0f * u2 - 1.0f) * hf[b]);
     lp->p = q;
     lp->n = kv3_scale(p->axis[dim], sgn);
+    lp->u = w, lp->v = u2;
     break;
   }
   case KPCN_PRIM_SPHERE: {
     kpcn_vec3 n = kpcn_warp_uniform_sphere(u1, u2);
     lp->p = kv3_madd(p->center, n, p->radius);
     lp->n = n;
+    kpcn_vec3 l = kpcn_frame_to_local(&p->frame, n);
+    lp->u = atan2f(l.y, l.x) * KPCN_INV_2PI + 0.5f;
+    lp->v = acosf(fmaxf(-1.0f, fminf(1.0f, l.z))) * KPCN_INV_PI;
     break;
   }
   case KPCN_PRIM_DISK: {
@@ -143,6 +148,8 @@ void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_p
     lp->p = kv3_add(p->center, kv3_add(kv3_scale(p->frame.b, x * p->radius),
                                        kv3_scale(p->frame.t, y * p->radius)));
     lp->n = p->n;
+    lp->v = fminf(1.0f, sqrtf(x * x + y * y));
+    lp->u = (x == 0.0f && y == 0.0f) ? 0.0f : atan2f(y, x) * KPCN_INV_2PI + 0.5f;
     break;
   }
   case KPCN_PRIM_MESH: {
@@ -164,6 +171,14 @@ void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_p
       if (kv3_dot(ns, ng) < 0.0f) ng = kv3_neg(ng);
     }
     lp->n = ng;
+    float b2 = 1.0f - b0 - b1; /* Embree's (u, v) are the weights of vertices 1 and 2 */
+    if (m->uv) {
+      const float *t0 = m->uv + 2 * id[0], *t1 = m->uv + 2 * id[1], *t2 = m->uv + 2 * id[2];
+      lp->u = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
+      lp->v = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
+    } else {
+      lp->u = b1, lp->v = b2;
+    }
     break;
   }
   case KPCN_PRIM_INFINITE_SPHERE: memset(lp, 0, sizeof(*lp)); break;

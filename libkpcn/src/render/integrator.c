@@ -23,25 +23,28 @@ void kpcn_filter_table_init(kpcn_filter_table *t, kpcn_filter_type type) {
   memset(t, 0, sizeof(*t));
   t->type = type;
   if (type != KPCN_FILTER_GAUSSIAN) return;
-  /* invert the CDF of the Gaussian on [-2, 2] numerically (fine trapezoid grid) */
-  enum { N = 8192 };
-  static double cdf[N + 1];
-  double acc = 0.0;
-  cdf[0] = 0.0;
+  /* invert the CDF of the Gaussian on [-2, 2] numerically: two passes over a fine trapezoid
+   * grid (total, then fill the equally spaced targets as the running integral passes them);
+   * no shared tables, so concurrent renders are safe */
+  enum { N = 65536 };
+  double total = 0.0;
   for (int i = 1; i <= N; i++) {
     double x0 = -2.0 + 4.0 * (i - 1) / N, x1 = -2.0 + 4.0 * i / N;
-    acc += 0.5 * (gauss_f(x0) + gauss_f(x1)) * (x1 - x0);
-    cdf[i] = acc;
+    total += 0.5 * (gauss_f(x0) + gauss_f(x1)) * (x1 - x0);
   }
-  int j = 0;
-  for (int k = 0; k <= KPCN_FILTER_TABLE; k++) {
-    double target = acc * k / KPCN_FILTER_TABLE;
-    while (j < N && cdf[j + 1] < target)
-      j++;
-    double seg = cdf[j + 1] - cdf[j];
-    double f = seg > 0 ? (target - cdf[j]) / seg : 0.0;
-    t->inv_cdf[k] = (float)(-2.0 + 4.0 * (j + f) / N);
+  double acc = 0.0;
+  int k = 1;
+  for (int i = 1; i <= N && k < KPCN_FILTER_TABLE; i++) {
+    double x0 = -2.0 + 4.0 * (i - 1) / N, x1 = -2.0 + 4.0 * i / N;
+    double seg = 0.5 * (gauss_f(x0) + gauss_f(x1)) * (x1 - x0);
+    while (k < KPCN_FILTER_TABLE && acc + seg >= total * k / KPCN_FILTER_TABLE) {
+      double f = seg > 0.0 ? (total * k / KPCN_FILTER_TABLE - acc) / seg : 0.0;
+      t->inv_cdf[k++] = (float)(x0 + f * (x1 - x0));
+    }
+    acc += seg;
   }
+  while (k < KPCN_FILTER_TABLE)
+    t->inv_cdf[k++] = 2.0f;
   t->inv_cdf[0] = -2.0f;
   t->inv_cdf[KPCN_FILTER_TABLE] = 2.0f;
 }
@@ -147,7 +150,9 @@ static int sample_direct(const kpcn_render_ctx *ctx, const kpcn_hit *h, const kp
     wi = kv3_scale(dv, 1.0f / dl);
     float cosl = -kv3_dot(wi, lp.n);
     if (cosl <= 0.0f) return 0; /* one-sided emitters */
-    Li = lp_prim->emission;
+    Li = lp_prim->emission_tex ? kpcn_texture_eval(lp_prim->emission_tex, lp.u, lp.v)
+                               : lp_prim->emission;
+    if (kv3_is_zero(Li)) return 0;
     pdf = pmf * lp.pdf_area * d2 / cosl;
     origin = kpcn_offset_ray(h->p, kv3_dot(wi, ng) > 0.0f ? ng : kv3_neg(ng));
     target = kpcn_offset_ray(lp.p, lp.n);
@@ -204,7 +209,7 @@ void kpcn_trace_sample(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler 
   kpcn_vec3 tp_s = kv3s(1.0f), tp_d = kv3s(0.0f); /* specular / diffuse throughputs */
   kpcn_vec3 Ls = kv3s(0.0f), Ld = kv3s(0.0f);
   int have_feature = 0, prev_delta = 1;
-  float prev_pdf = 0.0f, path_len = 0.0f;
+  float prev_pdf = 0.0f, path_len = 0.0f; /* d is unit length: t is the distance */
   kpcn_vec3 prev_p = o;
   int bounce = 0;
   struct RTCRayHit rh;
@@ -229,7 +234,7 @@ void kpcn_trace_sample(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler 
     const kpcn_prim *p = &s->prims[s->geom_to_prim[rh.hit.geomID]];
     kpcn_hit h;
     kpcn_hit_fill(s, p, o, d, rh.ray.tfar, rh.hit.primID, rh.hit.u, rh.hit.v, &h);
-    path_len += kv3_length(kv3_sub(h.p, o));
+    path_len += h.t;
     if (p->emissive) {
       kpcn_vec3 Le = kpcn_prim_emission(p, &h, d);
       if (!kv3_is_zero(Le)) {
@@ -292,6 +297,12 @@ void kpcn_trace_sample(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler 
         Ld = kv3_add(Ld, kv3_mul(tp_d, ct));
         Ls = kv3_add(Ls, kv3_mul(tp_s, ct));
       }
+    } else if (at_feature && !ctx->color_only && s->nlights > 0) {
+      /* light sampling is off (BSDF-only): still trace one shadow ray for the visibility AOV,
+       * without adding its contribution */
+      kpcn_vec3 ct, cd;
+      out->visibility =
+          (float)sample_direct(ctx, &h, &fr, bsdf, &sp, wo_l, ng, ul, u1, u2, &ct, &cd, &out->rays);
     }
     kpcn_bsdf_sample_result bs;
     if (!kpcn_bsdf_sample(bsdf, &sp, wo_l, ub1, ub2, ulobe, &bs)) break;

@@ -123,9 +123,11 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
         double mean[NCH], m2[NCH];
         memset(mean, 0, sizeof(mean));
         memset(m2, 0, sizeof(m2));
+        kpcn_sampler_cache cache;
+        kpcn_sampler_cache_reset(&cache, kpcn_pixel_seed(ctx.seed, (uint32_t)px, (uint32_t)py));
         for (int i = 0; i < spp; i++) {
           kpcn_sampler smp;
-          kpcn_sampler_start(&smp, ctx.seed, (uint32_t)px, (uint32_t)py, (uint32_t)i);
+          kpcn_sampler_start(&smp, ctx.seed, (uint32_t)px, (uint32_t)py, (uint32_t)i, &cache);
           kpcn_sample_out so;
           kpcn_trace_sample(&ctx, px, py, &smp, &so);
           total_rays += so.rays;

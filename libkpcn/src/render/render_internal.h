@@ -22,10 +22,11 @@ typedef struct kpcn_hit {
 typedef struct kpcn_light_point {
   kpcn_vec3 p, n; /* position and front normal */
   float pdf_area; /* area density (1/area for uniform sampling) */
+  float u, v;     /* texture coordinates there (as kpcn_hit_fill would report) */
 } kpcn_light_point;
 
 /* Filter importance sampling tables (Gaussian uses an inverted tabulated CDF). */
-#define KPCN_FILTER_TABLE 256
+#define KPCN_FILTER_TABLE 2048
 typedef struct kpcn_filter_table {
   kpcn_filter_type type;
   float inv_cdf[KPCN_FILTER_TABLE + 1]; /* gaussian: offset for u = i / N */

@@ -9,10 +9,21 @@
 
 #include <stdint.h>
 
+/* Per-pixel cache of the pair seeds (they depend on seed, pixel and pair, not on the sample
+ * index), filled lazily; pairs beyond KPCN_SAMPLER_CACHE are hashed on the fly. */
+#define KPCN_SAMPLER_CACHE 64
+typedef struct kpcn_sampler_cache {
+  uint32_t pixel_seed;
+  uint32_t filled; /* pairs [0, filled) are valid */
+  uint32_t seed[KPCN_SAMPLER_CACHE][3];
+} kpcn_sampler_cache;
+
 typedef struct kpcn_sampler {
-  uint32_t pixel_seed; /* hash of seed and pixel */
-  uint32_t index;      /* sample index within the pixel */
-  uint32_t pair;       /* next dimension pair */
+  uint32_t pixel_seed;       /* hash of seed and pixel */
+  uint32_t index;            /* sample index within the pixel */
+  uint32_t rev_index;        /* bit-reversed index */
+  uint32_t pair;             /* next dimension pair */
+  kpcn_sampler_cache *cache; /* may be NULL */
 } kpcn_sampler;
 
 static inline uint32_t kpcn_hash32(uint32_t x) {
@@ -70,15 +81,34 @@ static inline float kpcn_sampler_random(const kpcn_sampler *s, uint32_t salt) {
          (1.0f / 16777216.0f);
 }
 
-static inline void kpcn_sampler_start(kpcn_sampler *s, uint64_t seed, uint32_t px, uint32_t py,
-                                      uint32_t index) {
+static inline uint32_t kpcn_pixel_seed(uint64_t seed, uint32_t px, uint32_t py) {
   uint32_t h = kpcn_hash32((uint32_t)seed ^ 0xa511e9b3U);
   h = kpcn_hash_combine(h, (uint32_t)(seed >> 32));
   h = kpcn_hash_combine(h, px);
-  h = kpcn_hash_combine(h, py);
-  s->pixel_seed = h;
+  return kpcn_hash_combine(h, py);
+}
+
+/* Starts sample `index` of pixel (px, py). cache (optional) must belong to this pixel: call
+ * kpcn_sampler_cache_reset(cache, kpcn_pixel_seed(...)) when moving to a new pixel. */
+static inline void kpcn_sampler_start(kpcn_sampler *s, uint64_t seed, uint32_t px, uint32_t py,
+                                      uint32_t index, kpcn_sampler_cache *cache) {
+  s->pixel_seed = cache ? cache->pixel_seed : kpcn_pixel_seed(seed, px, py);
   s->index = index;
+  s->rev_index = 0;
   s->pair = 0;
+  s->cache = cache;
+}
+
+static inline void kpcn_sampler_cache_reset(kpcn_sampler_cache *c, uint32_t pixel_seed) {
+  c->pixel_seed = pixel_seed;
+  c->filled = 0;
+}
+
+static inline void kpcn_pair_seeds(uint32_t pixel_seed, uint32_t pair, uint32_t out[3]) {
+  uint32_t seed = kpcn_hash_combine(pixel_seed, pair);
+  out[0] = seed;
+  out[1] = kpcn_hash32(seed ^ 0x68bc21ebU);
+  out[2] = kpcn_hash32(seed ^ 0x02e5be93U);
 }
 
 static inline float kpcn_u32_to_unit(uint32_t x) { return (float)(x >> 8) * (1.0f / 16777216.0f); }
@@ -86,12 +116,25 @@ static inline float kpcn_u32_to_unit(uint32_t x) { return (float)(x >> 8) * (1.0
 /* Nested uniform scrambling is rev(LK(rev(x))); working in the reversed domain saves the
  * inner reversals: dimension 0 of Sobol is rev(i), dimension 1 comes reversed from the table. */
 static inline void kpcn_sampler_2d(kpcn_sampler *s, float *u, float *v) {
-  uint32_t seed = kpcn_hash_combine(s->pixel_seed, s->pair++);
-  uint32_t ir = kpcn_lk_permute(kpcn_reverse_bits(s->index), seed); /* reversed shuffled index */
+  uint32_t tmp[3];
+  const uint32_t *sd;
+  uint32_t pair = s->pair++;
+  kpcn_sampler_cache *c = s->cache;
+  if (c && pair < KPCN_SAMPLER_CACHE) {
+    while (c->filled <= pair) {
+      kpcn_pair_seeds(c->pixel_seed, c->filled, c->seed[c->filled]);
+      c->filled++;
+    }
+    sd = c->seed[pair];
+  } else {
+    kpcn_pair_seeds(s->pixel_seed, pair, tmp);
+    sd = tmp;
+  }
+  if (!s->rev_index && s->index) s->rev_index = kpcn_reverse_bits(s->index);
+  uint32_t ir = kpcn_lk_permute(s->rev_index, sd[0]); /* reversed shuffled index */
   uint32_t i = kpcn_reverse_bits(ir);
-  uint32_t x = kpcn_reverse_bits(kpcn_lk_permute(i, kpcn_hash32(seed ^ 0x68bc21ebU)));
-  uint32_t y =
-      kpcn_reverse_bits(kpcn_lk_permute(kpcn_sobol1_reversed(i), kpcn_hash32(seed ^ 0x02e5be93U)));
+  uint32_t x = kpcn_reverse_bits(kpcn_lk_permute(i, sd[1]));
+  uint32_t y = kpcn_reverse_bits(kpcn_lk_permute(kpcn_sobol1_reversed(i), sd[2]));
   *u = kpcn_u32_to_unit(x);
   *v = kpcn_u32_to_unit(y);
 }

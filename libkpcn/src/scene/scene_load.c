@@ -106,11 +106,9 @@ static kpcn_status parse_emission(kpcn_scene *s, kpcn_prim *p, const cJSON *e, c
     p->emissive = !kv3_is_zero(p->emission);
     return KPCN_OK;
   }
-  if (p->type != KPCN_PRIM_INFINITE_SPHERE)
-    return kpcn_fail(KPCN_ERR_UNSUPPORTED,
-                     "%s: textured emission is only supported on infinite_sphere (use a colour)",
-                     path);
+  /* a texture (bitmap, checker): looked up at the surface uv; its mean drives light selection */
   KPCN_TRY(kpcn_texture_parse(s->mats, e, path, 0, &p->emission_tex));
+  p->emission = p->emission_tex->average;
   p->emissive = 1;
   return KPCN_OK;
 }

@@ -117,7 +117,9 @@ double kpcn_grad_norm(const kpcn_param_block *blocks, int nblocks, int nthreads)
     double stackp[64], *part = nch <= 64 ? stackp : malloc(nch * sizeof(double));
     if (!part) return NAN;
     const float *g = blocks[b].grad;
-#pragma omp parallel for num_threads(nt) schedule(static)
+/* small tensors run serially: a parallel region costs more than the work (and far more
+ * when other processes hold the cores and OpenMP barriers wait for descheduled threads) */
+#pragma omp parallel for num_threads(nt) schedule(static) if (nch >= 16)
     for (long long c = 0; c < (long long)nch; c++) {
       size_t i0 = (size_t)c * NORM_CHUNK, i1 = i0 + NORM_CHUNK < n ? i0 + NORM_CHUNK : n;
       double acc = 0.0;
@@ -162,7 +164,7 @@ kpcn_status kpcn_adam_step(kpcn_adam *a, const kpcn_param_block *blocks, int nbl
     float *p = blocks[b].param, *m = a->m + off, *v = a->v + off;
     const float *g = blocks[b].grad;
     long long n = (long long)blocks[b].count;
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(static) if (n >= 65536)
     for (long long i = 0; i < n; i++) {
       float gi = g[i] * gs;
       m[i] = b1 * m[i] + (1.0f - b1) * gi;

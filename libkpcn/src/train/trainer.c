@@ -289,10 +289,17 @@ static kpcn_status branch_forward(kpcn_trainer *t, int b) {
 
 /* backward of one branch from dL/dout in t->grad[b], then its Adam step */
 static kpcn_status branch_backward_step(kpcn_trainer *t, int b) {
+  double t0 = kt_now();
   KPCN_TRY(kpcn_kpa_backward(t->arch.kernel_size, t->N, 3, t->P, t->P, t->logits[b], t->noisy[b],
                              t->grad[b], t->logits[b], NULL, t->nt));
+  double t1 = kt_now();
   KPCN_TRY(kpcn_net_backward(t->net[b], t->logits[b], NULL));
-  return kpcn_adam_step(t->adam[b], t->blocks[b], t->nparams[b], t->nt, NULL);
+  double t2 = kt_now();
+  kpcn_status st = kpcn_adam_step(t->adam[b], t->blocks[b], t->nparams[b], t->nt, NULL);
+  t->timing.kpa_s += t1 - t0;
+  t->timing.net_s += t2 - t1;
+  t->timing.adam_s += kt_now() - t2;
+  return st;
 }
 
 kpcn_status kpcn_trainer_step(kpcn_trainer *t, double *loss) {
@@ -315,9 +322,11 @@ kpcn_status kpcn_trainer_step(kpcn_trainer *t, double *loss) {
     size_t n = (size_t)t->N * 3 * t->P * t->P;
     for (int b = 0; b < KT_NB; b++)
       KPCN_TRY(branch_forward(t, b));
+    tl = kt_now();
     kpcn_recombine(t->out[0], t->out[1], t->albedo, t->arch.eps, n, t->comb);
     KPCN_TRY(kt_loss(t, t->s.loss2, t->comb, t->refc, t->gcomb, &total));
     kpcn_recombine_backward(t->gcomb, t->out[1], t->albedo, t->arch.eps, n, t->grad[0], t->grad[1]);
+    t->timing.loss_s += kt_now() - tl;
     for (int b = 0; b < KT_NB; b++)
       KPCN_TRY(branch_backward_step(t, b));
   }

@@ -40,12 +40,12 @@ struct CompareOptions {
 
 struct MetricResult {
   bool ok = false;
-  std::string error;                                     // set when !ok, names the problem
+  std::string error;                                       // set when !ok, names the problem
   double value = std::numeric_limits<double>::quiet_NaN(); // mean over valid pixels/channels
-  int64_t npixels = 0;                                   // pixels averaged
-  int64_t nonfinite = 0;                                 // pixels excluded (NaN/Inf in x or ref)
-  int nchannels = 0;                                     // channels compared
-  std::vector<std::string> channel_names;               // which ones
+  int64_t npixels = 0;                                     // pixels averaged
+  int64_t nonfinite = 0;                                   // pixels excluded (NaN/Inf in x or ref)
+  int nchannels = 0;                                       // channels compared
+  std::vector<std::string> channel_names;                  // which ones
 };
 
 MetricResult compare(const OIIO::ImageBuf &x, const OIIO::ImageBuf &ref, Metric m,

@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# The main job: set up + build, render a held-out scene at low spp with kpcn-render, denoise
+# it with the shipped KPCN model (and non-local means for comparison), write the EXRs, a
+# labelled comparison mosaic PNG through the OCIO display transform, a relMSE error map and
+# the metrics against the bundled reference.
+#   tools/main-job.sh [outdir]        (default: out/)
+# Environment: KPCN_SCENE, KPCN_REF, KPCN_MODEL, KPCN_SPP, KPCN_RES override the defaults.
+set -euo pipefail
+here=$(cd "$(dirname "$0")/.." && pwd)
+out=${1:-"$here/out"}
+"$here/tools/setup.sh" "$here/build"
+bin="$here/build/tools"
+scene=${KPCN_SCENE:-"$here/testdata/scenes/diffuse-interreflection/scene.json"}
+ref=${KPCN_REF:-"$here/testdata/references/diffuse-interreflection_256.exr"}
+model=${KPCN_MODEL:-"$here/testdata/models/kpcn-cpu.safetensors"}
+spp=${KPCN_SPP:-16}
+res=${KPCN_RES:-256x256}
+mkdir -p "$out"
+tool="$bin/kpcntool/kpcntool"
+
+echo "== render: $(basename "$(dirname "$scene")") at $spp spp, $res (held out from training)"
+"$bin/kpcn-render/kpcn-render" "$scene" --spp "$spp" --seed 1 --resolution "$res" -o "$out/noisy.exr"
+echo "== denoise: KPCN ($(basename "$model")) and non-local means"
+"$tool" "$out/noisy.exr" --denoise:model="$model" -o "$out/kpcn.exr"
+"$tool" "$out/noisy.exr" --denoise:method=nlmeans -o "$out/nlmeans.exr"
+echo "== mosaic and error map"
+"$tool" "$out/noisy.exr" --ch R,G,B "$out/nlmeans.exr" "$out/kpcn.exr" "$ref" --ch R,G,B \
+  --mosaic:n=4:labels=noisy,nlmeans,kpcn,reference --ociodisplay:view=Filmic -o "$out/mosaic.png"
+"$tool" "$out/kpcn.exr" "$ref" --ch R,G,B --errormap:metric=relmse -o "$out/kpcn_relmse.exr"
+echo "== metrics against the reference ($(basename "$ref"))"
+for name in noisy nlmeans kpcn; do
+  img="$out/$name.exr"
+  printf '%-8s ' "$name"
+  "$tool" "$img" --ch R,G,B "$ref" --ch R,G,B --relmse --ssim:display=srgb --psnr:display=srgb --json \
+    | tee "$out/metrics_$name.json"
+done
+echo "outputs in $out: noisy.exr kpcn.exr nlmeans.exr mosaic.png kpcn_relmse.exr metrics_*.json"
