@@ -7,7 +7,7 @@ set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 PKGS="build-essential cmake pkg-config libopenimageio-dev openimageio-tools libopenexr-dev
 libopencolorio-dev opencolorio-tools libembree-dev libdnnl-dev libopenblas-dev libassimp-dev
-libcjson-dev libstb-dev python3-skimage python3-numpy"
+libcjson-dev libstb-dev python3-skimage python3-numpy python3-openimageio"
 missing=()
 for p in $PKGS; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
