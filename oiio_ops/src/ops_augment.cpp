@@ -20,7 +20,8 @@ namespace {
 
 // Copies header attributes (kpcn:spp ...) that the planar round trip does not carry.
 void copy_metadata(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src) {
-  for (const auto &p : src.spec().extra_attribs) dst.specmod().attribute(p.name().string(), p.type(), p.data());
+  for (const auto &p : src.spec().extra_attribs)
+    dst.specmod().attribute(p.name().string(), p.type(), p.data());
 }
 
 template <class F> bool apply(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, F &&f) {
@@ -47,8 +48,8 @@ template <class F> bool apply(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, F 
 // Arbitrary-angle rotation of a kpcn_image (same size).
 kpcn_status rotate_any_image(kpcn_image **out, const kpcn_image *in, double deg, int nthreads) {
   kpcn_image *o = nullptr;
-  kpcn_status s = kpcn_image_create(&o, in->width, in->height, in->nchannels,
-                                    (const char *const *)in->names);
+  kpcn_status s =
+      kpcn_image_create(&o, in->width, in->height, in->nchannels, (const char *const *)in->names);
   if (s != KPCN_OK) return s;
   s = kpcn_augment_rotate_any_planes(o->data, in->data, in->nchannels,
                                      (const char *const *)in->names, in->width, in->height, deg,

@@ -16,8 +16,10 @@ static kpcn_aov_set *random_set(int w, int h) {
   for (int b = 0; b < KPCN_BUF_COUNT; b++) {
     kpcn_aov_add(s, (kpcn_buffer)b, 1);
     size_t n = kpcn_aov_plane_size(s) * (size_t)kpcn_buffer_channels((kpcn_buffer)b);
-    for (size_t i = 0; i < n; i++) s->buf[b][i] = kt_randf(&g_rng) * 2 - 0.5f;
-    for (size_t i = 0; i < kpcn_aov_plane_size(s); i++) s->var[b][i] = kt_randf(&g_rng);
+    for (size_t i = 0; i < n; i++)
+      s->buf[b][i] = kt_randf(&g_rng) * 2 - 0.5f;
+    for (size_t i = 0; i < kpcn_aov_plane_size(s); i++)
+      s->var[b][i] = kt_randf(&g_rng);
   }
   s->spp = 16;
   return s;
@@ -53,8 +55,10 @@ static void test_mirror_twice(void) {
   for (int v = 0; v < 2; v++) {
     kpcn_augment_xform m;
     kpcn_augment_identity(&m);
-    if (v) m.mirror_v = 1;
-    else m.mirror_h = 1;
+    if (v)
+      m.mirror_v = 1;
+    else
+      m.mirror_h = 1;
     kpcn_aov_set *b = apply(a, &m), *c = apply(b, &m);
     CHECK(!sets_equal(a, b));
     CHECK(sets_equal(a, c));
@@ -144,7 +148,8 @@ static void test_colorswap(void) {
       for (int c3 = 0; c3 < 3; c3++)
         ok &= px(b, KPCN_BUF_NORMAL, c3, x, y) == px(a, KPCN_BUF_NORMAL, c3, x, y);
       ok &= px(b, KPCN_BUF_DEPTH, 0, x, y) == px(a, KPCN_BUF_DEPTH, 0, x, y);
-      for (int k = 0; k < KPCN_BUF_COUNT; k++) ok &= b->var[k][y * 6 + x] == a->var[k][y * 6 + x];
+      for (int k = 0; k < KPCN_BUF_COUNT; k++)
+        ok &= b->var[k][y * 6 + x] == a->var[k][y * 6 + x];
     }
   CHECK(ok);
   int bad[3];
@@ -289,8 +294,10 @@ static void test_draw(void) {
     rots[x.rot90]++;
     mir[x.mirror_h]++;
   }
-  for (int i = 0; i < 6; i++) CHECK(perms[i] > 60);
-  for (int i = 0; i < 4; i++) CHECK(rots[i] > 100);
+  for (int i = 0; i < 6; i++)
+    CHECK(perms[i] > 60);
+  for (int i = 0; i < 4; i++)
+    CHECK(rots[i] > 100);
   CHECK(mir[0] > 240 && mir[1] > 240);
   /* ONE_OF: exactly one op differs from identity. */
   ds.mode = KPCN_AUGMENT_ONE_OF;
@@ -323,7 +330,8 @@ static void test_rotate_any(void) {
   }
   CHECK_NEAR(maxd, 0, 1e-5);
   kpcn_aov_destroy(b);
-  for (size_t i = 0; i < np; i++) a->var[KPCN_BUF_COLOR][i] = 1.0f;
+  for (size_t i = 0; i < np; i++)
+    a->var[KPCN_BUF_COLOR][i] = 1.0f;
   CHECK(kpcn_augment_rotate_any_aov(&b, a, 45.0, 0) == KPCN_OK);
   /* Centre pixel maps onto itself (weight 1); an off-centre one splits over 4 taps. */
   CHECK_NEAR(b->var[KPCN_BUF_COLOR][4 * 9 + 4], 1.0, 1e-6);

@@ -29,12 +29,14 @@ static kpcn_aov_set *half_flat(int W, int H) {
 static void test_flat_fraction(void) {
   /* 4x4 patch: 12 pixels at 1.0, 4 at 1.2 (relative deviation 0.2). Median 1.0, L(m)=1. */
   float r[16], g[16], b[16];
-  for (int i = 0; i < 16; i++) r[i] = g[i] = b[i] = i < 12 ? 1.0f : 1.2f;
+  for (int i = 0; i < 16; i++)
+    r[i] = g[i] = b[i] = i < 12 ? 1.0f : 1.2f;
   CHECK_NEAR(kpcn_patch_flat_fraction(r, g, b, 4, 0, 0, 4, 0.05, 0.01), 12.0 / 16, 1e-12);
   /* tol 0.25*(1+0.01) = 0.2525 covers the 0.2 deviation: all near. */
   CHECK_NEAR(kpcn_patch_flat_fraction(r, g, b, 4, 0, 0, 4, 0.25, 0.01), 1.0, 1e-12);
   /* Only one channel deviating is enough to be "far" (max over channels). */
-  for (int i = 0; i < 16; i++) r[i] = g[i] = 1.0f, b[i] = i % 2 ? 2.0f : 1.0f;
+  for (int i = 0; i < 16; i++)
+    r[i] = g[i] = 1.0f, b[i] = i % 2 ? 2.0f : 1.0f;
   /* median of b (lower median of 8x1.0, 8x2.0) = 1.0: half the pixels far */
   CHECK_NEAR(kpcn_patch_flat_fraction(r, g, b, 4, 0, 0, 4, 0.05, 0.01), 0.5, 1e-12);
   /* Black patch: L(m) = 0, tol = 0.05*0.01; exact zeros are near. */
@@ -58,7 +60,8 @@ static void test_select_culls_flat(void) {
   CHECK(st.kept == 30 && st.candidates == st.kept + st.culled);
   CHECK(st.culled > 5); /* about half the candidates fall in the flat half */
   int ok = 1;
-  for (int i = 0; i < n; i++) ok &= o[i].x + 16 > 64 && o[i].flat_frac < 0.9f;
+  for (int i = 0; i < n; i++)
+    ok &= o[i].x + 16 > 64 && o[i].flat_frac < 0.9f;
   CHECK(ok); /* every kept patch overlaps the textured half */
   /* Determinism. */
   kpcn_patch_origin *o2 = NULL;
@@ -72,7 +75,8 @@ static void test_select_culls_flat(void) {
   CHECK(kpcn_patches_select(&o, &n, &st, img, NULL, &s) == KPCN_OK);
   CHECK(st.culled == 0 && n == 30);
   int flat = 0;
-  for (int i = 0; i < n; i++) flat += o[i].x + 16 <= 64;
+  for (int i = 0; i < n; i++)
+    flat += o[i].x + 16 <= 64;
   CHECK(flat > 3);
   free(o);
   /* Grid mode: stride 16 over 128x64 gives 8x4 candidates; left 4 columns flat. */
@@ -93,7 +97,8 @@ static void test_reference_decides(void) {
   kpcn_aov_set *noisy = half_flat(64, 32), *ref = NULL;
   kpcn_aov_create(&ref, 64, 32);
   kpcn_aov_add(ref, KPCN_BUF_COLOR, 0);
-  for (size_t i = 0; i < 3 * kpcn_aov_plane_size(ref); i++) ref->buf[KPCN_BUF_COLOR][i] = 0.3f;
+  for (size_t i = 0; i < 3 * kpcn_aov_plane_size(ref); i++)
+    ref->buf[KPCN_BUF_COLOR][i] = 0.3f;
   kpcn_patch_settings s;
   kpcn_patch_settings_defaults(&s);
   s.size = 16;
@@ -123,7 +128,8 @@ static void test_importance(void) {
   int n = 0;
   CHECK(kpcn_patches_select(&o, &n, NULL, img, NULL, &s) == KPCN_OK);
   int right = 0;
-  for (int i = 0; i < n; i++) right += o[i].x >= 64;
+  for (int i = 0; i < n; i++)
+    right += o[i].x >= 64;
   /* Variance 100x higher on the right: with the 10% floor, P(right) ~ 0.9. */
   CHECK(right > 150);
   free(o);

@@ -23,9 +23,11 @@ static kpcn_aov_set *make_set(int W, int H, int with_all, unsigned seed) {
     if (!with_all && b > KPCN_BUF_SPECULAR) break;
     kpcn_aov_add(s, (kpcn_buffer)b, with_all);
     size_t n = kpcn_aov_plane_size(s) * (size_t)kpcn_buffer_channels((kpcn_buffer)b);
-    for (size_t i = 0; i < n; i++) s->buf[b][i] = kt_randf(&rng) * 4;
+    for (size_t i = 0; i < n; i++)
+      s->buf[b][i] = kt_randf(&rng) * 4;
     if (with_all)
-      for (size_t i = 0; i < kpcn_aov_plane_size(s); i++) s->var[b][i] = kt_randf(&rng) * 0.1f;
+      for (size_t i = 0; i < kpcn_aov_plane_size(s); i++)
+        s->var[b][i] = kt_randf(&rng) * 0.1f;
   }
   return s;
 }
@@ -108,12 +110,15 @@ static void round_trip(kpcn_dtype dt) {
       for (int y = 0; y < 9; y++)
         for (int x = 0; x < 9; x++) {
           double t = truth(n, r, ch[c], xs[k] + x, ys[k] + y), v = buf[(c * 9 + y) * 9 + x];
-          double rel = fabs(v - t) / (fabs(t) + 6e-8 * 2048); /* half: 2^-11 relative, 6e-8 absolute */
+          double rel =
+              fabs(v - t) / (fabs(t) + 6e-8 * 2048); /* half: 2^-11 relative, 6e-8 absolute */
           maxrel = rel > maxrel ? rel : maxrel;
         }
   }
-  if (dt == KPCN_DTYPE_F32) CHECK(maxrel == 0);
-  else CHECK(maxrel <= 1.0 / 2048 && maxrel > 0);
+  if (dt == KPCN_DTYPE_F32)
+    CHECK(maxrel == 0);
+  else
+    CHECK(maxrel <= 1.0 / 2048 && maxrel > 0);
   CHECK(kpcn_patchstore_get(ps, 3, buf, NULL) == KPCN_ERR_INVALID_ARGUMENT);
   /* Augmenting a stored patch through its names keeps noisy/reference aligned. */
   float *aug = malloc(sizeof(float) * 33 * 81);
@@ -238,14 +243,15 @@ static void half_conv(void) {
   CHECK(kpcn_float_to_half(-2.0f) == 0xc000);
   CHECK(kpcn_float_to_half(65504.0f) == 0x7bff);
   CHECK(kpcn_float_to_half(65520.0f) == 0x7c00);
-  CHECK(kpcn_float_to_half(5.9604645e-8f) == 0x0001); /* smallest subnormal */
-  CHECK(kpcn_float_to_half(6.1035156e-5f) == 0x0400); /* smallest normal */
+  CHECK(kpcn_float_to_half(5.9604645e-8f) == 0x0001);      /* smallest subnormal */
+  CHECK(kpcn_float_to_half(6.1035156e-5f) == 0x0400);      /* smallest normal */
   CHECK(kpcn_float_to_half(1.0f + 1.0f / 2048) == 0x3c00); /* tie to even */
   CHECK(kpcn_float_to_half(1.0f + 3.0f / 2048) == 0x3c02);
   CHECK(kpcn_half_to_float(0x3555) == 0.333251953125f);
   CHECK(kpcn_half_to_float(0x0001) == 5.9604645e-8f);
   int ok = 1;
-  for (uint32_t h = 0; h < 0x7c00; h++) ok &= kpcn_float_to_half(kpcn_half_to_float((uint16_t)h)) == h;
+  for (uint32_t h = 0; h < 0x7c00; h++)
+    ok &= kpcn_float_to_half(kpcn_half_to_float((uint16_t)h)) == h;
   CHECK(ok);
 }
 

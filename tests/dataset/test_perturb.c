@@ -79,7 +79,8 @@ static void test_scene(const char *file) {
     cJSON_ArrayForEach(bs, cJSON_GetObjectItemCaseSensitive(j, "bsdfs")) {
       const cJSON *al = cJSON_GetObjectItemCaseSensitive(bs, "albedo");
       const cJSON *ty = cJSON_GetObjectItemCaseSensitive(bs, "type");
-      if (!strcmp(ty->valuestring, "null")) ok &= cJSON_Compare(bs, cJSON_GetArrayItem(obs, i), 1);
+      if (!strcmp(ty->valuestring, "null"))
+        ok &= cJSON_Compare(bs, cJSON_GetArrayItem(obs, i), 1);
       else if (cJSON_IsArray(al))
         for (int c = 0; c < 3; c++) {
           double x = cJSON_GetArrayItem(al, c)->valuedouble;

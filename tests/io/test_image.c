@@ -170,9 +170,9 @@ static void test_map_channels(void) {
   CHECK(kpcn_aov_map_channels(n3, 5, chan, var, "t3") == KPCN_OK);
   CHECK(chan[KPCN_BUF_NORMAL][0] == 2 && chan[KPCN_BUF_NORMAL][2] == 4);
   /* Cycles: the un-denoised "Noisy Image" is preferred over "Combined" */
-  const char *n5[] = {"ViewLayer.Combined.B", "ViewLayer.Combined.G", "ViewLayer.Combined.R",
-                      "ViewLayer.Noisy Image.B", "ViewLayer.Noisy Image.G",
-                      "ViewLayer.Noisy Image.R"};
+  const char *n5[] = {"ViewLayer.Combined.B",    "ViewLayer.Combined.G",
+                      "ViewLayer.Combined.R",    "ViewLayer.Noisy Image.B",
+                      "ViewLayer.Noisy Image.G", "ViewLayer.Noisy Image.R"};
   CHECK(kpcn_aov_map_channels(n5, 6, chan, var, "t5") == KPCN_OK);
   CHECK(chan[KPCN_BUF_COLOR][0] == 5 && chan[KPCN_BUF_COLOR][2] == 3);
   /* channels from two different layers never mix */

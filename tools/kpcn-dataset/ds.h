@@ -13,9 +13,9 @@ typedef enum ds_kind { DS_PREVIEW = 0, DS_NOISY, DS_REFERENCE } ds_kind;
 /* One independent render job (one line of manifest.jsonl). Paths are relative to the
  * dataset directory. */
 typedef struct ds_job {
-  char id[192];         /* "<scene>/v003/16spp", "<scene>/v003/ref", "<scene>/v003/preview" */
+  char id[192]; /* "<scene>/v003/16spp", "<scene>/v003/ref", "<scene>/v003/preview" */
   ds_kind kind;
-  char scene[128];      /* base scene name: the split unit */
+  char scene[128]; /* base scene name: the split unit */
   int variant;
   char split[16];
   char scene_file[DS_PATH];

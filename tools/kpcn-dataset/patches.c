@@ -39,10 +39,11 @@ static int spp_selected(const int *spps, int n, int spp) {
 }
 
 static void usage(void) {
-  fprintf(stderr,
-          "usage: kpcn-dataset patches DATASET_DIR -o OUT.kps [--split train] [--spp 16,32|all]\n"
-          "         [--size 65] [--per-image 100 | --stride S] [--cull 0.9] [--cull-tol 0.05]\n"
-          "         [--cull-abs 0.01] [--importance] [--seed 1] [--dtype f32|f16] [--allow-partial]\n");
+  fprintf(
+      stderr,
+      "usage: kpcn-dataset patches DATASET_DIR -o OUT.kps [--split train] [--spp 16,32|all]\n"
+      "         [--size 65] [--per-image 100 | --stride S] [--cull 0.9] [--cull-tol 0.05]\n"
+      "         [--cull-abs 0.01] [--importance] [--seed 1] [--dtype f32|f16] [--allow-partial]\n");
 }
 
 int ds_cmd_patches(int argc, char **argv) {
@@ -78,20 +79,28 @@ int ds_cmd_patches(int argc, char **argv) {
       return 2;
     }
     int ok = 1, iv;
-    if (!strcmp(a, "-o") || !strcmp(a, "--output")) out = v;
-    else if (!strcmp(a, "--split")) split = v;
-    else if (!strcmp(a, "--spp")) spp_list = v;
+    if (!strcmp(a, "-o") || !strcmp(a, "--output"))
+      out = v;
+    else if (!strcmp(a, "--split"))
+      split = v;
+    else if (!strcmp(a, "--spp"))
+      spp_list = v;
     else if (!strcmp(a, "--dtype")) {
       dtype = v;
       ok = !strcmp(v, "f32") || !strcmp(v, "f16");
-    } else if (!strcmp(a, "--size")) ok = ds_parse_int(v, 2, 4096, &ps.size);
-    else if (!strcmp(a, "--per-image")) ok = ds_parse_int(v, 1, 1 << 20, &ps.count);
+    } else if (!strcmp(a, "--size"))
+      ok = ds_parse_int(v, 2, 4096, &ps.size);
+    else if (!strcmp(a, "--per-image"))
+      ok = ds_parse_int(v, 1, 1 << 20, &ps.count);
     else if (!strcmp(a, "--stride")) {
       ok = ds_parse_int(v, 1, 4096, &ps.stride);
       ps.count = 0;
-    } else if (!strcmp(a, "--cull")) ok = ds_parse_double(v, &ps.cull) && ps.cull >= 0;
-    else if (!strcmp(a, "--cull-tol")) ok = ds_parse_double(v, &ps.cull_tol) && ps.cull_tol >= 0;
-    else if (!strcmp(a, "--cull-abs")) ok = ds_parse_double(v, &ps.cull_abs) && ps.cull_abs >= 0;
+    } else if (!strcmp(a, "--cull"))
+      ok = ds_parse_double(v, &ps.cull) && ps.cull >= 0;
+    else if (!strcmp(a, "--cull-tol"))
+      ok = ds_parse_double(v, &ps.cull_tol) && ps.cull_tol >= 0;
+    else if (!strcmp(a, "--cull-abs"))
+      ok = ds_parse_double(v, &ps.cull_abs) && ps.cull_abs >= 0;
     else if (!strcmp(a, "--seed")) {
       ok = ds_parse_int(v, 0, 2147483647, &iv);
       ps.seed = (uint64_t)iv;
@@ -143,7 +152,10 @@ int ds_cmd_patches(int argc, char **argv) {
     if (r >= 0) ds_join(b, sizeof b, dir, m.jobs[r].out);
     if (r < 0 || !ds_exists(a) || !ds_exists(b)) {
       if (!allow_partial && missing < 5)
-        ds_err("patches: %s not rendered yet (%s)", j->id, r < 0 ? "no reference job" : !ds_exists(a) ? a : b);
+        ds_err("patches: %s not rendered yet (%s)", j->id,
+               r < 0           ? "no reference job"
+               : !ds_exists(a) ? a
+                               : b);
       missing++;
       continue;
     }
@@ -154,7 +166,8 @@ int ds_cmd_patches(int argc, char **argv) {
   if ((missing && !allow_partial) || np == 0) {
     if (np == 0) ds_err("patches: no finished %s image pairs in '%s'", split, dir);
     if (missing && !allow_partial)
-      ds_err("patches: %d image pairs missing: finish `kpcn-dataset run` or pass --allow-partial", missing);
+      ds_err("patches: %d image pairs missing: finish `kpcn-dataset run` or pass --allow-partial",
+             missing);
     free(pairs);
     ds_manifest_free(&m);
     return 1;

@@ -46,7 +46,8 @@ static int find_scenes(const char *dir, base_scene **out, int *n) {
     } else {
       char sj[DS_PATH];
       ds_join(sj, sizeof sj, p, "scene.json");
-      if (ds_exists(sj)) snprintf(f, sizeof f, "%s", sj);
+      if (ds_exists(sj))
+        snprintf(f, sizeof f, "%s", sj);
       else {
         DIR *sd = opendir(p);
         if (!sd) continue;
@@ -61,7 +62,8 @@ static int find_scenes(const char *dir, base_scene **out, int *n) {
         }
         closedir(sd);
         if (found != 1) {
-          if (found > 1) ds_err("warning: '%s' holds %d .json files and no scene.json: skipped", p, found);
+          if (found > 1)
+            ds_err("warning: '%s' holds %d .json files and no scene.json: skipped", p, found);
           continue;
         }
       }
@@ -93,7 +95,8 @@ static int find_scenes(const char *dir, base_scene **out, int *n) {
  * "train:a+b,val:c,test:d" (names). */
 static int assign_splits(base_scene *s, int n, const char *spec, uint64_t seed) {
   if (!spec) {
-    for (int i = 0; i < n; i++) strcpy(s[i].split, "train");
+    for (int i = 0; i < n; i++)
+      strcpy(s[i].split, "train");
     return 0;
   }
   char buf[4096];
@@ -151,7 +154,8 @@ static int assign_splits(base_scene *s, int n, const char *spec, uint64_t seed) 
     /* Fisher-Yates with the seed, then consecutive blocks; the first split takes the
      * rounding remainder so every scene gets a split. */
     int *order = malloc(sizeof(int) * (size_t)n);
-    for (int i = 0; i < n; i++) order[i] = i;
+    for (int i = 0; i < n; i++)
+      order[i] = i;
     uint64_t h = seed * 0x9e3779b97f4a7c15ull + 7;
     for (int i = n - 1; i > 0; i--) {
       h = ds_hash("split", h);
@@ -163,9 +167,11 @@ static int assign_splits(base_scene *s, int n, const char *spec, uint64_t seed) 
     int pos = 0;
     for (int k = nsplit - 1; k >= 1; k--) {
       int cnt = (int)lround(frac[k] * n);
-      for (int c = 0; c < cnt && pos < n; c++) strcpy(s[order[pos++]].split, names[k]);
+      for (int c = 0; c < cnt && pos < n; c++)
+        strcpy(s[order[pos++]].split, names[k]);
     }
-    while (pos < n) strcpy(s[order[pos++]].split, names[0]);
+    while (pos < n)
+      strcpy(s[order[pos++]].split, names[0]);
     free(order);
   }
   for (int i = 0; i < n; i++)
@@ -199,7 +205,8 @@ static void rebase_paths(cJSON *node, const char *dir) {
 
 static int scene_resolution(const char *json, int *w, int *h) {
   cJSON *r = cJSON_Parse(json);
-  const cJSON *res = cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(r, "camera"), "resolution");
+  const cJSON *res =
+      cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(r, "camera"), "resolution");
   int ok = 0;
   if (cJSON_IsArray(res) && cJSON_GetArraySize(res) == 2) {
     *w = cJSON_GetArrayItem(res, 0)->valueint;
@@ -234,9 +241,12 @@ int ds_cmd_plan(int argc, char **argv) {
     const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
     double *dst = NULL;
     int takes = 1;
-    if (!strcmp(a, "--no-preview")) no_preview = 1, takes = 0;
-    else if (!strcmp(a, "--eval-variants")) eval_variants = 1, takes = 0;
-    else if (!strcmp(a, "--force")) force = 1, takes = 0;
+    if (!strcmp(a, "--no-preview"))
+      no_preview = 1, takes = 0;
+    else if (!strcmp(a, "--eval-variants"))
+      eval_variants = 1, takes = 0;
+    else if (!strcmp(a, "--force"))
+      force = 1, takes = 0;
     else if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
       usage();
       return 0;
@@ -248,14 +258,22 @@ int ds_cmd_plan(int argc, char **argv) {
       return 2;
     }
     int ok = 1;
-    if (!strcmp(a, "--scenes")) scenes = v;
-    else if (!strcmp(a, "-o") || !strcmp(a, "--output")) outdir = v;
-    else if (!strcmp(a, "--split")) split = v;
-    else if (!strcmp(a, "--spp")) spp_list = v;
-    else if (!strcmp(a, "--variants")) ok = ds_parse_int(v, 0, 100000, &variants);
-    else if (!strcmp(a, "--ref-spp")) ok = ds_parse_int(v, 1, 1 << 24, &ref_spp);
-    else if (!strcmp(a, "--preview-spp")) ok = ds_parse_int(v, 1, 1 << 16, &preview_spp);
-    else if (!strcmp(a, "--preview-scale")) ok = ds_parse_int(v, 1, 64, &preview_scale);
+    if (!strcmp(a, "--scenes"))
+      scenes = v;
+    else if (!strcmp(a, "-o") || !strcmp(a, "--output"))
+      outdir = v;
+    else if (!strcmp(a, "--split"))
+      split = v;
+    else if (!strcmp(a, "--spp"))
+      spp_list = v;
+    else if (!strcmp(a, "--variants"))
+      ok = ds_parse_int(v, 0, 100000, &variants);
+    else if (!strcmp(a, "--ref-spp"))
+      ok = ds_parse_int(v, 1, 1 << 24, &ref_spp);
+    else if (!strcmp(a, "--preview-spp"))
+      ok = ds_parse_int(v, 1, 1 << 16, &preview_spp);
+    else if (!strcmp(a, "--preview-scale"))
+      ok = ds_parse_int(v, 1, 64, &preview_scale);
     else if (!strcmp(a, "--seed")) {
       char *end;
       seed = strtoull(v, &end, 10);
@@ -263,12 +281,18 @@ int ds_cmd_plan(int argc, char **argv) {
     } else if (!strcmp(a, "--resolution")) {
       char extra;
       ok = sscanf(v, "%dx%d%c", &W, &H, &extra) == 2 && W > 0 && H > 0 && W <= 16384 && H <= 16384;
-    } else if (!strcmp(a, "--camera")) dst = &ps.camera;
-    else if (!strcmp(a, "--fov")) dst = &ps.fov;
-    else if (!strcmp(a, "--material")) dst = &ps.material;
-    else if (!strcmp(a, "--bsdf-swap")) dst = &ps.bsdf_swap;
-    else if (!strcmp(a, "--light")) dst = &ps.light;
-    else if (!strcmp(a, "--env")) dst = &ps.env;
+    } else if (!strcmp(a, "--camera"))
+      dst = &ps.camera;
+    else if (!strcmp(a, "--fov"))
+      dst = &ps.fov;
+    else if (!strcmp(a, "--material"))
+      dst = &ps.material;
+    else if (!strcmp(a, "--bsdf-swap"))
+      dst = &ps.bsdf_swap;
+    else if (!strcmp(a, "--light"))
+      dst = &ps.light;
+    else if (!strcmp(a, "--env"))
+      dst = &ps.env;
     else {
       ds_err("plan: unknown option '%s'", a);
       usage();
@@ -346,7 +370,8 @@ int ds_cmd_plan(int argc, char **argv) {
   char *old = ds_slurp(path, NULL);
   if (old && strcmp(old, ptxt) != 0 && !force) {
     ds_err("plan: '%s' holds a different plan; use another directory or --force "
-           "(existing renders would no longer match their jobs)", path);
+           "(existing renders would no longer match their jobs)",
+           path);
     free(old);
     free(sc);
     free(ptxt);
@@ -361,7 +386,8 @@ int ds_cmd_plan(int argc, char **argv) {
     char *base = ds_slurp(sc[i].file, NULL);
     int sw = W, sh = H;
     if (!base || (!(W && H) && !scene_resolution(base, &sw, &sh))) {
-      ds_err("plan: %s: %s", sc[i].file, base ? "no camera.resolution (give --resolution)" : "cannot read");
+      ds_err("plan: %s: %s", sc[i].file,
+             base ? "no camera.resolution (give --resolution)" : "cannot read");
       free(base);
       rc = 1;
       break;
@@ -395,7 +421,8 @@ int ds_cmd_plan(int argc, char **argv) {
       char line[1024];
       snprintf(line, sizeof line, "{\"variant\":%d,\"perturbation\":\"%s\"}\n", v, summary);
       size_t ll = strlen(line);
-      if (variants_len + ll + 1 > sizeof variants_txt) variants_len = 0; /* absurd count: keep last */
+      if (variants_len + ll + 1 > sizeof variants_txt)
+        variants_len = 0; /* absurd count: keep last */
       memcpy(variants_txt + variants_len, line, ll + 1);
       variants_len += ll;
       ds_job j;
@@ -452,10 +479,13 @@ int ds_cmd_plan(int argc, char **argv) {
   }
   if (rc == 0) {
     int cnt[3] = {0, 0, 0};
-    for (int i = 0; i < m.n; i++) cnt[m.jobs[i].kind]++;
+    for (int i = 0; i < m.n; i++)
+      cnt[m.jobs[i].kind]++;
     printf("planned %d scenes:", nsc);
-    for (int i = 0; i < nsc; i++) printf(" %s(%s)", sc[i].name, sc[i].split);
-    printf("\n%d jobs (%d noisy, %d reference, %d preview), %.3g camera samples -> %s/manifest.jsonl\n",
+    for (int i = 0; i < nsc; i++)
+      printf(" %s(%s)", sc[i].name, sc[i].split);
+    printf("\n%d jobs (%d noisy, %d reference, %d preview), %.3g camera samples -> "
+           "%s/manifest.jsonl\n",
            m.n, cnt[DS_NOISY], cnt[DS_REFERENCE], cnt[DS_PREVIEW], samples, outdir);
   }
   ds_manifest_free(&m);

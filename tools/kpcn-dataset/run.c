@@ -77,7 +77,8 @@ static int judge_preview(const run_opts *o, const char *preview, char *reason, s
   ds_join(path, sizeof path, o->dir, preview);
   verdict_path(vpath, sizeof vpath, o->dir, preview);
   kpcn_aov_set *s = NULL;
-  if (kpcn_exr_read_aov(path, &s) != KPCN_OK || kpcn_aov_require(s, KPCN_BUF_COLOR, 0, path) != KPCN_OK) {
+  if (kpcn_exr_read_aov(path, &s) != KPCN_OK ||
+      kpcn_aov_require(s, KPCN_BUF_COLOR, 0, path) != KPCN_OK) {
     ds_err("run: preview %s: %s", path, kpcn_last_error());
     kpcn_aov_destroy(s);
     return -1;
@@ -94,11 +95,13 @@ static int judge_preview(const run_opts *o, const char *preview, char *reason, s
   double fb = (double)black / n, fg = (double)bg / n, fo = (double)blown / n;
   int ok = 1;
   reason[0] = 0;
-  if (fb > o->max_black) ok = 0, snprintf(reason, rn, "mostly black (%.0f%% of pixels)", 100 * fb);
+  if (fb > o->max_black)
+    ok = 0, snprintf(reason, rn, "mostly black (%.0f%% of pixels)", 100 * fb);
   else if (z && fg > o->max_background)
     ok = 0, snprintf(reason, rn, "mostly background (%.0f%% of pixels miss)", 100 * fg);
   else if (fo > o->max_blown)
-    ok = 0, snprintf(reason, rn, "blown out (%.0f%% of pixels above %.3g)", 100 * fo, o->blown_level);
+    ok = 0,
+    snprintf(reason, rn, "blown out (%.0f%% of pixels above %.3g)", 100 * fo, o->blown_level);
   kpcn_aov_destroy(s);
   cJSON *j = cJSON_CreateObject();
   cJSON_AddBoolToObject(j, "ok", ok);
@@ -142,8 +145,8 @@ static pid_t spawn(const run_opts *o, const ds_job *j, char *part, size_t pn) {
   snprintf(seed, sizeof seed, "%llu", (unsigned long long)j->seed);
   snprintf(res, sizeof res, "%dx%d", j->width, j->height);
   snprintf(thr, sizeof thr, "%d", o->threads);
-  char *argv[] = {(char *)o->renderer, scene, "-o", part, "--spp", spp, "--seed", seed,
-                  "--resolution", res, "--threads", thr, "--quiet", NULL};
+  char *argv[] = {(char *)o->renderer, scene, "-o",        part, "--spp",   spp, "--seed", seed,
+                  "--resolution",      res,   "--threads", thr,  "--quiet", NULL};
   pid_t pid = fork();
   if (pid == 0) {
     int fd = open(logp, O_WRONLY | O_CREAT | O_TRUNC, 0666);
@@ -185,7 +188,8 @@ static int run_pool(const run_opts *o, const ds_manifest *m, const int *idx, int
     while (!g_stop && next < n && running < o->jobs) {
       const ds_job *j = &m->jobs[idx[next]];
       int k = 0;
-      while (slots[k].pid) k++;
+      while (slots[k].pid)
+        k++;
       slots[k].job = idx[next];
       slots[k].pid = spawn(o, j, slots[k].part, sizeof slots[k].part);
       if (slots[k].pid < 0) {
@@ -240,10 +244,11 @@ static int run_pool(const run_opts *o, const ds_manifest *m, const int *idx, int
 }
 
 static void usage(void) {
-  fprintf(stderr,
-          "usage: kpcn-dataset run DATASET_DIR [--jobs N] [--shard i/n] [--renderer PATH]\n"
-          "         [--threads-per-job T] [--dry-run] [--list]\n"
-          "         [--max-black 0.9] [--max-background 0.9] [--max-blown 0.5] [--blown-level 1]\n");
+  fprintf(
+      stderr,
+      "usage: kpcn-dataset run DATASET_DIR [--jobs N] [--shard i/n] [--renderer PATH]\n"
+      "         [--threads-per-job T] [--dry-run] [--list]\n"
+      "         [--max-black 0.9] [--max-background 0.9] [--max-blown 0.5] [--blown-level 1]\n");
 }
 
 int ds_cmd_run(int argc, char **argv) {
@@ -259,8 +264,10 @@ int ds_cmd_run(int argc, char **argv) {
   int threads = -1;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
-    if (!strcmp(a, "--dry-run")) o.dry_run = 1;
-    else if (!strcmp(a, "--list")) o.list = 1;
+    if (!strcmp(a, "--dry-run"))
+      o.dry_run = 1;
+    else if (!strcmp(a, "--list"))
+      o.list = 1;
     else if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
       usage();
       return 0;
@@ -276,17 +283,24 @@ int ds_cmd_run(int argc, char **argv) {
         return 2;
       }
       int ok = 1;
-      if (!strcmp(a, "--jobs") || !strcmp(a, "-j")) ok = ds_parse_int(v, 1, 1024, &o.jobs);
-      else if (!strcmp(a, "--threads-per-job")) ok = ds_parse_int(v, 0, 4096, &threads);
-      else if (!strcmp(a, "--renderer")) renderer = v;
+      if (!strcmp(a, "--jobs") || !strcmp(a, "-j"))
+        ok = ds_parse_int(v, 1, 1024, &o.jobs);
+      else if (!strcmp(a, "--threads-per-job"))
+        ok = ds_parse_int(v, 0, 4096, &threads);
+      else if (!strcmp(a, "--renderer"))
+        renderer = v;
       else if (!strcmp(a, "--shard")) {
         char extra;
         ok = sscanf(v, "%d/%d%c", &o.shard_i, &o.shard_n, &extra) == 2 && o.shard_n >= 1 &&
              o.shard_i >= 0 && o.shard_i < o.shard_n;
-      } else if (!strcmp(a, "--max-black")) ok = ds_parse_double(v, &o.max_black);
-      else if (!strcmp(a, "--max-background")) ok = ds_parse_double(v, &o.max_background);
-      else if (!strcmp(a, "--max-blown")) ok = ds_parse_double(v, &o.max_blown);
-      else if (!strcmp(a, "--blown-level")) ok = ds_parse_double(v, &o.blown_level);
+      } else if (!strcmp(a, "--max-black"))
+        ok = ds_parse_double(v, &o.max_black);
+      else if (!strcmp(a, "--max-background"))
+        ok = ds_parse_double(v, &o.max_background);
+      else if (!strcmp(a, "--max-blown"))
+        ok = ds_parse_double(v, &o.max_blown);
+      else if (!strcmp(a, "--blown-level"))
+        ok = ds_parse_double(v, &o.blown_level);
       else {
         ds_err("run: unknown option '%s'", a);
         usage();
@@ -324,7 +338,8 @@ int ds_cmd_run(int argc, char **argv) {
     if (k++ % o.shard_n == o.shard_i) mine[nmine++] = i;
   }
   if (o.list) {
-    for (int i = 0; i < nmine; i++) printf("%s\n", m.jobs[mine[i]].id);
+    for (int i = 0; i < nmine; i++)
+      printf("%s\n", m.jobs[mine[i]].id);
     free(mine);
     ds_manifest_free(&m);
     return 0;
@@ -355,7 +370,8 @@ int ds_cmd_run(int argc, char **argv) {
   }
   int rc = 0;
   if (o.dry_run) {
-    for (int i = 0; i < npv; i++) printf("would render %s\n", m.jobs[pv[i]].id);
+    for (int i = 0; i < npv; i++)
+      printf("would render %s\n", m.jobs[pv[i]].id);
   } else if (npv) {
     counts pc = {0, 0, 0, 0, npv};
     if (run_pool(&o, &m, pv, npv, &pc, t0) != 0) rc = 130;
@@ -408,7 +424,8 @@ int ds_cmd_run(int argc, char **argv) {
     todo[ntodo++] = mine[q];
   }
   if (o.dry_run) {
-    for (int i = 0; i < ntodo; i++) printf("would render %s\n", m.jobs[todo[i]].id);
+    for (int i = 0; i < ntodo; i++)
+      printf("would render %s\n", m.jobs[todo[i]].id);
   } else if (rc == 0 && ntodo) {
     if (run_pool(&o, &m, todo, ntodo, &c, t0) != 0) rc = 130;
     if (ds_isatty()) fputc('\n', stderr);

@@ -40,8 +40,10 @@ int ds_exists(const char *path) {
 }
 
 void ds_join(char *out, size_t n, const char *a, const char *b) {
-  if (b[0] == '/' || !a[0]) snprintf(out, n, "%s", b);
-  else snprintf(out, n, "%s/%s", a, b);
+  if (b[0] == '/' || !a[0])
+    snprintf(out, n, "%s", b);
+  else
+    snprintf(out, n, "%s/%s", a, b);
 }
 
 char *ds_slurp(const char *path, size_t *len) {
@@ -109,7 +111,8 @@ int ds_parse_double(const char *s, double *out) {
 
 uint64_t ds_hash(const char *s, uint64_t seed) {
   uint64_t h = 1469598103934665603ull ^ (seed * 0x9e3779b97f4a7c15ull);
-  for (; *s; s++) h = (h ^ (unsigned char)*s) * 1099511628211ull;
+  for (; *s; s++)
+    h = (h ^ (unsigned char)*s) * 1099511628211ull;
   h ^= h >> 29;
   h *= 0xbf58476d1ce4e5b9ull;
   return h ^ (h >> 32);

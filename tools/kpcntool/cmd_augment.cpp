@@ -33,7 +33,8 @@ template <class F> bool each(Context &ctx, const Modifiers &m, std::string &err,
   return true;
 }
 
-bool cmd_mirror(Context &ctx, const Modifiers &m, const std::vector<std::string> &, std::string &err) {
+bool cmd_mirror(Context &ctx, const Modifiers &m, const std::vector<std::string> &,
+                std::string &err) {
   std::string d = m.str("dir", "h");
   if (d != "h" && d != "v") {
     err = "modifier 'dir' must be h or v (got '" + d + "')";
@@ -44,7 +45,8 @@ bool cmd_mirror(Context &ctx, const Modifiers &m, const std::vector<std::string>
   });
 }
 
-bool cmd_rotate(Context &ctx, const Modifiers &m, const std::vector<std::string> &, std::string &err) {
+bool cmd_rotate(Context &ctx, const Modifiers &m, const std::vector<std::string> &,
+                std::string &err) {
   double deg = m.num("deg", 90.0);
   return each(ctx, m, err, [&](OIIO::ImageBuf &dst, const OIIO::ImageBuf &src) {
     return kpcn::ops::rotate(dst, src, deg, ctx.nthreads);
@@ -63,7 +65,8 @@ bool cmd_colorswap(Context &ctx, const Modifiers &m, const std::vector<std::stri
   });
 }
 
-bool cmd_shift(Context &ctx, const Modifiers &m, const std::vector<std::string> &, std::string &err) {
+bool cmd_shift(Context &ctx, const Modifiers &m, const std::vector<std::string> &,
+               std::string &err) {
   long dx = m.integer("dx", 0), dy = m.integer("dy", 0);
   return each(ctx, m, err, [&](OIIO::ImageBuf &dst, const OIIO::ImageBuf &src) {
     return kpcn::ops::shift(dst, src, (int)dx, (int)dy, ctx.nthreads);
@@ -123,21 +126,34 @@ bool cmd_patches(Context &ctx, const Modifiers &m, const std::vector<std::string
   return true;
 }
 
-bool r1 = kpcntool::register_command({"mirror", 0, {"dir", "all"},
+bool r1 = kpcntool::register_command({"mirror",
+                                      0,
+                                      {"dir", "all"},
                                       "mirror the top image (:dir=h|v; N.X resp. N.Y negated; "
-                                      ":all=1 every stack image)", cmd_mirror});
-bool r2 = kpcntool::register_command({"rotate", 0, {"deg", "all"},
+                                      ":all=1 every stack image)",
+                                      cmd_mirror});
+bool r2 = kpcntool::register_command({"rotate",
+                                      0,
+                                      {"deg", "all"},
                                       "rotate counter-clockwise (:deg=90; multiples of 90 exact, "
-                                      "others bilinear: alters noise statistics)", cmd_rotate});
-bool r3 = kpcntool::register_command({"colorswap", 0, {"perm", "all"},
-                                      "permute RGB of every colour buffer (:perm=BRG)", cmd_colorswap});
-bool r4 = kpcntool::register_command({"shift", 0, {"dx", "dy", "all"},
-                                      "translate with wrap-around (:dx=N:dy=N)", cmd_shift});
-bool r5 = kpcntool::register_command({"augment", 0, {"seed", "index", "shift", "mirror_v", "oneof"},
+                                      "others bilinear: alters noise statistics)",
+                                      cmd_rotate});
+bool r3 = kpcntool::register_command({"colorswap",
+                                      0,
+                                      {"perm", "all"},
+                                      "permute RGB of every colour buffer (:perm=BRG)",
+                                      cmd_colorswap});
+bool r4 = kpcntool::register_command(
+    {"shift", 0, {"dx", "dy", "all"}, "translate with wrap-around (:dx=N:dy=N)", cmd_shift});
+bool r5 = kpcntool::register_command({"augment",
+                                      0,
+                                      {"seed", "index", "shift", "mirror_v", "oneof"},
                                       "one random draw (colour swap, mirror, rotate[, shift]) "
-                                      "applied to every image on the stack", cmd_augment});
+                                      "applied to every image on the stack",
+                                      cmd_augment});
 bool r6 = kpcntool::register_command(
-    {"patches", 0,
+    {"patches",
+     0,
      {"size", "count", "stride", "seed", "cull", "tol", "abs", "importance", "out"},
      "select patches of noisy (2nd) / reference (top) with flat-patch culling; "
      ":out=DIR writes EXR pairs, :out=F.kps a patch store; prints kept/culled",

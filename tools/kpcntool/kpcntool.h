@@ -44,8 +44,8 @@ struct Context {
   std::vector<std::pair<std::string, OIIO::ImageBuf>> outputs;
   // Extension: records a numeric result under a unique key (key, key_2, key_3 ...).
   void add_result(const std::string &key, double value);
-  OIIO::ImageBuf pop();              // throws Error on an empty stack
-  OIIO::ImageBuf &top();             // throws Error on an empty stack
+  OIIO::ImageBuf pop();  // throws Error on an empty stack
+  OIIO::ImageBuf &top(); // throws Error on an empty stack
   void push(OIIO::ImageBuf buf) { stack.push_back(std::move(buf)); }
 };
 
@@ -55,16 +55,15 @@ struct Command {
   std::vector<std::string> modifiers; // accepted :key=value keys; others are an error
   std::string help;                   // one line for --help
   // Returns false and sets err (naming the problem) on failure; may also throw Error.
-  std::function<bool(Context &, const Modifiers &, const std::vector<std::string> &,
-                     std::string &)>
+  std::function<bool(Context &, const Modifiers &, const std::vector<std::string> &, std::string &)>
       run;
 };
 
 bool register_command(Command c);
 
 // Extensions used by main.cpp (implemented in registry.cpp / cmd_core.cpp).
-const Command *find_command(const std::string &name);     // nullptr if unknown
-std::vector<const Command *> all_commands();              // sorted by name
+const Command *find_command(const std::string &name); // nullptr if unknown
+std::vector<const Command *> all_commands();          // sorted by name
 // Writes img to path atomically (temp file + rename); EXR keeps float, PNG/JPEG/TIFF-8
 // formats get 8 bits. Returns false with err naming the file on failure.
 bool write_image(const OIIO::ImageBuf &img, const std::string &path, std::string &err);

@@ -69,11 +69,11 @@ typedef enum kpcn_augment_mode {
 } kpcn_augment_mode;
 
 typedef struct kpcn_augment_draw_settings {
-  int colorswap;  /* 1: uniform over the 6 permutations */
-  int mirror;     /* 1: mirror_h with probability 1/2 */
-  int mirror_v;   /* 1: mirror_v with probability 1/2 (default 0; rot180 covers it) */
-  int rotate;     /* 1: rot90 uniform in 0..3 */
-  int max_shift;  /* shift uniform in [-max_shift, max_shift] each axis; 0 = no shift */
+  int colorswap; /* 1: uniform over the 6 permutations */
+  int mirror;    /* 1: mirror_h with probability 1/2 */
+  int mirror_v;  /* 1: mirror_v with probability 1/2 (default 0; rot180 covers it) */
+  int rotate;    /* 1: rot90 uniform in 0..3 */
+  int max_shift; /* shift uniform in [-max_shift, max_shift] each axis; 0 = no shift */
   kpcn_augment_mode mode;
 } kpcn_augment_draw_settings;
 
@@ -81,8 +81,8 @@ typedef struct kpcn_augment_draw_settings {
 void kpcn_augment_draw_defaults(kpcn_augment_draw_settings *s);
 /* Deterministic counter-based draw: the result depends only on (seed, index), never on
  * call order or threads, so patch i of epoch e can use index = e * count + i. */
-void kpcn_augment_draw(kpcn_augment_xform *x, const kpcn_augment_draw_settings *s,
-                       uint64_t seed, uint64_t index);
+void kpcn_augment_draw(kpcn_augment_xform *x, const kpcn_augment_draw_settings *s, uint64_t seed,
+                       uint64_t index);
 
 /* Applies x to nch planar channels of width x height (src: nch planes, channel c at
  * src + c*width*height). dst must hold nch planes of the output size and must not alias
@@ -99,8 +99,8 @@ kpcn_status kpcn_augment_image(kpcn_image **out, const kpcn_image *in, const kpc
                                int nthreads);
 
 /* Seam-free shift/crop: *out is the w x h window with top-left corner (x0, y0) of in. */
-kpcn_status kpcn_augment_crop_aov(kpcn_aov_set **out, const kpcn_aov_set *in, int x0, int y0,
-                                  int w, int h);
+kpcn_status kpcn_augment_crop_aov(kpcn_aov_set **out, const kpcn_aov_set *in, int x0, int y0, int w,
+                                  int h);
 
 /* Rotation by an arbitrary angle (degrees, counter-clockwise on screen) about the image
  * centre, bilinear, same size as the input; pixels mapping outside are 0. Normals are
@@ -109,8 +109,8 @@ kpcn_status kpcn_augment_crop_aov(kpcn_aov_set **out, const kpcn_aov_set *in, in
 kpcn_status kpcn_augment_rotate_any_planes(float *dst, const float *src, int nch,
                                            const char *const *names, int width, int height,
                                            double degrees, int nthreads);
-kpcn_status kpcn_augment_rotate_any_aov(kpcn_aov_set **out, const kpcn_aov_set *in,
-                                        double degrees, int nthreads);
+kpcn_status kpcn_augment_rotate_any_aov(kpcn_aov_set **out, const kpcn_aov_set *in, double degrees,
+                                        int nthreads);
 
 /* ---- patch extraction (seed §4.4) ----
  *
@@ -122,38 +122,38 @@ kpcn_status kpcn_augment_rotate_any_aov(kpcn_aov_set **out, const kpcn_aov_set *
  * Defaults cull = 0.9, cull_tol = 0.05, cull_abs = 0.01; cull > 1 disables culling.
  */
 typedef struct kpcn_patch_settings {
-  int size;            /* patch side, default 65 */
-  int count;           /* random patches per image (default 400); 0 = regular grid */
-  int stride;          /* grid stride when count == 0 (default = size) */
-  uint64_t seed;       /* default 1 */
-  double cull;         /* default 0.9 */
-  double cull_tol;     /* default 0.05 */
-  double cull_abs;     /* default 0.01 */
-  int importance;      /* 1: draw candidates with probability proportional to the mean
-                          noisy color.var inside the patch (plus a floor of 10% of the mean,
-                          so no region is impossible); default 0 = uniform */
-  int max_candidates;  /* random mode: stop after this many candidates (default 8*count) */
+  int size;           /* patch side, default 65 */
+  int count;          /* random patches per image (default 400); 0 = regular grid */
+  int stride;         /* grid stride when count == 0 (default = size) */
+  uint64_t seed;      /* default 1 */
+  double cull;        /* default 0.9 */
+  double cull_tol;    /* default 0.05 */
+  double cull_abs;    /* default 0.01 */
+  int importance;     /* 1: draw candidates with probability proportional to the mean
+                         noisy color.var inside the patch (plus a floor of 10% of the mean,
+                         so no region is impossible); default 0 = uniform */
+  int max_candidates; /* random mode: stop after this many candidates (default 8*count) */
   int nthreads;
 } kpcn_patch_settings;
 
 void kpcn_patch_settings_defaults(kpcn_patch_settings *s);
 
 typedef struct kpcn_patch_origin {
-  int x, y;          /* top-left corner in the source image */
-  float flat_frac;   /* fraction of near pixels (culling statistic) */
-  float weight;      /* selection probability relative to uniform (1 when uniform) */
+  int x, y;        /* top-left corner in the source image */
+  float flat_frac; /* fraction of near pixels (culling statistic) */
+  float weight;    /* selection probability relative to uniform (1 when uniform) */
 } kpcn_patch_origin;
 
 typedef struct kpcn_patch_stats {
   int64_t candidates; /* patches examined */
   int64_t kept;
-  int64_t culled;     /* flat patches removed */
+  int64_t culled; /* flat patches removed */
 } kpcn_patch_stats;
 
 /* Fraction of near pixels of the size x size window at (x0, y0) of a 3-plane colour
  * (planes r, g, b, each of row length stride); see the criterion above. */
-double kpcn_patch_flat_fraction(const float *r, const float *g, const float *b, int stride,
-                                int x0, int y0, int size, double cull_tol, double cull_abs);
+double kpcn_patch_flat_fraction(const float *r, const float *g, const float *b, int stride, int x0,
+                                int y0, int size, double cull_tol, double cull_abs);
 
 /* Chooses patch origins in noisy (and its reference; may be NULL, must match in size):
  * *out is a kpcn_alloc'ed array of *nout origins (free with free()). Deterministic for

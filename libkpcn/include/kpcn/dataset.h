@@ -59,25 +59,25 @@ extern const char *const kpcn_patchstore_default_channels[KPCN_PATCHSTORE_NUM_DE
 
 /* One source image pair (one render of one scene variant at one spp). */
 typedef struct kpcn_patch_source {
-  char scene[128];    /* base scene name (the split unit) */
-  int variant;        /* perturbation index, 0 = unperturbed */
-  char split[16];     /* "train", "val", "test" */
-  int spp;            /* noisy spp */
+  char scene[128]; /* base scene name (the split unit) */
+  int variant;     /* perturbation index, 0 = unperturbed */
+  char split[16];  /* "train", "val", "test" */
+  int spp;         /* noisy spp */
   int ref_spp;
-  int width, height;  /* full image size */
-  float depth_min, depth_max;  /* over the whole noisy image, all pixels (misses are 0) */
+  int width, height;          /* full image size */
+  float depth_min, depth_max; /* over the whole noisy image, all pixels (misses are 0) */
   float depth_mean, depth_std;
-  char noisy[256];    /* file names, informative */
+  char noisy[256]; /* file names, informative */
   char reference[256];
 } kpcn_patch_source;
 
 /* Index record, 32 bytes on disk. */
 typedef struct kpcn_patch_record {
-  uint32_t source;    /* index into sources */
-  int32_t x, y;       /* top-left corner in the source image */
-  uint32_t flags;     /* reserved, 0 */
-  float flat_frac;    /* culling statistic of this patch */
-  float weight;       /* selection probability relative to uniform */
+  uint32_t source; /* index into sources */
+  int32_t x, y;    /* top-left corner in the source image */
+  uint32_t flags;  /* reserved, 0 */
+  float flat_frac; /* culling statistic of this patch */
+  float weight;    /* selection probability relative to uniform */
   uint64_t reserved;
 } kpcn_patch_record;
 
@@ -167,9 +167,8 @@ typedef struct kpcn_perturb_settings {
 void kpcn_perturb_settings_defaults(kpcn_perturb_settings *s);
 /* *out_json: malloc'ed JSON text of the perturbed scene (free with free()).
  * summary (optional, size summary_size) receives a one-line description of what changed. */
-kpcn_status kpcn_perturb_scene(char **out_json, const char *scene_json, uint64_t seed,
-                               int variant, const kpcn_perturb_settings *s, char *summary,
-                               size_t summary_size);
+kpcn_status kpcn_perturb_scene(char **out_json, const char *scene_json, uint64_t seed, int variant,
+                               const kpcn_perturb_settings *s, char *summary, size_t summary_size);
 
 #ifdef __cplusplus
 }

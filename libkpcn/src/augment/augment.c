@@ -56,7 +56,8 @@ void kpcn_augment_inverse(kpcn_augment_xform *inv, const kpcn_augment_xform *x, 
   (void)width;
   (void)height;
   kpcn_augment_xform r;
-  for (int c = 0; c < 3; c++) r.perm[x->perm[c]] = c;
+  for (int c = 0; c < 3; c++)
+    r.perm[x->perm[c]] = c;
   int a = x->mirror_h ? 1 : 0, b = x->mirror_v ? 1 : 0, k = mod(x->rot90, 4);
   int dx = -x->dx, dy = -x->dy;
   /* Move S(-d) left through R^-k (4-k forward turns). */
@@ -100,7 +101,8 @@ void kpcn_augment_draw(kpcn_augment_xform *x, const kpcn_augment_draw_settings *
   kpcn_augment_identity(x);
   uint64_t h = splitmix64(splitmix64(seed) ^ (index * 0xd1b54a32d192ed03ull));
   uint64_t r[6];
-  for (int i = 0; i < 6; i++) r[i] = h = splitmix64(h);
+  for (int i = 0; i < 6; i++)
+    r[i] = h = splitmix64(h);
   int ops[5], nops = 0;
   if (s->colorswap) ops[nops++] = 0;
   if (s->mirror) ops[nops++] = 1;
@@ -217,8 +219,8 @@ kpcn_status kpcn_augment_xform_ptrs(float *const *dst, const float *const *src, 
       int a = M[role][0], b = M[role][1];
       if ((a != 0 && ix < 0) || (b != 0 && iy < 0)) {
         st = kpcn_fail(KPCN_ERR_MISSING_CHANNEL,
-                       "augment: rotating normal channel '%s' needs its partner N.%c",
-                       names[c], role == 0 ? 'Y' : 'X');
+                       "augment: rotating normal channel '%s' needs its partner N.%c", names[c],
+                       role == 0 ? 'Y' : 'X');
         break;
       }
       const float *sx = ix >= 0 ? src[ix] : NULL, *sy = iy >= 0 ? src[iy] : NULL;
@@ -232,7 +234,8 @@ kpcn_status kpcn_augment_xform_ptrs(float *const *dst, const float *const *src, 
     } else {
       const float *s = src[roles.src_channel[c]];
 #pragma omp parallel for num_threads(nt) schedule(static)
-      for (size_t i = 0; i < n; i++) d[i] = s[map[i]];
+      for (size_t i = 0; i < n; i++)
+        d[i] = s[map[i]];
     }
   }
   free(map);
@@ -348,9 +351,9 @@ kpcn_status kpcn_augment_image(kpcn_image **out, const kpcn_image *in, const kpc
   kpcn_augment_output_size(x, in->width, in->height, &Wo, &Ho);
   kpcn_image *o = NULL;
   KPCN_TRY(kpcn_image_create(&o, Wo, Ho, in->nchannels, (const char *const *)in->names));
-  kpcn_status st = kpcn_augment_planes(o->data, in->data, in->nchannels,
-                                       (const char *const *)in->names, in->width, in->height, x,
-                                       nthreads);
+  kpcn_status st =
+      kpcn_augment_planes(o->data, in->data, in->nchannels, (const char *const *)in->names,
+                          in->width, in->height, x, nthreads);
   if (st != KPCN_OK) {
     kpcn_image_destroy(o);
     return st;
@@ -359,14 +362,14 @@ kpcn_status kpcn_augment_image(kpcn_image **out, const kpcn_image *in, const kpc
   return KPCN_OK;
 }
 
-kpcn_status kpcn_augment_crop_aov(kpcn_aov_set **out, const kpcn_aov_set *in, int x0, int y0,
-                                  int w, int h) {
+kpcn_status kpcn_augment_crop_aov(kpcn_aov_set **out, const kpcn_aov_set *in, int x0, int y0, int w,
+                                  int h) {
   if (!out || !in) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_augment_crop_aov: NULL");
   *out = NULL;
   if (w <= 0 || h <= 0 || x0 < 0 || y0 < 0 || x0 > in->width - w || y0 > in->height - h)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "crop window %dx%d at (%d,%d) does not fit in the %dx%d image", w, h, x0,
-                     y0, in->width, in->height);
+                     "crop window %dx%d at (%d,%d) does not fit in the %dx%d image", w, h, x0, y0,
+                     in->width, in->height);
   kpcn_aov_set *o = NULL;
   KPCN_TRY(kpcn_aov_like(&o, in, w, h));
   float *sp[KPCN_AOV_MAX_PLANES], *dp[KPCN_AOV_MAX_PLANES];

@@ -25,8 +25,10 @@ static float select_kth(float *a, int n, int k) {
     float pivot = a[(lo + hi) / 2];
     int i = lo, j = hi;
     while (i <= j) {
-      while (a[i] < pivot) i++;
-      while (a[j] > pivot) j--;
+      while (a[i] < pivot)
+        i++;
+      while (a[j] > pivot)
+        j--;
       if (i <= j) {
         float t = a[i];
         a[i] = a[j];
@@ -35,15 +37,18 @@ static float select_kth(float *a, int n, int k) {
         j--;
       }
     }
-    if (k <= j) hi = j;
-    else if (k >= i) lo = i;
-    else return a[k];
+    if (k <= j)
+      hi = j;
+    else if (k >= i)
+      lo = i;
+    else
+      return a[k];
   }
   return a[k];
 }
 
-double kpcn_patch_flat_fraction(const float *r, const float *g, const float *b, int stride,
-                                int x0, int y0, int size, double cull_tol, double cull_abs) {
+double kpcn_patch_flat_fraction(const float *r, const float *g, const float *b, int stride, int x0,
+                                int y0, int size, double cull_tol, double cull_abs) {
   const float *ch[3] = {r, g, b};
   int n = size * size;
   float *tmp = malloc(sizeof(float) * (size_t)n);
@@ -132,20 +137,23 @@ kpcn_status kpcn_patches_select(kpcn_patch_origin **out, int *nout, kpcn_patch_s
   if (stats) *stats = st0;
   int W = noisy->width, H = noisy->height, S = s->size;
   if (S <= 0 || S > W || S > H)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch size %d does not fit in the %dx%d image",
-                     S, W, H);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch size %d does not fit in the %dx%d image", S,
+                     W, H);
   if (s->count < 0 || s->stride < 0)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch count %d / stride %d must be >= 0",
-                     s->count, s->stride);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch count %d / stride %d must be >= 0", s->count,
+                     s->stride);
   if (!(s->cull_tol >= 0) || !(s->cull_abs >= 0) || !(s->cull >= 0))
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch culling: cull %g, tol %g, abs %g must be >= 0",
-                     s->cull, s->cull_tol, s->cull_abs);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "patch culling: cull %g, tol %g, abs %g must be >= 0", s->cull, s->cull_tol,
+                     s->cull_abs);
   if (ref && (ref->width != W || ref->height != H))
     return kpcn_fail(KPCN_ERR_SIZE_MISMATCH, "reference is %dx%d but the noisy image is %dx%d",
                      ref->width, ref->height, W, H);
   const kpcn_aov_set *cs = ref ? ref : noisy;
-  KPCN_TRY(kpcn_aov_require(cs, KPCN_BUF_COLOR, 0, ref ? "reference (patch culling)" : "noisy (patch culling)"));
-  if (s->importance) KPCN_TRY(kpcn_aov_require(noisy, KPCN_BUF_COLOR, 1, "noisy (importance sampling)"));
+  KPCN_TRY(kpcn_aov_require(cs, KPCN_BUF_COLOR, 0,
+                            ref ? "reference (patch culling)" : "noisy (patch culling)"));
+  if (s->importance)
+    KPCN_TRY(kpcn_aov_require(noisy, KPCN_BUF_COLOR, 1, "noisy (importance sampling)"));
   size_t np = kpcn_aov_plane_size(cs);
   const float *cr = cs->buf[KPCN_BUF_COLOR], *cg = cr + np, *cb = cr + 2 * np;
   int nx = W - S + 1, ny = H - S + 1;
@@ -153,8 +161,10 @@ kpcn_status kpcn_patches_select(kpcn_patch_origin **out, int *nout, kpcn_patch_s
   int grid = s->count == 0;
   int stride = s->stride > 0 ? s->stride : S;
   int64_t maxc;
-  if (grid) maxc = (int64_t)((W - S) / stride + 1) * ((H - S) / stride + 1);
-  else maxc = s->max_candidates > 0 ? s->max_candidates : (int64_t)8 * s->count;
+  if (grid)
+    maxc = (int64_t)((W - S) / stride + 1) * ((H - S) / stride + 1);
+  else
+    maxc = s->max_candidates > 0 ? s->max_candidates : (int64_t)8 * s->count;
   int cap = grid ? (int)maxc : s->count;
   kpcn_patch_origin *o = kpcn_alloc(sizeof *o * (size_t)(cap > 0 ? cap : 1), "patch origins");
   if (!o) return KPCN_ERR_OUT_OF_MEMORY;
@@ -181,8 +191,10 @@ kpcn_status kpcn_patches_select(kpcn_patch_origin **out, int *nout, kpcn_patch_s
       size_t lo = 0, hi = (size_t)nx * ny - 1;
       while (lo < hi) {
         size_t mid = (lo + hi) / 2;
-        if (cdf[mid] > u) hi = mid;
-        else lo = mid + 1;
+        if (cdf[mid] > u)
+          hi = mid;
+        else
+          lo = mid + 1;
       }
       x = (int)(lo % (size_t)nx);
       y = (int)(lo / (size_t)nx);

@@ -53,14 +53,16 @@ kpcn_status kpcn_channel_roles_init(kpcn_channel_roles *r, const char *const *na
       int p = prefix_len(nm, rgb[k]);
       if (p < 0) continue;
       int idx[3];
-      for (int j = 0; j < 3; j++) idx[j] = find_with_prefix(names, n, nm, p, rgb[j]);
+      for (int j = 0; j < 3; j++)
+        idx[j] = find_with_prefix(names, n, nm, p, rgb[j]);
       if (idx[0] >= 0 && idx[1] >= 0 && idx[2] >= 0) r->src_channel[c] = idx[perm[k]];
     }
     for (int k = 0; k < 3; k++) {
       int p = prefix_len(nm, nxyz[k]);
       if (p < 0) continue;
       r->normal_role[c] = k;
-      for (int j = 0; j < 3; j++) r->normal_pair[c][j] = find_with_prefix(names, n, nm, p, nxyz[j]);
+      for (int j = 0; j < 3; j++)
+        r->normal_pair[c][j] = find_with_prefix(names, n, nm, p, nxyz[j]);
     }
   }
   return KPCN_OK;

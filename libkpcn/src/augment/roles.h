@@ -7,9 +7,9 @@
 
 typedef struct kpcn_channel_roles {
   int n;
-  int *src_channel;     /* after the colour permutation: input channel feeding channel c */
-  int *normal_role;     /* -1 none, 0 = N.X, 1 = N.Y, 2 = N.Z */
-  int (*normal_pair)[3];/* for normal channels: indices of N.X, N.Y, N.Z of its group (-1) */
+  int *src_channel;      /* after the colour permutation: input channel feeding channel c */
+  int *normal_role;      /* -1 none, 0 = N.X, 1 = N.Y, 2 = N.Z */
+  int (*normal_pair)[3]; /* for normal channels: indices of N.X, N.Y, N.Z of its group (-1) */
 } kpcn_channel_roles;
 
 /* names may be NULL (every channel purely geometric); perm NULL = identity. */

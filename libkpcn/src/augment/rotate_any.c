@@ -67,7 +67,8 @@ static kpcn_status rotate_ptrs(float *const *dst, const float *const *src, int n
     for (size_t i = 0; i < n; i++) {
       const tap *t = &taps[i];
       double acc = 0;
-      for (int j = 0; j < 4; j++) acc += (sq ? (double)t->w[j] * t->w[j] : t->w[j]) * s[t->idx[j]];
+      for (int j = 0; j < 4; j++)
+        acc += (sq ? (double)t->w[j] * t->w[j] : t->w[j]) * s[t->idx[j]];
       d[i] = (float)acc;
     }
   }
@@ -125,8 +126,8 @@ kpcn_status kpcn_augment_rotate_any_planes(float *dst, const float *src, int nch
   return st;
 }
 
-kpcn_status kpcn_augment_rotate_any_aov(kpcn_aov_set **out, const kpcn_aov_set *in,
-                                        double degrees, int nthreads) {
+kpcn_status kpcn_augment_rotate_any_aov(kpcn_aov_set **out, const kpcn_aov_set *in, double degrees,
+                                        int nthreads) {
   if (!out || !in) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_augment_rotate_any_aov: NULL");
   *out = NULL;
   kpcn_aov_set *o = NULL;

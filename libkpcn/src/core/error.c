@@ -104,8 +104,9 @@ kpcn_status kpcn_check_size(int width, int height, const char *what) {
                      height);
   if (width > KPCN_MAX_DIM || height > KPCN_MAX_DIM ||
       (int64_t)width * (int64_t)height > KPCN_MAX_PIXELS)
-    return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "%s: absurd size %dx%d (limit %d per side, %lld pixels)",
-                     what, width, height, KPCN_MAX_DIM, (long long)KPCN_MAX_PIXELS);
+    return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY,
+                     "%s: absurd size %dx%d (limit %d per side, %lld pixels)", what, width, height,
+                     KPCN_MAX_DIM, (long long)KPCN_MAX_PIXELS);
   return KPCN_OK;
 }
 

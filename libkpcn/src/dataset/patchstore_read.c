@@ -29,7 +29,8 @@ void kpcn_patchstore_close(kpcn_patchstore *ps) {
   if (!ps) return;
   if (ps->map) munmap((void *)ps->map, ps->size);
   if (ps->channels)
-    for (uint32_t c = 0; c < ps->h.nchannels; c++) free(ps->channels[c]);
+    for (uint32_t c = 0; c < ps->h.nchannels; c++)
+      free(ps->channels[c]);
   free(ps->channels);
   free(ps->src);
   free(ps);
@@ -64,15 +65,18 @@ static kpcn_status parse_meta(kpcn_patchstore *ps, const char *path) {
   if (!j) {
     st = kpcn_fail(KPCN_ERR_FORMAT, "patch store '%s': metadata is not valid JSON", path);
   } else if (!cJSON_IsString(fmt) || strcmp(fmt->valuestring, "kpcn-patchstore") != 0) {
-    st = kpcn_fail(KPCN_ERR_FORMAT, "patch store '%s': metadata \"format\" is not kpcn-patchstore", path);
+    st = kpcn_fail(KPCN_ERR_FORMAT, "patch store '%s': metadata \"format\" is not kpcn-patchstore",
+                   path);
   } else if (!cJSON_IsArray(ch) || cJSON_GetArraySize(ch) != (int)ps->h.nchannels) {
-    st = kpcn_fail(KPCN_ERR_FORMAT, "patch store '%s': metadata \"channels\" has %d names, header says %u",
-                   path, cJSON_IsArray(ch) ? cJSON_GetArraySize(ch) : -1, ps->h.nchannels);
+    st = kpcn_fail(KPCN_ERR_FORMAT,
+                   "patch store '%s': metadata \"channels\" has %d names, header says %u", path,
+                   cJSON_IsArray(ch) ? cJSON_GetArraySize(ch) : -1, ps->h.nchannels);
   } else if (!cJSON_IsArray(srcs)) {
     st = kpcn_fail(KPCN_ERR_FORMAT, "patch store '%s': metadata \"sources\" missing", path);
-  } else if (num(j, "count", -1) != (double)ps->h.count || num(j, "patch_size", -1) != ps->h.patch_size) {
-    st = kpcn_fail(KPCN_ERR_FORMAT, "patch store '%s': metadata count/patch_size disagree with the header",
-                   path);
+  } else if (num(j, "count", -1) != (double)ps->h.count ||
+             num(j, "patch_size", -1) != ps->h.patch_size) {
+    st = kpcn_fail(KPCN_ERR_FORMAT,
+                   "patch store '%s': metadata count/patch_size disagree with the header", path);
   }
   if (st == KPCN_OK) {
     ps->channels = kpcn_calloc(ps->h.nchannels, sizeof(char *), "channel names");
@@ -146,10 +150,12 @@ kpcn_status kpcn_patchstore_open(kpcn_patchstore **out, const char *path,
   ps->map = m;
   kps_get_header(&ps->h, ps->map);
   kps_header *h = &ps->h;
-  if (memcmp(h->magic, KPS_MAGIC, 8) != 0) return bad(ps, path, "wrong magic (not a kpcn patch store)");
+  if (memcmp(h->magic, KPS_MAGIC, 8) != 0)
+    return bad(ps, path, "wrong magic (not a kpcn patch store)");
   if (h->version != KPCN_PATCHSTORE_VERSION) {
-    kpcn_status s = kpcn_fail(KPCN_ERR_UNSUPPORTED, "patch store '%s': format version %u, this build reads %d",
-                              path, h->version, KPCN_PATCHSTORE_VERSION);
+    kpcn_status s =
+        kpcn_fail(KPCN_ERR_UNSUPPORTED, "patch store '%s': format version %u, this build reads %d",
+                  path, h->version, KPCN_PATCHSTORE_VERSION);
     kpcn_patchstore_close(ps);
     return s;
   }
@@ -158,16 +164,17 @@ kpcn_status kpcn_patchstore_open(kpcn_patchstore **out, const char *path,
   if (h->patch_size == 0 || h->patch_size > 4096 || h->nchannels == 0 || h->nchannels > 1024)
     return bad(ps, path, "patch size or channel count out of range");
   uint64_t pb = (uint64_t)h->nchannels * h->patch_size * h->patch_size * ds;
-  if (h->patch_bytes != pb) return bad(ps, path, "patch_bytes disagrees with channels x size^2 x dtype");
+  if (h->patch_bytes != pb)
+    return bad(ps, path, "patch_bytes disagrees with channels x size^2 x dtype");
   if (h->count > (UINT64_MAX - KPCN_PATCHSTORE_DATA_OFFSET) / (pb + KPS_RECORD_BYTES))
     return bad(ps, path, "patch count absurd");
   if (h->index_offset != KPCN_PATCHSTORE_DATA_OFFSET + h->count * pb ||
       h->meta_offset != h->index_offset + h->count * KPS_RECORD_BYTES)
     return bad(ps, path, "index/metadata offsets disagree with the patch count");
   if (h->meta_length > ((uint64_t)1 << 31) || h->meta_offset + h->meta_length > ps->size) {
-    kpcn_status s = kpcn_fail(KPCN_ERR_FORMAT,
-                              "patch store '%s': truncated (file has %zu bytes, header needs %llu)",
-                              path, ps->size, (unsigned long long)(h->meta_offset + h->meta_length));
+    kpcn_status s = kpcn_fail(
+        KPCN_ERR_FORMAT, "patch store '%s': truncated (file has %zu bytes, header needs %llu)",
+        path, ps->size, (unsigned long long)(h->meta_offset + h->meta_length));
     kpcn_patchstore_close(ps);
     return s;
   }
@@ -194,10 +201,11 @@ kpcn_status kpcn_patchstore_open(kpcn_patchstore **out, const char *path,
       const char *a = c < (int)h->nchannels ? ps->channels[c] : "(none)";
       const char *b = c < n ? expected[c] : "(none)";
       if (strcmp(a, b) != 0) {
-        st = kpcn_fail(KPCN_ERR_FORMAT,
-                       "patch store '%s': channel list mismatch at %d: store has '%s', expected '%s' "
-                       "(store %u channels, expected %d)",
-                       path, c, a, b, h->nchannels, n);
+        st = kpcn_fail(
+            KPCN_ERR_FORMAT,
+            "patch store '%s': channel list mismatch at %d: store has '%s', expected '%s' "
+            "(store %u channels, expected %d)",
+            path, c, a, b, h->nchannels, n);
         kpcn_patchstore_close(ps);
         return st;
       }

@@ -13,27 +13,60 @@
 #include <string.h>
 
 const char *const kpcn_patchstore_default_channels[KPCN_PATCHSTORE_NUM_DEFAULT + 1] = {
-    "R", "G", "B", "diffuse.R", "diffuse.G", "diffuse.B", "specular.R", "specular.G",
-    "specular.B", "albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z", "visibility.V",
-    "color.var", "diffuse.var", "specular.var", "albedo.var", "N.var", "Z.var", "visibility.var",
-    "ref.R", "ref.G", "ref.B", "ref.diffuse.R", "ref.diffuse.G", "ref.diffuse.B",
-    "ref.specular.R", "ref.specular.G", "ref.specular.B", NULL};
+    "R",
+    "G",
+    "B",
+    "diffuse.R",
+    "diffuse.G",
+    "diffuse.B",
+    "specular.R",
+    "specular.G",
+    "specular.B",
+    "albedo.R",
+    "albedo.G",
+    "albedo.B",
+    "N.X",
+    "N.Y",
+    "N.Z",
+    "Z",
+    "visibility.V",
+    "color.var",
+    "diffuse.var",
+    "specular.var",
+    "albedo.var",
+    "N.var",
+    "Z.var",
+    "visibility.var",
+    "ref.R",
+    "ref.G",
+    "ref.B",
+    "ref.diffuse.R",
+    "ref.diffuse.G",
+    "ref.diffuse.B",
+    "ref.specular.R",
+    "ref.specular.G",
+    "ref.specular.B",
+    NULL};
 
 /* ---- little-endian helpers ---- */
 static void put32(unsigned char *p, uint32_t v) {
-  for (int i = 0; i < 4; i++) p[i] = (unsigned char)(v >> (8 * i));
+  for (int i = 0; i < 4; i++)
+    p[i] = (unsigned char)(v >> (8 * i));
 }
 static void put64(unsigned char *p, uint64_t v) {
-  for (int i = 0; i < 8; i++) p[i] = (unsigned char)(v >> (8 * i));
+  for (int i = 0; i < 8; i++)
+    p[i] = (unsigned char)(v >> (8 * i));
 }
 static uint32_t get32(const unsigned char *p) {
   uint32_t v = 0;
-  for (int i = 0; i < 4; i++) v |= (uint32_t)p[i] << (8 * i);
+  for (int i = 0; i < 4; i++)
+    v |= (uint32_t)p[i] << (8 * i);
   return v;
 }
 static uint64_t get64(const unsigned char *p) {
   uint64_t v = 0;
-  for (int i = 0; i < 8; i++) v |= (uint64_t)p[i] << (8 * i);
+  for (int i = 0; i < 8; i++)
+    v |= (uint64_t)p[i] << (8 * i);
   return v;
 }
 static uint32_t fbits(float f) {
@@ -102,7 +135,7 @@ uint16_t kpcn_float_to_half(float f) {
   if (absx >= 0x7f800000u) /* Inf or NaN (keep a quiet NaN) */
     return (uint16_t)(sign | 0x7c00u | (absx > 0x7f800000u ? 0x200u : 0));
   if (absx >= 0x477ff000u) return (uint16_t)(sign | 0x7c00u); /* overflow -> Inf */
-  if (absx < 0x38800000u) {                                  /* subnormal or zero */
+  if (absx < 0x38800000u) {                                   /* subnormal or zero */
     if (absx < 0x33000000u) return (uint16_t)sign;
     uint32_t mant = (absx & 0x7fffffu) | 0x800000u;
     int shift = 126 - (int)(absx >> 23); /* value = h * 2^-24 */
@@ -156,7 +189,8 @@ static void free_writer(kpcn_patchstore_writer *w) {
   if (!w) return;
   if (w->f) fclose(w->f);
   if (w->channels)
-    for (int c = 0; c < w->C; c++) free(w->channels[c]);
+    for (int c = 0; c < w->C; c++)
+      free(w->channels[c]);
   free(w->channels);
   free(w->settings_json);
   free(w->src);
@@ -212,8 +246,8 @@ kpcn_status kpcn_patchstore_create(kpcn_patchstore_writer **out, const char *pat
     cJSON_Delete(j);
     if (!ok) {
       free_writer(w);
-      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch store '%s': settings_json is not a JSON object",
-                       path);
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                       "patch store '%s': settings_json is not a JSON object", path);
     }
     w->settings_json = strdup(s->settings_json);
   }
@@ -256,16 +290,19 @@ kpcn_status kpcn_patchstore_append(kpcn_patchstore_writer *w, const kpcn_patch_r
   if (!w || !rec || !planes)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_patchstore_append: NULL argument");
   if (rec->source >= w->nsrc)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch store '%s': source id %u not registered (%u sources)",
-                     w->path, rec->source, w->nsrc);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "patch store '%s': source id %u not registered (%u sources)", w->path,
+                     rec->source, w->nsrc);
   size_t pe = (size_t)w->C * (size_t)w->S * (size_t)w->S;
   for (size_t i = 0; i < pe; i++)
     if (!isfinite(planes[i]))
-      return kpcn_fail(KPCN_ERR_NONFINITE, "patch store '%s': non-finite value in channel '%s' of patch %llu",
-                       w->path, w->channels[i / ((size_t)w->S * w->S)], (unsigned long long)w->nrec);
+      return kpcn_fail(KPCN_ERR_NONFINITE,
+                       "patch store '%s': non-finite value in channel '%s' of patch %llu", w->path,
+                       w->channels[i / ((size_t)w->S * w->S)], (unsigned long long)w->nrec);
   if (w->dtype == KPCN_DTYPE_F32) {
     unsigned char *o = w->conv;
-    for (size_t i = 0; i < pe; i++) put32(o + 4 * i, fbits(planes[i]));
+    for (size_t i = 0; i < pe; i++)
+      put32(o + 4 * i, fbits(planes[i]));
   } else {
     unsigned char *o = w->conv;
     for (size_t i = 0; i < pe; i++) {
@@ -306,8 +343,8 @@ kpcn_status kpcn_patchstore_append_aov(kpcn_patchstore_writer *w, const kpcn_pat
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_patchstore_append_aov: NULL argument");
   int S = w->S;
   if (rec->x < 0 || rec->y < 0 || rec->x > noisy->width - S || rec->y > noisy->height - S)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch %dx%d at (%d,%d) outside the %dx%d image",
-                     S, S, rec->x, rec->y, noisy->width, noisy->height);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch %dx%d at (%d,%d) outside the %dx%d image", S,
+                     S, rec->x, rec->y, noisy->width, noisy->height);
   if (ref && (ref->width != noisy->width || ref->height != noisy->height))
     return kpcn_fail(KPCN_ERR_SIZE_MISMATCH, "reference %dx%d vs noisy %dx%d", ref->width,
                      ref->height, noisy->width, noisy->height);
@@ -317,8 +354,9 @@ kpcn_status kpcn_patchstore_append_aov(kpcn_patchstore_writer *w, const kpcn_pat
     const kpcn_aov_set *s = is_ref ? ref : noisy;
     const float *p = s ? aov_plane(s, is_ref ? nm + 4 : nm) : NULL;
     if (!p)
-      return kpcn_fail(KPCN_ERR_MISSING_CHANNEL, "patch store: channel '%s' missing in the %s image%s%s",
-                       nm, is_ref ? "reference" : "noisy", s && s->scene[0] ? " of " : "",
+      return kpcn_fail(KPCN_ERR_MISSING_CHANNEL,
+                       "patch store: channel '%s' missing in the %s image%s%s", nm,
+                       is_ref ? "reference" : "noisy", s && s->scene[0] ? " of " : "",
                        s && s->scene[0] ? s->scene : "");
     for (int y = 0; y < S; y++)
       memcpy(w->tmpf + ((size_t)c * S + y) * S,
@@ -431,13 +469,15 @@ void kpcn_patchstore_abort(kpcn_patchstore_writer *w) {
 
 kpcn_status kpcn_patch_source_depth_stats(kpcn_patch_source *src, const kpcn_aov_set *noisy) {
   if (!src || !noisy) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "depth stats: NULL");
-  KPCN_TRY(kpcn_aov_require(noisy, KPCN_BUF_DEPTH, 0, noisy->scene[0] ? noisy->scene : "noisy image"));
+  KPCN_TRY(
+      kpcn_aov_require(noisy, KPCN_BUF_DEPTH, 0, noisy->scene[0] ? noisy->scene : "noisy image"));
   size_t n = kpcn_aov_plane_size(noisy);
   const float *z = noisy->buf[KPCN_BUF_DEPTH];
   double mn = INFINITY, mx = -INFINITY, s = 0, s2 = 0;
   for (size_t i = 0; i < n; i++) {
     double v = z[i];
-    if (!isfinite(v)) return kpcn_fail(KPCN_ERR_NONFINITE, "depth stats: non-finite Z at pixel %zu", i);
+    if (!isfinite(v))
+      return kpcn_fail(KPCN_ERR_NONFINITE, "depth stats: non-finite Z at pixel %zu", i);
     mn = v < mn ? v : mn;
     mx = v > mx ? v : mx;
     s += v;

@@ -64,18 +64,25 @@ static int get_vec3(const cJSON *a, double v[3]) {
 }
 static void set_vec3(cJSON *obj, const char *key, const double v[3]) {
   cJSON *a = cJSON_CreateDoubleArray(v, 3);
-  if (cJSON_GetObjectItemCaseSensitive(obj, key)) cJSON_ReplaceItemInObjectCaseSensitive(obj, key, a);
-  else cJSON_AddItemToObject(obj, key, a);
+  if (cJSON_GetObjectItemCaseSensitive(obj, key))
+    cJSON_ReplaceItemInObjectCaseSensitive(obj, key, a);
+  else
+    cJSON_AddItemToObject(obj, key, a);
 }
 static void set_num(cJSON *obj, const char *key, double v) {
   cJSON *n = cJSON_CreateNumber(v);
-  if (cJSON_GetObjectItemCaseSensitive(obj, key)) cJSON_ReplaceItemInObjectCaseSensitive(obj, key, n);
-  else cJSON_AddItemToObject(obj, key, n);
+  if (cJSON_GetObjectItemCaseSensitive(obj, key))
+    cJSON_ReplaceItemInObjectCaseSensitive(obj, key, n);
+  else
+    cJSON_AddItemToObject(obj, key, n);
 }
 static void sub(double o[3], const double a[3], const double b[3]) {
-  for (int i = 0; i < 3; i++) o[i] = a[i] - b[i];
+  for (int i = 0; i < 3; i++)
+    o[i] = a[i] - b[i];
 }
-static double dot(const double a[3], const double b[3]) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+static double dot(const double a[3], const double b[3]) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
 static void cross(double o[3], const double a[3], const double b[3]) {
   o[0] = a[1] * b[2] - a[2] * b[1];
   o[1] = a[2] * b[0] - a[0] * b[2];
@@ -84,13 +91,15 @@ static void cross(double o[3], const double a[3], const double b[3]) {
 static void normalize(double v[3]) {
   double l = sqrt(dot(v, v));
   if (l > 0)
-    for (int i = 0; i < 3; i++) v[i] /= l;
+    for (int i = 0; i < 3; i++)
+      v[i] /= l;
 }
 /* Rodrigues rotation of v about unit axis k by angle a. */
 static void rotate(double v[3], const double k[3], double a) {
   double c = cos(a), s = sin(a), kxv[3], kv = dot(k, v);
   cross(kxv, k, v);
-  for (int i = 0; i < 3; i++) v[i] = v[i] * c + kxv[i] * s + k[i] * kv * (1 - c);
+  for (int i = 0; i < 3; i++)
+    v[i] = v[i] * c + kxv[i] * s + k[i] * kv * (1 - c);
 }
 
 static void perturb_camera(cJSON *cam, rng *r, const kpcn_perturb_settings *s, summary *sm) {
@@ -140,17 +149,20 @@ static void perturb_rgb(double c[3], double hue, double sat, double gain) {
   double k[3] = {1 / sqrt(3.0), 1 / sqrt(3.0), 1 / sqrt(3.0)};
   rotate(c, k, hue);
   double m = (c[0] + c[1] + c[2]) / 3;
-  for (int i = 0; i < 3; i++) c[i] = clampd((m + (c[i] - m) * sat) * gain, 0.0, 0.95);
+  for (int i = 0; i < 3; i++)
+    c[i] = clampd((m + (c[i] - m) * sat) * gain, 0.0, 0.95);
 }
 
 static void perturb_albedo(cJSON *owner, const char *key, rng *r, double st) {
   cJSON *a = cJSON_GetObjectItemCaseSensitive(owner, key);
-  double hue = uni(r, -PI, PI) * st, sat = exp(uni(r, -0.4, 0.4) * st), gain = exp(uni(r, -0.3, 0.3) * st);
+  double hue = uni(r, -PI, PI) * st, sat = exp(uni(r, -0.4, 0.4) * st),
+         gain = exp(uni(r, -0.3, 0.3) * st);
   double c[3];
   if (cJSON_IsNumber(a)) {
     double v[3] = {a->valuedouble, a->valuedouble, a->valuedouble};
     /* A grey albedo gets a random tint so hue jitter has something to rotate. */
-    for (int i = 0; i < 3; i++) v[i] *= 1 + uni(r, -0.3, 0.3) * st;
+    for (int i = 0; i < 3; i++)
+      v[i] *= 1 + uni(r, -0.3, 0.3) * st;
     perturb_rgb(v, hue, sat, gain);
     set_vec3(owner, key, v);
   } else if (get_vec3(a, c)) {
@@ -170,7 +182,8 @@ static const char *const g_swap_types[] = {"lambert", "plastic", "rough_plastic"
                                            "conductor"};
 static const char *const g_metals[] = {"Cu", "Au", "Ag", "Al", "Cr"};
 
-static void perturb_bsdf(cJSON *b, rng *r, const kpcn_perturb_settings *s, summary *sm, int *nswaps) {
+static void perturb_bsdf(cJSON *b, rng *r, const kpcn_perturb_settings *s, summary *sm,
+                         int *nswaps) {
   if (!cJSON_IsObject(b)) return;
   cJSON *type = cJSON_GetObjectItemCaseSensitive(b, "type");
   if (!cJSON_IsString(type) || !strcmp(type->valuestring, "null")) return; /* lights, portals */
@@ -179,7 +192,8 @@ static void perturb_bsdf(cJSON *b, rng *r, const kpcn_perturb_settings *s, summa
   double st = s->material;
   int opaque = !strcmp(type->valuestring, "lambert") || !strcmp(type->valuestring, "plastic") ||
                !strcmp(type->valuestring, "rough_plastic") ||
-               !strcmp(type->valuestring, "rough_conductor") || !strcmp(type->valuestring, "conductor");
+               !strcmp(type->valuestring, "rough_conductor") ||
+               !strcmp(type->valuestring, "conductor");
   /* Only opaque single-layer BSDFs swap (a glass or coated object keeps its type). */
   if (opaque && u_swap < s->bsdf_swap) {
     const char *nt = g_swap_types[(int)(u_type * 5) % 5];
@@ -198,7 +212,8 @@ static void perturb_bsdf(cJSON *b, rng *r, const kpcn_perturb_settings *s, summa
       cJSON_AddStringToObject(b, "material", g_metals[(int)(u_metal * 5) % 5]);
     }
     if (!strncmp(nt, "rough", 5)) set_num(b, "roughness", 0.05 + 0.4 * u_rough);
-    if (strstr(nt, "plastic") && !cJSON_GetObjectItemCaseSensitive(b, "ior")) set_num(b, "ior", 1.5);
+    if (strstr(nt, "plastic") && !cJSON_GetObjectItemCaseSensitive(b, "ior"))
+      set_num(b, "ior", 1.5);
     (*nswaps)++;
   }
   if (st > 0) {
@@ -224,9 +239,11 @@ static int is_emitter(const cJSON *p) {
 static void scale_emission(cJSON *p, const char *key, double k) {
   cJSON *e = cJSON_GetObjectItemCaseSensitive(p, key);
   double c[3];
-  if (cJSON_IsNumber(e)) set_num(p, key, e->valuedouble * k);
+  if (cJSON_IsNumber(e))
+    set_num(p, key, e->valuedouble * k);
   else if (get_vec3(e, c)) {
-    for (int i = 0; i < 3; i++) c[i] *= k;
+    for (int i = 0; i < 3; i++)
+      c[i] *= k;
     set_vec3(p, key, c);
   }
 }
@@ -236,7 +253,8 @@ static void perturb_light(cJSON *p, rng *r, const kpcn_perturb_settings *s, summ
   int env = cJSON_IsString(type) && (!strcmp(type->valuestring, "infinite_sphere") ||
                                      !strcmp(type->valuestring, "skydome"));
   double u[6];
-  for (int i = 0; i < 6; i++) u[i] = urand(r);
+  for (int i = 0; i < 6; i++)
+    u[i] = urand(r);
   cJSON *t = cJSON_GetObjectItemCaseSensitive(p, "transform");
   if (env) {
     if (s->env <= 0) return;
@@ -264,7 +282,8 @@ static void perturb_light(cJSON *p, rng *r, const kpcn_perturb_settings *s, summ
       set_num(t, "scale", mag * sz);
     } else if (get_vec3(scale, sc)) {
       mag = sqrt(dot(sc, sc) / 3);
-      for (int i = 0; i < 3; i++) sc[i] *= sz;
+      for (int i = 0; i < 3; i++)
+        sc[i] *= sz;
       set_vec3(t, "scale", sc);
     }
     /* Move in the horizontal plane by up to 10% of the light's size: keeps ceiling
@@ -296,7 +315,8 @@ kpcn_status kpcn_perturb_scene(char **out_json, const char *scene_json, uint64_t
   if (!root || !cJSON_IsObject(root)) {
     const char *e = cJSON_GetErrorPtr();
     cJSON_Delete(root);
-    return kpcn_fail(KPCN_ERR_FORMAT, "scene JSON does not parse%s%.40s", e ? " near: " : "", e ? e : "");
+    return kpcn_fail(KPCN_ERR_FORMAT, "scene JSON does not parse%s%.40s", e ? " near: " : "",
+                     e ? e : "");
   }
   if (variant > 0) {
     rng r = {seed * 0x9e3779b97f4a7c15ull ^ ((uint64_t)variant * 0xd1b54a32d192ed03ull)};
