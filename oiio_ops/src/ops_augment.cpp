@@ -62,6 +62,18 @@ kpcn_status rotate_any_image(kpcn_image **out, const kpcn_image *in, double deg,
   return KPCN_OK;
 }
 
+// Converts the noisy image and, when given (initialized), the reference image.
+bool to_aov_pair(const OIIO::ImageBuf &noisy, const OIIO::ImageBuf &ref, AovPtr &n, AovPtr &r,
+                 std::string &err) {
+  n = to_aov_set(noisy, err);
+  if (!n) return false;
+  if (ref.initialized()) {
+    r = to_aov_set(ref, err);
+    if (!r) return false;
+  }
+  return true;
+}
+
 } // namespace
 
 bool augment(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, const kpcn_augment_xform &x,
@@ -142,13 +154,8 @@ OIIO::ImageBuf shift(const OIIO::ImageBuf &src, int dx, int dy, int nthreads) {
 bool select_patches(const OIIO::ImageBuf &noisy, const OIIO::ImageBuf &ref,
                     const kpcn_patch_settings &s, std::vector<kpcn_patch_origin> &out,
                     kpcn_patch_stats &stats, std::string &err) {
-  AovPtr n = to_aov_set(noisy, err);
-  if (!n) return false;
-  AovPtr r;
-  if (ref.initialized()) {
-    r = to_aov_set(ref, err);
-    if (!r) return false;
-  }
+  AovPtr n, r;
+  if (!to_aov_pair(noisy, ref, n, r, err)) return false;
   kpcn_patch_origin *o = nullptr;
   int cnt = 0;
   if (kpcn_patches_select(&o, &cnt, &stats, n.get(), r.get(), &s) != KPCN_OK) {
@@ -162,13 +169,8 @@ bool select_patches(const OIIO::ImageBuf &noisy, const OIIO::ImageBuf &ref,
 
 bool write_patches(const std::string &out, const OIIO::ImageBuf &noisy, const OIIO::ImageBuf &ref,
                    const std::vector<kpcn_patch_origin> &origins, int size, std::string &err) {
-  AovPtr n = to_aov_set(noisy, err);
-  if (!n) return false;
-  AovPtr r;
-  if (ref.initialized()) {
-    r = to_aov_set(ref, err);
-    if (!r) return false;
-  }
+  AovPtr n, r;
+  if (!to_aov_pair(noisy, ref, n, r, err)) return false;
   bool kps = out.size() > 4 && out.compare(out.size() - 4, 4, ".kps") == 0;
   if (kps) {
     kpcn_patchstore_settings ss;

@@ -16,6 +16,8 @@
 #   BATCH PATCH  batch size, patch side      [16, 64]
 #   CH K         depth experiment: channels, prediction window K  [32, 11]
 #   PRESET       architecture of experiment A [cpu]
+#   ARCH_A       explicit architecture options for experiment A instead of PRESET, e.g.
+#                "--preset paper --layers 3 --channels 16 --conv 3 --kernel 5" (word-split)
 #   VAL_EVERY    validation interval (iterations) [50]
 #   DECAY_EVERY  lr x0.96 every N iterations [1000]
 #   SEED         [1]
@@ -71,9 +73,10 @@ compare() {
 }
 
 if [ -z "$ONLY" ] || [ "$ONLY" = A ]; then
-  run A_l1_lr1e-3 --preset "$PRESET" --loss l1 --lr 1e-3
-  run A_l2_lr1e-3 --preset "$PRESET" --loss l2 --lr 1e-3
-  run A_l2_lr1e-5 --preset "$PRESET" --loss l2 --lr 1e-5
+  read -r -a arch_a <<< "${ARCH_A:---preset $PRESET}"
+  run A_l1_lr1e-3 "${arch_a[@]}" --loss l1 --lr 1e-3
+  run A_l2_lr1e-3 "${arch_a[@]}" --loss l2 --lr 1e-3
+  run A_l2_lr1e-5 "${arch_a[@]}" --loss l2 --lr 1e-5
   compare A "loss and learning rate" A_l1_lr1e-3 A_l2_lr1e-3 A_l2_lr1e-5
 fi
 if [ -z "$ONLY" ] || [ "$ONLY" = B ]; then

@@ -45,15 +45,22 @@ bool check_nonfinite(const kpcn::ops::MetricResult &r, const kpcntool::Modifiers
   return false;
 }
 
-bool run_metric(Metric metric, kpcntool::Context &ctx, const kpcntool::Modifiers &m,
-                std::string &err) {
+// The two comparison operands are the top two stack images (test, then reference); also
+// parses the comparison modifiers into o.
+bool top_pair(const kpcntool::Context &ctx, const kpcntool::Modifiers &m,
+              kpcn::ops::CompareOptions &o, std::string &err) {
   if (ctx.stack.size() < 2) {
     err = "needs two images on the stack (test image, then reference); found " +
           std::to_string(ctx.stack.size());
     return false;
   }
+  return options(m, o, err);
+}
+
+bool run_metric(Metric metric, kpcntool::Context &ctx, const kpcntool::Modifiers &m,
+                std::string &err) {
   kpcn::ops::CompareOptions o;
-  if (!options(m, o, err)) return false;
+  if (!top_pair(ctx, m, o, err)) return false;
   const OIIO::ImageBuf &x = ctx.stack[ctx.stack.size() - 2], &y = ctx.stack.back();
   kpcn::ops::MetricResult r = kpcn::ops::compare(x, y, metric, o, {}, ctx.nthreads);
   if (!r.ok) {
@@ -75,13 +82,8 @@ bool run_errormap(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
     err = "unknown metric '" + name + "' (l1, mse, relmse, rell1, psnr, ssim)";
     return false;
   }
-  if (ctx.stack.size() < 2) {
-    err = "needs two images on the stack (test image, then reference); found " +
-          std::to_string(ctx.stack.size());
-    return false;
-  }
   kpcn::ops::CompareOptions o;
-  if (!options(m, o, err)) return false;
+  if (!top_pair(ctx, m, o, err)) return false;
   const OIIO::ImageBuf &x = ctx.stack[ctx.stack.size() - 2], &y = ctx.stack.back();
   OIIO::ImageBuf map;
   kpcn::ops::MetricResult r;

@@ -243,11 +243,11 @@ kpcn_status kpcn_augment_xform_ptrs(float *const *dst, const float *const *src, 
   return st;
 }
 
-kpcn_status kpcn_augment_planes(float *dst, const float *src, int nch, const char *const *names,
-                                int width, int height, const kpcn_augment_xform *x, int nthreads) {
-  if (!dst || !src || nch <= 0)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_augment_planes: NULL buffer or nch <= 0");
-  KPCN_TRY(kpcn_check_size(width, height, "kpcn_augment_planes"));
+/* Splits contiguous planar buffers (nch planes of W*H floats each) into per-plane pointers
+ * and runs fn on them: the common body of the *_planes entry points. */
+kpcn_status kpcn_augment_contiguous(float *dst, const float *src, int nch, const char *const *names,
+                                    int W, int H, kpcn_augment_ptrs_fn fn, const void *arg,
+                                    int nthreads) {
   float **d = kpcn_alloc(sizeof(float *) * (size_t)nch, "plane pointers");
   const float **s = kpcn_alloc(sizeof(float *) * (size_t)nch, "plane pointers");
   if (!d || !s) {
@@ -255,15 +255,29 @@ kpcn_status kpcn_augment_planes(float *dst, const float *src, int nch, const cha
     free((void *)s);
     return KPCN_ERR_OUT_OF_MEMORY;
   }
-  size_t n = (size_t)width * (size_t)height;
+  size_t n = (size_t)W * (size_t)H;
   for (int c = 0; c < nch; c++) {
     d[c] = dst + (size_t)c * n;
     s[c] = src + (size_t)c * n;
   }
-  kpcn_status st = kpcn_augment_xform_ptrs(d, s, nch, names, width, height, x, nthreads);
+  kpcn_status st = fn(d, s, nch, names, W, H, arg, nthreads);
   free(d);
   free((void *)s);
   return st;
+}
+
+static kpcn_status xform_ptrs_fn(float *const *dst, const float *const *src, int nch,
+                                 const char *const *names, int W, int H, const void *arg,
+                                 int nthreads) {
+  return kpcn_augment_xform_ptrs(dst, src, nch, names, W, H, arg, nthreads);
+}
+
+kpcn_status kpcn_augment_planes(float *dst, const float *src, int nch, const char *const *names,
+                                int width, int height, const kpcn_augment_xform *x, int nthreads) {
+  if (!dst || !src || nch <= 0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_augment_planes: NULL buffer or nch <= 0");
+  KPCN_TRY(kpcn_check_size(width, height, "kpcn_augment_planes"));
+  return kpcn_augment_contiguous(dst, src, nch, names, width, height, xform_ptrs_fn, x, nthreads);
 }
 
 /* Collects the present planes of an AOV set with their canonical names. */

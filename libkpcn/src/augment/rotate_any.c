@@ -102,28 +102,20 @@ static kpcn_status rotate_ptrs(float *const *dst, const float *const *src, int n
   return st;
 }
 
+static kpcn_status rotate_ptrs_fn(float *const *dst, const float *const *src, int nch,
+                                  const char *const *names, int W, int H, const void *arg,
+                                  int nthreads) {
+  return rotate_ptrs(dst, src, nch, names, W, H, *(const double *)arg, nthreads);
+}
+
 kpcn_status kpcn_augment_rotate_any_planes(float *dst, const float *src, int nch,
                                            const char *const *names, int width, int height,
                                            double degrees, int nthreads) {
   if (!dst || !src || nch <= 0 || nch > 4096)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_augment_rotate_any_planes: bad arguments");
   KPCN_TRY(kpcn_check_size(width, height, "kpcn_augment_rotate_any_planes"));
-  float **d = kpcn_alloc(sizeof(float *) * (size_t)nch, "plane pointers");
-  const float **s = kpcn_alloc(sizeof(float *) * (size_t)nch, "plane pointers");
-  if (!d || !s) {
-    free(d);
-    free((void *)s);
-    return KPCN_ERR_OUT_OF_MEMORY;
-  }
-  size_t n = (size_t)width * (size_t)height;
-  for (int c = 0; c < nch; c++) {
-    d[c] = dst + (size_t)c * n;
-    s[c] = src + (size_t)c * n;
-  }
-  kpcn_status st = rotate_ptrs(d, s, nch, names, width, height, degrees, nthreads);
-  free(d);
-  free((void *)s);
-  return st;
+  return kpcn_augment_contiguous(dst, src, nch, names, width, height, rotate_ptrs_fn, &degrees,
+                                 nthreads);
 }
 
 kpcn_status kpcn_augment_rotate_any_aov(kpcn_aov_set **out, const kpcn_aov_set *in, double degrees,

@@ -49,26 +49,20 @@ const char *const kpcn_patchstore_default_channels[KPCN_PATCHSTORE_NUM_DEFAULT +
     NULL};
 
 /* ---- little-endian helpers ---- */
-static void put32(unsigned char *p, uint32_t v) {
-  for (int i = 0; i < 4; i++)
+static void put_le(unsigned char *p, uint64_t v, int nbytes) {
+  for (int i = 0; i < nbytes; i++)
     p[i] = (unsigned char)(v >> (8 * i));
 }
-static void put64(unsigned char *p, uint64_t v) {
-  for (int i = 0; i < 8; i++)
-    p[i] = (unsigned char)(v >> (8 * i));
-}
-static uint32_t get32(const unsigned char *p) {
-  uint32_t v = 0;
-  for (int i = 0; i < 4; i++)
-    v |= (uint32_t)p[i] << (8 * i);
-  return v;
-}
-static uint64_t get64(const unsigned char *p) {
+static uint64_t get_le(const unsigned char *p, int nbytes) {
   uint64_t v = 0;
-  for (int i = 0; i < 8; i++)
+  for (int i = 0; i < nbytes; i++)
     v |= (uint64_t)p[i] << (8 * i);
   return v;
 }
+static void put32(unsigned char *p, uint32_t v) { put_le(p, v, 4); }
+static void put64(unsigned char *p, uint64_t v) { put_le(p, v, 8); }
+static uint32_t get32(const unsigned char *p) { return (uint32_t)get_le(p, 4); }
+static uint64_t get64(const unsigned char *p) { return get_le(p, 8); }
 static uint32_t fbits(float f) {
   uint32_t u;
   memcpy(&u, &f, 4);

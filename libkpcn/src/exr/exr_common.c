@@ -37,6 +37,15 @@ kpcn_status kpcn_exr_fail(exr_result_t rv, kpcn_status st, const char *what, con
   return s;
 }
 
+void kpcn_exr_record_error(kpcn_exr_chunk_error *e, kpcn_status st, int chunk) {
+#pragma omp critical(kpcn_exr_chunk_error)
+  if (e->st == KPCN_OK || chunk < e->chunk) {
+    e->st = st;
+    e->chunk = chunk;
+    snprintf(e->msg, sizeof e->msg, "%s", kpcn_last_error());
+  }
+}
+
 kpcn_status kpcn_exr_open_read(const char *path, exr_context_t *ctx) {
   *ctx = NULL;
   if (!path || !*path) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "EXR read: empty file name");

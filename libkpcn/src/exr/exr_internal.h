@@ -22,6 +22,18 @@ exr_context_initializer_t kpcn_exr_initializer(void);
 void kpcn_exr_read_meta(exr_context_t ctx, int *spp, int64_t *seed, char *scene, size_t scenesz,
                         char *version, size_t versionsz);
 
+/* First error of a parallel chunk loop (reader and writer), kept by lowest chunk index so the
+ * message does not depend on thread timing. Messages live in thread-local storage, so
+ * workers copy theirs here and the calling thread re-raises it with kpcn_fail. */
+typedef struct {
+  kpcn_status st;
+  int chunk;
+  char msg[1024];
+} kpcn_exr_chunk_error;
+
+/* Records st (and the calling thread's kpcn_last_error()) for chunk if it is the first. */
+void kpcn_exr_record_error(kpcn_exr_chunk_error *e, kpcn_status st, int chunk);
+
 /* Reads all channels of part 0 of an open context into a new image (names as stored). */
 kpcn_status kpcn_exr_read_context(exr_context_t ctx, const char *path, int nthreads,
                                   kpcn_image **out);

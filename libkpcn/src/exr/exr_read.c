@@ -55,24 +55,6 @@ static kpcn_status decode_chunk(exr_context_t ctx, const exr_chunk_info_t *ci,
   return KPCN_OK;
 }
 
-/* First error of a parallel loop, by lowest chunk index so the message does not depend on
- * thread timing. Messages live in thread-local storage, so workers copy theirs here and
- * the calling thread re-raises it. */
-typedef struct {
-  kpcn_status st;
-  int chunk;
-  char msg[1024];
-} chunk_error;
-
-static void record_error(chunk_error *e, kpcn_status st, int chunk) {
-#pragma omp critical(kpcn_exr_chunk_error)
-  if (e->st == KPCN_OK || chunk < e->chunk) {
-    e->st = st;
-    e->chunk = chunk;
-    snprintf(e->msg, sizeof e->msg, "%s", kpcn_last_error());
-  }
-}
-
 /* Reads chunk k: scanline block k, or tile (k % ntx, k / ntx) of level 0. */
 static kpcn_status read_one_chunk(exr_context_t ctx, int k, int tiled, int spc, int tw, int th,
                                   int ntx, const exr_attr_box2i_t *dw, exr_decode_pipeline_t *dec,
@@ -116,7 +98,7 @@ static kpcn_status read_pixels(exr_context_t ctx, kpcn_image *img, const exr_att
   }
   int nt = kpcn_resolve_threads(nthreads);
   if (nt > nchunks) nt = nchunks;
-  chunk_error err = {KPCN_OK, 0, ""};
+  kpcn_exr_chunk_error err = {KPCN_OK, 0, ""};
   int failed = 0;
 #pragma omp parallel num_threads(nt)
   {
@@ -131,7 +113,7 @@ static kpcn_status read_pixels(exr_context_t ctx, kpcn_image *img, const exr_att
       kpcn_status s =
           read_one_chunk(ctx, k, tiled, spc, (int)tw, (int)th, ntx, dw, &dec, &first, img, path);
       if (s != KPCN_OK) {
-        record_error(&err, s, k);
+        kpcn_exr_record_error(&err, s, k);
 #pragma omp atomic write
         failed = 1;
       }

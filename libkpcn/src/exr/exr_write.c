@@ -67,22 +67,6 @@ static exr_compression_t to_exr_compression(kpcn_exr_compression c) {
   }
 }
 
-/* First error of the parallel encoder, by chunk index (messages are thread-local). */
-typedef struct {
-  kpcn_status st;
-  int chunk;
-  char msg[1024];
-} chunk_error;
-
-static void record_error(chunk_error *e, kpcn_status st, int chunk) {
-#pragma omp critical(kpcn_exr_write_error)
-  if (e->st == KPCN_OK || chunk < e->chunk) {
-    e->st = st;
-    e->chunk = chunk;
-    snprintf(e->msg, sizeof e->msg, "%s", kpcn_last_error());
-  }
-}
-
 /* Packs and compresses the chunk starting at scanline y into enc (not written yet). */
 static kpcn_status encode_chunk(exr_context_t ctx, int part, int y, int w, int n,
                                 const char *const *names, const float *const *planes,
@@ -155,7 +139,7 @@ static kpcn_status write_body(exr_context_t ctx, int w, int h, int n, const char
   /* Without real compression a chunk is a memcpy: the ordered hand-off between threads
    * would cost more than it saves (badly so on an oversubscribed machine). */
   if (opt->compression == KPCN_EXR_NONE || opt->compression == KPCN_EXR_RLE) nt = 1;
-  chunk_error err = {KPCN_OK, 0, ""};
+  kpcn_exr_chunk_error err = {KPCN_OK, 0, ""};
   int failed = 0;
   /* Chunks are packed and compressed in parallel (exr_encoding_run releases the context
    * lock after packing) with the pipeline's write step disabled; the compressed chunks are
@@ -184,7 +168,7 @@ static kpcn_status write_body(exr_context_t ctx, int w, int h, int n, const char
             s = kpcn_exr_fail(rv, KPCN_ERR_IO, "cannot write pixels of", path);
         }
         if (s != KPCN_OK && s != KPCN_ERR_CANCELLED) {
-          record_error(&err, s, k);
+          kpcn_exr_record_error(&err, s, k);
 #pragma omp atomic write
           failed = 1;
         }

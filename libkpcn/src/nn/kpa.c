@@ -40,6 +40,15 @@ static void padded_row(float *restrict row, const float *restrict src, int w, in
 
 #define XB 32 /* pixels per register-blocked chunk */
 
+/* This thread's slice of a per-thread scratch buffer of `per` floats each. */
+static inline float *thread_scratch(float *buf, size_t per) {
+#ifdef _OPENMP
+  return buf + (size_t)omp_get_thread_num() * per;
+#else
+  return buf;
+#endif
+}
+
 static inline int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
 
 /* exp(x) for x <= 0 (softmax after max subtraction), written with plain arithmetic so the
@@ -146,14 +155,10 @@ kpcn_status kpcn_kpa_forward(int K, int n, int nc, int h, int w, const float *lo
   if (!buf) return KPCN_ERR_OUT_OF_MEMORY;
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++) {
-    int tid = 0;
-#ifdef _OPENMP
-    tid = omp_get_thread_num();
-#endif
     const int b = (int)(row / h), y = (int)(row % h);
     fwd_row(K, nc, h, w, y, logits + (size_t)b * K2 * plane, noisy + (size_t)b * nc * plane,
             out + (size_t)b * nc * plane, weights ? weights + (size_t)b * K2 * plane : NULL,
-            buf + (size_t)tid * scratch);
+            thread_scratch(buf, scratch));
   }
   kpcn_aligned_free(buf);
   return KPCN_OK;
@@ -176,11 +181,7 @@ kpcn_status kpcn_kpa_backward(int K, int n, int nc, int h, int w, const float *w
   if (dnoisy) {
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (long row = 0; row < (long)n * nc * h; row++) {
-      int tid = 0;
-#ifdef _OPENMP
-      tid = omp_get_thread_num();
-#endif
-      float *acc = buf + (size_t)tid * scratch;
+      float *acc = thread_scratch(buf, scratch);
       const int qy = (int)(row % h), c = (int)((row / h) % nc), b = (int)(row / ((long)h * nc));
       for (int x = 0; x < w + 2 * r; x++)
         acc[x] = 0.f;
@@ -214,11 +215,7 @@ kpcn_status kpcn_kpa_backward(int K, int n, int nc, int h, int w, const float *w
   }
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++) {
-    int tid = 0;
-#ifdef _OPENMP
-    tid = omp_get_thread_num();
-#endif
-    float *g = buf + (size_t)tid * scratch; /* [K2][w]: dL/dw_t */
+    float *g = thread_scratch(buf, scratch); /* [K2][w]: dL/dw_t */
     float *dot = g + (size_t)K2 * w, *pr = dot + 2 * (size_t)w;
     const int b = (int)(row / h), y = (int)(row % h);
     for (size_t i = 0; i < (size_t)K2 * w; i++)

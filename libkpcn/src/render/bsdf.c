@@ -123,18 +123,6 @@ kpcn_vec3 kpcn_bsdf_albedo(const kpcn_bsdf *b, const kpcn_shading_point *sp) {
   return kb_albedo(b, sp);
 }
 
-static inline kpcn_vec3 reflect_z(kpcn_vec3 w) { return kv3(-w.x, -w.y, w.z); }
-
-static void set_delta(kpcn_bsdf_sample_result *s, kpcn_vec3 wi, kpcn_vec3 weight, float pdf,
-                      int lobe) {
-  s->wi = wi;
-  s->weight = weight;
-  s->weight_diffuse = kv3s(0.0f);
-  s->pdf = pdf;
-  s->lobe = lobe;
-  s->is_delta = 1;
-}
-
 /* ---- smooth dielectric (Tungsten DielectricBsdf) ---- */
 static int dielectric_sample(const kpcn_bsdf *b, const kpcn_shading_point *sp, kpcn_vec3 wo,
                              float ulobe, kpcn_bsdf_sample_result *s) {
@@ -143,16 +131,16 @@ static int dielectric_sample(const kpcn_bsdf *b, const kpcn_shading_point *sp, k
   float F = kpcn_fresnel_dielectric(eta, fabsf(wo.z), &cos_t);
   kpcn_vec3 a = kb_albedo(b, sp);
   if (!b->enable_refraction) {
-    set_delta(s, reflect_z(wo), kv3_scale(a, F), 1.0f, KPCN_LOBE_SPECULAR);
+    kb_set_delta(s, kb_reflect_z(wo), kv3_scale(a, F), 1.0f, KPCN_LOBE_SPECULAR);
     return 1;
   }
   if (ulobe < F) {
-    set_delta(s, reflect_z(wo), a, F, KPCN_LOBE_SPECULAR);
+    kb_set_delta(s, kb_reflect_z(wo), a, F, KPCN_LOBE_SPECULAR);
     return 1;
   }
   if (F >= 1.0f) return 0;
   kpcn_vec3 wi = kv3(-wo.x * eta, -wo.y * eta, -copysignf(cos_t, wo.z));
-  set_delta(s, wi, a, 1.0f - F, KPCN_LOBE_SPECULAR | KPCN_LOBE_TRANSMISSION);
+  kb_set_delta(s, wi, a, 1.0f - F, KPCN_LOBE_SPECULAR | KPCN_LOBE_TRANSMISSION);
   return 1;
 }
 
@@ -172,13 +160,13 @@ int kpcn_bsdf_sample(const kpcn_bsdf *b, const kpcn_shading_point *sp, kpcn_vec3
   }
   case KPCN_BSDF_MIRROR:
     if (wo.z <= 0.0f) return 0;
-    set_delta(s, reflect_z(wo), kb_albedo(b, sp), 1.0f, KPCN_LOBE_SPECULAR);
+    kb_set_delta(s, kb_reflect_z(wo), kb_albedo(b, sp), 1.0f, KPCN_LOBE_SPECULAR);
     return 1;
   case KPCN_BSDF_CONDUCTOR:
     if (wo.z <= 0.0f) return 0;
-    set_delta(s, reflect_z(wo),
-              kv3_mul(kb_albedo(b, sp), kpcn_fresnel_conductor3(b->eta, b->k, wo.z)), 1.0f,
-              KPCN_LOBE_SPECULAR);
+    kb_set_delta(s, kb_reflect_z(wo),
+                 kv3_mul(kb_albedo(b, sp), kpcn_fresnel_conductor3(b->eta, b->k, wo.z)), 1.0f,
+                 KPCN_LOBE_SPECULAR);
     return 1;
   case KPCN_BSDF_ROUGH_CONDUCTOR: return kb_rough_conductor_sample(b, sp, wo, u1, u2, s);
   case KPCN_BSDF_DIELECTRIC: return dielectric_sample(b, sp, wo, ulobe, s);

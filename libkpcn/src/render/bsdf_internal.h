@@ -35,6 +35,17 @@ static inline void kb_eval_zero(kpcn_bsdf_eval_result *r) {
   r->f_cos = r->f_cos_diffuse = kv3s(0.0f);
   r->pdf = 0.0f;
 }
+static inline kpcn_vec3 kb_reflect_z(kpcn_vec3 w) { return kv3(-w.x, -w.y, w.z); }
+/* Fills a delta-lobe sample (mirror, smooth dielectric, specular coat): no diffuse part. */
+static inline void kb_set_delta(kpcn_bsdf_sample_result *s, kpcn_vec3 wi, kpcn_vec3 weight,
+                                float pdf, int lobe) {
+  s->wi = wi;
+  s->weight = weight;
+  s->weight_diffuse = kv3s(0.0f);
+  s->pdf = pdf;
+  s->lobe = lobe;
+  s->is_delta = 1;
+}
 
 /* bsdf_microfacet.c */
 int kb_rough_conductor_sample(const kpcn_bsdf *b, const kpcn_shading_point *sp, kpcn_vec3 wo,

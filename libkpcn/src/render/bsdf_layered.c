@@ -41,12 +41,7 @@ int kb_plastic_sample(const kpcn_bsdf *b, const kpcn_shading_point *sp, kpcn_vec
   float Fi = kpcn_fresnel_dielectric(1.0f / b->ior, wo.z, NULL);
   float ps = spec_probability(b, Fi);
   if (ulobe < ps) {
-    s->wi = kv3(-wo.x, -wo.y, wo.z);
-    s->weight = kv3s(Fi / ps);
-    s->weight_diffuse = kv3s(0.0f);
-    s->pdf = ps;
-    s->lobe = KPCN_LOBE_SPECULAR;
-    s->is_delta = 1;
+    kb_set_delta(s, kb_reflect_z(wo), kv3s(Fi / ps), ps, KPCN_LOBE_SPECULAR);
     return 1;
   }
   kpcn_vec3 wi = kpcn_warp_cosine_hemisphere(u1, u2);
@@ -129,12 +124,7 @@ int kb_smooth_coat_sample(const kpcn_bsdf *b, const kpcn_shading_point *sp, kpcn
   float Fi = kpcn_fresnel_dielectric(eta, wo.z, &cos_ti);
   float ps = spec_probability(b, Fi);
   if (ulobe < ps) {
-    s->wi = kv3(-wo.x, -wo.y, wo.z);
-    s->weight = kv3s(Fi / ps);
-    s->weight_diffuse = kv3s(0.0f);
-    s->pdf = ps;
-    s->lobe = KPCN_LOBE_SPECULAR;
-    s->is_delta = 1;
+    kb_set_delta(s, kb_reflect_z(wo), kv3s(Fi / ps), ps, KPCN_LOBE_SPECULAR);
     return 1;
   }
   /* reuse the lobe number for the substrate's own lobe choice */

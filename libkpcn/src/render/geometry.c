@@ -13,6 +13,26 @@ static inline kpcn_vec3 mesh_vtx(const kpcn_mesh *m, unsigned i) {
   return kv3(m->pos[3 * i], m->pos[3 * i + 1], m->pos[3 * i + 2]);
 }
 
+/* uv of triangle id at barycentric weights (b0, b1, b2) of its vertices: the interpolated
+ * texture coordinates, or (b1, b2) when the mesh has none. */
+static inline void mesh_uv(const kpcn_mesh *m, const unsigned *id, float b0, float b1, float b2,
+                           float *u, float *v) {
+  if (m->uv) {
+    const float *t0 = m->uv + 2 * id[0], *t1 = m->uv + 2 * id[1], *t2 = m->uv + 2 * id[2];
+    *u = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
+    *v = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
+  } else {
+    *u = b1, *v = b2;
+  }
+}
+
+/* Tungsten's sphere parametrisation of the outward unit normal n (hits and light samples). */
+static inline void sphere_uv(const kpcn_prim *p, kpcn_vec3 n, float *u, float *v) {
+  kpcn_vec3 l = kpcn_frame_to_local(&p->frame, n);
+  *u = atan2f(l.y, l.x) * KPCN_INV_2PI + 0.5f;
+  *v = acosf(fmaxf(-1.0f, fminf(1.0f, l.z))) * KPCN_INV_PI;
+}
+
 void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_vec3 d, float t,
                    unsigned prim_id, float bu, float bv, kpcn_hit *h) {
   (void)s;
@@ -51,9 +71,7 @@ void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_ve
     kpcn_vec3 n = kv3_normalize(kv3_sub(x, p->center));
     x = kv3_madd(p->center, n, p->radius);
     h->ng = n;
-    kpcn_vec3 l = kpcn_frame_to_local(&p->frame, n);
-    h->u = atan2f(l.y, l.x) * KPCN_INV_2PI + 0.5f;
-    h->v = acosf(fmaxf(-1.0f, fminf(1.0f, l.z))) * KPCN_INV_PI;
+    sphere_uv(p, n, &h->u, &h->v);
     break;
   }
   case KPCN_PRIM_DISK: {
@@ -85,13 +103,7 @@ void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_ve
       h->ns = ng;
     }
     h->ng = ng;
-    if (m->uv) {
-      const float *t0 = m->uv + 2 * id[0], *t1 = m->uv + 2 * id[1], *t2 = m->uv + 2 * id[2];
-      h->u = b0 * t0[0] + bu * t1[0] + bv * t2[0];
-      h->v = b0 * t0[1] + bu * t1[1] + bv * t2[1];
-    } else {
-      h->u = bu, h->v = bv;
-    }
+    mesh_uv(m, id, b0, bu, bv, &h->u, &h->v);
     h->p = x;
     return;
   }
@@ -137,9 +149,7 @@ void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_p
     kpcn_vec3 n = kpcn_warp_uniform_sphere(u1, u2);
     lp->p = kv3_madd(p->center, n, p->radius);
     lp->n = n;
-    kpcn_vec3 l = kpcn_frame_to_local(&p->frame, n);
-    lp->u = atan2f(l.y, l.x) * KPCN_INV_2PI + 0.5f;
-    lp->v = acosf(fmaxf(-1.0f, fminf(1.0f, l.z))) * KPCN_INV_PI;
+    sphere_uv(p, n, &lp->u, &lp->v);
     break;
   }
   case KPCN_PRIM_DISK: {
@@ -172,13 +182,7 @@ void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_p
     }
     lp->n = ng;
     float b2 = 1.0f - b0 - b1; /* Embree's (u, v) are the weights of vertices 1 and 2 */
-    if (m->uv) {
-      const float *t0 = m->uv + 2 * id[0], *t1 = m->uv + 2 * id[1], *t2 = m->uv + 2 * id[2];
-      lp->u = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
-      lp->v = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
-    } else {
-      lp->u = b1, lp->v = b2;
-    }
+    mesh_uv(m, id, b0, b1, b2, &lp->u, &lp->v);
     break;
   }
   case KPCN_PRIM_INFINITE_SPHERE: memset(lp, 0, sizeof(*lp)); break;
