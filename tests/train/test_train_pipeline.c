@@ -16,7 +16,15 @@
 
 static const char *g_store;
 /* kt_tmpfile rotates 8 static buffers; the tests keep many paths alive */
-static const char *tf_tmp(const char *name) { return strdup(kt_tmpfile(name)); }
+/* kt_tmpfile cycles through 8 buffers; this test holds more paths at once, so it copies them
+ * into its own pool (static, so nothing is left to free). */
+static const char *tf_tmp(const char *name) {
+  static char pool[64][512];
+  static int next = 0;
+  char *p = pool[next++ % 64];
+  snprintf(p, sizeof pool[0], "%s", kt_tmpfile(name));
+  return p;
+}
 
 static void settings(kpcn_train_settings *s, const char *out) {
   kpcn_train_settings_defaults(s);
