@@ -227,7 +227,7 @@ static void usage(void) {
           "         [--split train:0.7,val:0.15,test:0.15 | train:a+b,val:c,test:d]\n"
           "         [--eval-variants] [--preview-spp 4] [--preview-scale 4] [--no-preview]\n"
           "         [--camera X] [--fov X] [--material X] [--bsdf-swap P] [--light X] [--env X]\n"
-          "         [--force]\n");
+          "         [--texture-swap P] [--texture-dir DIR] [--force]\n");
 }
 
 int ds_cmd_plan(int argc, char **argv) {
@@ -235,6 +235,7 @@ int ds_cmd_plan(int argc, char **argv) {
   int variants = 10, ref_spp = 1024, W = 0, H = 0, preview_spp = 4, preview_scale = 4;
   int no_preview = 0, eval_variants = 0, force = 0;
   uint64_t seed = 1;
+  static char texture_dir[DS_PATH]; /* realpath of --texture-dir */
   kpcn_perturb_settings ps;
   kpcn_perturb_settings_defaults(&ps);
   for (int i = 1; i < argc; i++) {
@@ -293,7 +294,19 @@ int ds_cmd_plan(int argc, char **argv) {
       dst = &ps.light;
     else if (!strcmp(a, "--env"))
       dst = &ps.env;
-    else {
+    else if (!strcmp(a, "--texture-swap")) {
+      ok = ds_parse_double(v, &ps.texture_swap) && ps.texture_swap >= 0 && ps.texture_swap <= 1;
+    } else if (!strcmp(a, "--texture-dir")) {
+      /* Absolute, so plan.json names the same images from any working directory. */
+      char *rp = realpath(v, NULL);
+      if (!rp) {
+        ds_err("plan: --texture-dir '%s' does not exist", v);
+        return 2;
+      }
+      snprintf(texture_dir, sizeof texture_dir, "%s", rp);
+      free(rp);
+      ps.texture_dir = texture_dir;
+    } else {
       ds_err("plan: unknown option '%s'", a);
       usage();
       return 2;
@@ -327,6 +340,18 @@ int ds_cmd_plan(int argc, char **argv) {
       return 2;
     }
   }
+  if (ps.texture_dir && ps.texture_swap > 0) {
+    /* Reject a directory without images now, before anything is written: perturbing a
+     * one-texture scene lists the directory exactly as every variant will. */
+    char *probe = NULL;
+    kpcn_status st = kpcn_perturb_scene(
+        &probe, "{\"bsdfs\":[{\"type\":\"lambert\",\"albedo\":\"x.png\"}]}", seed, 1, &ps, NULL, 0);
+    free(probe);
+    if (st != KPCN_OK) {
+      ds_err("plan: --texture-dir: %s", kpcn_last_error());
+      return 2;
+    }
+  }
   base_scene *sc = NULL;
   int nsc = 0;
   if (find_scenes(scenes, &sc, &nsc) != 0) return 1;
@@ -351,6 +376,11 @@ int ds_cmd_plan(int argc, char **argv) {
   cJSON_AddBoolToObject(pj, "eval_variants", eval_variants);
   double pv[6] = {ps.camera, ps.fov, ps.material, ps.bsdf_swap, ps.light, ps.env};
   cJSON_AddItemToObject(pj, "perturb", cJSON_CreateDoubleArray(pv, 6));
+  cJSON_AddNumberToObject(pj, "texture_swap", ps.texture_swap);
+  if (ps.texture_dir)
+    cJSON_AddStringToObject(pj, "texture_dir", texture_dir);
+  else
+    cJSON_AddNullToObject(pj, "texture_dir");
   cJSON *sj = cJSON_AddObjectToObject(pj, "scenes");
   for (int i = 0; i < nsc; i++) {
     cJSON *o = cJSON_AddObjectToObject(sj, sc[i].name);

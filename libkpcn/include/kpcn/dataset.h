@@ -162,6 +162,12 @@ typedef struct kpcn_perturb_settings {
   double bsdf_swap; /* probability that a BSDF changes type, default 0.15 */
   double light;     /* light size/intensity/position jitter, default 1 */
   double env;       /* environment rotation, default 1 */
+  /* Probability that an eligible albedo texture is swapped, default 0.2: an image texture
+   * for another image, a constant for a checker of two colours, a checker for a constant. */
+  double texture_swap;
+  /* Image pool for those swaps: a directory (its .png/.jpg/.jpeg/.tga/.bmp/.hdr/.exr files,
+   * made absolute) or NULL = the albedo images the scene itself uses. Default NULL. */
+  const char *texture_dir;
 } kpcn_perturb_settings;
 
 void kpcn_perturb_settings_defaults(kpcn_perturb_settings *s);

@@ -1,17 +1,22 @@
 /* Pre-render augmentation (seed §3.3): random but deterministic perturbations of a
  * Tungsten scene.json — camera orbit/dolly/look-at jitter, field of view, material
  * albedo/hue, roughness, IOR, BSDF type swaps, light size/intensity/position and
- * environment rotation. Only scene parameters change; geometry files are untouched.
+ * environment rotation, albedo texture swaps. Only scene parameters change; geometry files
+ * are untouched.
  * Ranges are documented in docs/dataset.md; every strength scales its ranges. */
+#define _GNU_SOURCE /* realpath, strcasecmp */
 #include "core/internal.h"
 #include "kpcn/dataset.h"
 
 #include <cjson/cJSON.h>
+#include <dirent.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
+#include <sys/stat.h>
 
 #define PI 3.14159265358979323846
 
@@ -22,6 +27,8 @@ void kpcn_perturb_settings_defaults(kpcn_perturb_settings *s) {
   s->bsdf_swap = 0.15;
   s->light = 1.0;
   s->env = 1.0;
+  s->texture_swap = 0.2;
+  s->texture_dir = NULL;
 }
 
 typedef struct rng {
@@ -299,6 +306,254 @@ static void perturb_light(cJSON *p, rng *r, const kpcn_perturb_settings *s, summ
   }
 }
 
+/* ---- texture swaps ----
+ * Drawn from their own sub-stream of the (seed, variant) generator, after every other
+ * perturbation: with texture_swap = 0 a variant is byte-identical to what it was before
+ * texture swaps existed, and at any probability camera/material/light draws are unchanged. */
+
+typedef struct tex_pool {
+  char **files;
+  int n, cap;
+} tex_pool;
+
+static int pool_add(tex_pool *p, const char *f) {
+  for (int i = 0; i < p->n; i++)
+    if (!strcmp(p->files[i], f)) return 1;
+  if (p->n == p->cap) {
+    int cap = p->cap ? 2 * p->cap : 16;
+    char **nf = realloc(p->files, sizeof *nf * (size_t)cap);
+    if (!nf) return 0;
+    p->files = nf, p->cap = cap;
+  }
+  size_t l = strlen(f) + 1;
+  char *c = malloc(l);
+  if (!c) return 0;
+  memcpy(c, f, l);
+  p->files[p->n++] = c;
+  return 1;
+}
+static void pool_free(tex_pool *p) {
+  for (int i = 0; i < p->n; i++)
+    free(p->files[i]);
+  free(p->files);
+}
+static int cmp_str(const void *a, const void *b) {
+  return strcmp(*(char *const *)a, *(char *const *)b);
+}
+
+/* BSDFs whose albedo is their visible surface colour; glass, coats and null keep theirs
+ * (smooth_coat only accepts albedo 1 in the renderer). */
+static int tex_eligible(const cJSON *b) {
+  static const char *const types[] = {"lambert", "mirror",          "conductor",
+                                      "plastic", "rough_conductor", "rough_plastic"};
+  const cJSON *t = cJSON_GetObjectItemCaseSensitive(b, "type");
+  if (!cJSON_IsString(t)) return 0;
+  for (size_t i = 0; i < sizeof types / sizeof *types; i++)
+    if (!strcmp(t->valuestring, types[i])) return 1;
+  return 0;
+}
+
+/* The image file of an albedo: a bare file name or a {"type":"bitmap","file":...} object. */
+static const char *albedo_file(const cJSON *a) {
+  if (cJSON_IsString(a)) return a->valuestring[0] ? a->valuestring : NULL;
+  const cJSON *t = cJSON_GetObjectItemCaseSensitive(a, "type");
+  const cJSON *f = cJSON_GetObjectItemCaseSensitive(a, "file");
+  if (cJSON_IsString(t) && !strcmp(t->valuestring, "bitmap") && cJSON_IsString(f) &&
+      f->valuestring[0])
+    return f->valuestring;
+  return NULL;
+}
+
+static int gather_bitmaps(const cJSON *b, tex_pool *p) {
+  if (!cJSON_IsObject(b)) return 1;
+  const char *f =
+      tex_eligible(b) ? albedo_file(cJSON_GetObjectItemCaseSensitive(b, "albedo")) : NULL;
+  if (f && !pool_add(p, f)) return 0;
+  return gather_bitmaps(cJSON_GetObjectItemCaseSensitive(b, "substrate"), p);
+}
+
+static int is_image_name(const char *n) {
+  static const char *const ext[] = {".png", ".jpg", ".jpeg", ".tga", ".bmp", ".hdr", ".exr"};
+  size_t l = strlen(n);
+  for (size_t i = 0; i < sizeof ext / sizeof *ext; i++) {
+    size_t e = strlen(ext[i]);
+    if (l > e && !strcasecmp(n + l - e, ext[i])) return 1;
+  }
+  return 0;
+}
+
+/* Image files of a directory, absolute and sorted (readdir order is not deterministic). */
+static kpcn_status load_dir_pool(const char *dir, tex_pool *p) {
+  DIR *d = opendir(dir);
+  if (!d) return kpcn_fail(KPCN_ERR_IO, "perturb: texture_dir '%s' cannot be opened", dir);
+  char *rd = realpath(dir, NULL);
+  struct dirent *e;
+  int ok = rd != NULL;
+  while (ok && (e = readdir(d))) {
+    if (e->d_name[0] == '.' || !is_image_name(e->d_name)) continue;
+    size_t l = strlen(rd) + strlen(e->d_name) + 2;
+    char *f = malloc(l);
+    if (!f) {
+      ok = 0;
+      break;
+    }
+    snprintf(f, l, "%s/%s", rd, e->d_name);
+    struct stat st;
+    if (stat(f, &st) == 0 && S_ISREG(st.st_mode)) ok = pool_add(p, f);
+    free(f);
+  }
+  closedir(d);
+  free(rd);
+  if (!ok) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "perturb: listing texture_dir '%s'", dir);
+  if (p->n == 0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "perturb: texture_dir '%s' holds no image file (.png .jpg .jpeg .tga .bmp "
+                     ".hdr .exr)",
+                     dir);
+  qsort(p->files, (size_t)p->n, sizeof *p->files, cmp_str);
+  return KPCN_OK;
+}
+
+typedef struct tex_log {
+  int nswaps, full;
+  char list[200]; /* what changed, for the variant summary */
+} tex_log;
+
+/* Appends an entry; base names only, with characters that would break the JSON line the
+ * summary is written into replaced. */
+static void tex_log_add(tex_log *lg, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void tex_log_add(tex_log *lg, const char *fmt, ...) {
+  lg->nswaps++;
+  char e[128];
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(e, sizeof e, fmt, ap);
+  va_end(ap);
+  for (char *c = e; *c; c++)
+    if (*c == '"' || *c == '\\' || (unsigned char)*c < 32 || *c == ' ') *c = '_';
+  if (lg->full) return;
+  size_t n = strlen(lg->list);
+  if (n + strlen(e) + 6 >= sizeof lg->list) { /* keep room for ",..." */
+    strcat(lg->list, n ? ",..." : "...");
+    lg->full = 1;
+    return;
+  }
+  if (n) strcat(lg->list, ",");
+  strcat(lg->list, e);
+}
+static const char *base_name(const char *f) {
+  const char *s = strrchr(f, '/');
+  return s ? s + 1 : f;
+}
+
+/* A constant albedo: a number, [r,g,b] or {"type":"constant","value":...} (value 1 when
+ * absent, as the renderer). */
+static int albedo_constant(const cJSON *a, double c[3]) {
+  if (cJSON_IsNumber(a)) {
+    c[0] = c[1] = c[2] = a->valuedouble;
+    return 1;
+  }
+  if (get_vec3(a, c)) return 1;
+  const cJSON *t = cJSON_GetObjectItemCaseSensitive(a, "type");
+  if (!cJSON_IsObject(a) || !cJSON_IsString(t) || strcmp(t->valuestring, "constant")) return 0;
+  const cJSON *v = cJSON_GetObjectItemCaseSensitive(a, "value");
+  if (!v) {
+    c[0] = c[1] = c[2] = 1;
+    return 1;
+  }
+  return albedo_constant(v, c);
+}
+
+static void swap_texture(cJSON *b, rng *r, const kpcn_perturb_settings *s, const tex_pool *pool,
+                         tex_log *lg) {
+  if (!cJSON_IsObject(b)) return;
+  /* A fixed number of draws per BSDF, whatever happens to it. */
+  double u[8];
+  for (int i = 0; i < 8; i++)
+    u[i] = urand(r);
+  cJSON *a = cJSON_GetObjectItemCaseSensitive(b, "albedo");
+  if (a && tex_eligible(b) && u[0] < s->texture_swap) {
+    const char *file = albedo_file(a);
+    const cJSON *ty = cJSON_GetObjectItemCaseSensitive(a, "type");
+    double c[3];
+    if (file) {
+      /* Another image of the pool; none when the pool holds only this one. */
+      int alt = 0;
+      for (int i = 0; i < pool->n; i++)
+        alt += strcmp(pool->files[i], file) != 0;
+      if (alt > 0) {
+        int k = (int)(u[1] * alt) % alt;
+        const char *nf = NULL;
+        for (int i = 0; i < pool->n && !nf; i++)
+          if (strcmp(pool->files[i], file) && k-- == 0) nf = pool->files[i];
+        tex_log_add(lg, "%s>%s", base_name(file), base_name(nf));
+        if (cJSON_IsString(a))
+          cJSON_ReplaceItemInObjectCaseSensitive(b, "albedo", cJSON_CreateString(nf));
+        else
+          cJSON_ReplaceItemInObjectCaseSensitive(a, "file", cJSON_CreateString(nf));
+      }
+    } else if (albedo_constant(a, c)) {
+      /* Two colours around the constant: a brighter and a darker hue-shifted one. */
+      double on[3] = {c[0], c[1], c[2]}, off[3] = {c[0], c[1], c[2]};
+      perturb_rgb(on, (u[2] * 2 - 1) * PI / 3, 1, exp(u[3] * 0.6 - 0.2));
+      perturb_rgb(off, (u[4] * 2 - 1) * PI, exp(u[5] * 0.8 - 0.4), exp(-0.4 - 1.2 * u[6]));
+      int res = 2 + (int)(u[7] * 23); /* 2..24 checks per unit of uv */
+      cJSON *ck = cJSON_CreateObject();
+      cJSON_AddStringToObject(ck, "type", "checker");
+      cJSON_AddItemToObject(ck, "on_color", cJSON_CreateDoubleArray(on, 3));
+      cJSON_AddItemToObject(ck, "off_color", cJSON_CreateDoubleArray(off, 3));
+      cJSON_AddNumberToObject(ck, "res_u", res);
+      cJSON_AddNumberToObject(ck, "res_v", res);
+      cJSON_ReplaceItemInObjectCaseSensitive(b, "albedo", ck);
+      tex_log_add(lg, "const>checker%d", res);
+    } else if (cJSON_IsString(ty) && !strcmp(ty->valuestring, "checker")) {
+      /* The checker's mean colour (Tungsten's defaults 0.8/0.2 where absent), jittered. */
+      double on[3] = {0.8, 0.8, 0.8}, off[3] = {0.2, 0.2, 0.2};
+      get_vec3(cJSON_GetObjectItemCaseSensitive(a, "on_color"), on);
+      get_vec3(cJSON_GetObjectItemCaseSensitive(a, "off_color"), off);
+      double m[3];
+      for (int i = 0; i < 3; i++)
+        m[i] = (on[i] + off[i]) / 2;
+      perturb_rgb(m, 0, 1, exp(u[2] * 0.4 - 0.2));
+      set_vec3(b, "albedo", m);
+      tex_log_add(lg, "checker>const");
+    }
+  }
+  swap_texture(cJSON_GetObjectItemCaseSensitive(b, "substrate"), r, s, pool, lg);
+}
+
+static kpcn_status perturb_textures(cJSON *root, rng *r, const kpcn_perturb_settings *s,
+                                    summary *sm) {
+  tex_pool pool = {0};
+  cJSON *b, *p, *bsdfs = cJSON_GetObjectItemCaseSensitive(root, "bsdfs"),
+                *prims = cJSON_GetObjectItemCaseSensitive(root, "primitives");
+  if (s->texture_dir) {
+    kpcn_status st = load_dir_pool(s->texture_dir, &pool);
+    if (st != KPCN_OK) {
+      pool_free(&pool);
+      return st;
+    }
+  } else {
+    int ok = 1;
+    cJSON_ArrayForEach(b, bsdfs) ok &= gather_bitmaps(b, &pool);
+    cJSON_ArrayForEach(p, prims) ok &=
+        gather_bitmaps(cJSON_GetObjectItemCaseSensitive(p, "bsdf"), &pool);
+    if (!ok) {
+      pool_free(&pool);
+      return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "perturb: texture pool");
+    }
+  }
+  tex_log lg = {0, 0, ""};
+  cJSON_ArrayForEach(b, bsdfs) swap_texture(b, r, s, &pool, &lg);
+  cJSON_ArrayForEach(p, prims) {
+    cJSON *ib = cJSON_GetObjectItemCaseSensitive(p, "bsdf");
+    if (cJSON_IsObject(ib)) swap_texture(ib, r, s, &pool, &lg);
+  }
+  pool_free(&pool);
+  note(sm, "textures(swaps=%d%s%s)", lg.nswaps, lg.nswaps ? ":" : "", lg.list);
+  return KPCN_OK;
+}
+
 kpcn_status kpcn_perturb_scene(char **out_json, const char *scene_json, uint64_t seed, int variant,
                                const kpcn_perturb_settings *s, char *summary_buf,
                                size_t summary_size) {
@@ -321,6 +576,7 @@ kpcn_status kpcn_perturb_scene(char **out_json, const char *scene_json, uint64_t
   if (variant > 0) {
     rng r = {seed * 0x9e3779b97f4a7c15ull ^ ((uint64_t)variant * 0xd1b54a32d192ed03ull)};
     urand(&r);
+    const rng r0 = r;
     cJSON *cam = cJSON_GetObjectItemCaseSensitive(root, "camera");
     if (cJSON_IsObject(cam)) perturb_camera(cam, &r, s, &sm);
     int nswaps = 0;
@@ -335,6 +591,16 @@ kpcn_status kpcn_perturb_scene(char **out_json, const char *scene_json, uint64_t
       if (is_emitter(p)) perturb_light(p, &r, s, &sm);
     }
     if (s->material > 0) note(&sm, "materials(swaps=%d)", nswaps);
+    if (s->texture_swap > 0) {
+      /* Sub-stream of the same (seed, variant) generator; see perturb_textures. */
+      rng tr = {r0.s ^ 0x6a09e667f3bcc909ull};
+      kpcn_status st = perturb_textures(root, &tr, s, &sm);
+      if (st != KPCN_OK) {
+        cJSON_Delete(root);
+        if (summary_buf && summary_size) summary_buf[0] = 0;
+        return st;
+      }
+    }
   } else {
     note(&sm, "unperturbed");
   }
