@@ -13,19 +13,6 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-static char *slurp(const char *path) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return NULL;
-  fseek(f, 0, SEEK_END);
-  long n = ftell(f);
-  fseek(f, 0, SEEK_SET);
-  char *b = malloc((size_t)n + 1);
-  size_t got = fread(b, 1, (size_t)n, f);
-  b[got] = 0;
-  fclose(f);
-  return b;
-}
-
 static double vlen(const cJSON *a, const cJSON *b) {
   double s = 0;
   for (int i = 0; i < 3; i++) {
@@ -40,7 +27,7 @@ static const cJSON *path2(const cJSON *o, const char *a, const char *b) {
 }
 
 static void test_scene(const char *file) {
-  char *base = slurp(file);
+  char *base = kt_slurp(file, NULL);
   CHECK(base != NULL);
   if (!base) return;
   cJSON *orig = cJSON_Parse(base);
@@ -441,7 +428,7 @@ static void test_render_swapped(void) {
   kpcn_perturb_settings_defaults(&s);
   s.texture_swap = 1;
   for (int i = 0; i < 2; i++) {
-    char *base = slurp(scenes[i]);
+    char *base = kt_slurp(scenes[i], NULL);
     CHECK(base != NULL);
     if (!base) continue;
     char *out = NULL, sm[512];

@@ -14,21 +14,6 @@ static long file_size(const char *p) {
   return stat(p, &st) == 0 ? (long)st.st_size : -1;
 }
 
-static unsigned char *slurp(const char *p, long *n) {
-  FILE *f = fopen(p, "rb");
-  if (!f) return NULL;
-  fseek(f, 0, SEEK_END);
-  *n = ftell(f);
-  fseek(f, 0, SEEK_SET);
-  unsigned char *b = malloc((size_t)*n);
-  if (b && fread(b, 1, (size_t)*n, f) != (size_t)*n) {
-    free(b);
-    b = NULL;
-  }
-  fclose(f);
-  return b;
-}
-
 static void spit(const char *p, const unsigned char *b, long n) {
   FILE *f = fopen(p, "wb");
   if (!f) return;
@@ -114,7 +99,7 @@ static void test_truncated(void) {
     snprintf(name, sizeof name, "valid%d.exr", k);
     const char *path = write_valid(name, 61, 45, comps[k]);
     long n = 0;
-    unsigned char *b = slurp(path, &n);
+    unsigned char *b = (unsigned char *)kt_slurp(path, &n);
     CHECK(b != NULL && n > 1000);
     if (!b) continue;
     /* cut points: inside the header, half the file (the brief's case), one byte short */
@@ -152,7 +137,7 @@ static void test_truncated(void) {
 static void test_absurd_header(void) {
   const char *path = write_valid("small.exr", 3, 2, KPCN_EXR_NONE);
   long n = 0;
-  unsigned char *b = slurp(path, &n);
+  unsigned char *b = (unsigned char *)kt_slurp(path, &n);
   CHECK(b != NULL);
   if (!b) return;
   const char key[] = "dataWindow\0box2i"; /* name, NUL, type; then size (4) + 4 ints */

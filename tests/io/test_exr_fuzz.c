@@ -9,21 +9,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-static unsigned char *slurp(const char *p, long *n) {
-  FILE *f = fopen(p, "rb");
-  if (!f) return NULL;
-  fseek(f, 0, SEEK_END);
-  *n = ftell(f);
-  fseek(f, 0, SEEK_SET);
-  unsigned char *b = malloc((size_t)*n);
-  if (b && fread(b, 1, (size_t)*n, f) != (size_t)*n) {
-    free(b);
-    b = NULL;
-  }
-  fclose(f);
-  return b;
-}
-
 static const char *make_seed(const char *name, kpcn_exr_compression comp, kpcn_exr_pixel_type pt) {
   const char *names[] = {"R", "G", "B", "N.X", "N.Y", "N.Z", "Z"};
   kpcn_image *img = NULL;
@@ -50,7 +35,7 @@ static unsigned rnd(unsigned *s) {
 
 static void fuzz_file(const char *seed_path, int iters, unsigned seed, int *ok, int *err) {
   long n = 0;
-  unsigned char *orig = slurp(seed_path, &n);
+  unsigned char *orig = (unsigned char *)kt_slurp(seed_path, &n);
   CHECK(orig != NULL);
   if (!orig) return;
   unsigned char *buf = malloc((size_t)n);

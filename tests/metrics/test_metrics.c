@@ -133,19 +133,6 @@ static double run(kpcn_metric m, const float *x, const float *y, int w, int h, i
   return r.value;
 }
 
-static char *slurp(const char *path) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return NULL;
-  fseek(f, 0, SEEK_END);
-  long n = ftell(f);
-  fseek(f, 0, SEEK_SET);
-  char *buf = malloc((size_t)n + 1);
-  size_t got = fread(buf, 1, (size_t)n, f);
-  buf[got] = 0;
-  fclose(f);
-  return buf;
-}
-
 /* Checks every metric of one reference case on planar x/y. */
 static void check_case(const cJSON *cs, const float *x, const float *y, int w, int h, int nch) {
   const char *name = cJSON_GetObjectItem(cs, "name")->valuestring;
@@ -169,7 +156,7 @@ static void check_case(const cJSON *cs, const float *x, const float *y, int w, i
 static void test_reference(void) {
   char path[1024];
   snprintf(path, sizeof path, "%s/metrics/reference.json", KPCN_TESTDATA);
-  char *txt = slurp(path);
+  char *txt = kt_slurp(path, NULL);
   CHECK(txt != NULL);
   if (!txt) return;
   cJSON *root = cJSON_Parse(txt);

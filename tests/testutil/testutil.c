@@ -40,3 +40,21 @@ float kt_randf(unsigned *state) {
   *state = x;
   return (x >> 8) * (1.0f / 16777216.0f);
 }
+
+char *kt_slurp(const char *path, long *len) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return NULL;
+  fseek(f, 0, SEEK_END);
+  long n = ftell(f);
+  fseek(f, 0, SEEK_SET);
+  char *b = n >= 0 ? malloc((size_t)n + 1) : NULL;
+  if (b && fread(b, 1, (size_t)n, f) != (size_t)n) {
+    free(b);
+    b = NULL;
+  }
+  fclose(f);
+  if (!b) return NULL;
+  b[n] = 0;
+  if (len) *len = n;
+  return b;
+}

@@ -38,6 +38,10 @@ int kt_summary(const char *suite);
 const char *kt_tmpdir(void);
 const char *kt_tmpfile(const char *name);
 
+/* Reads a whole file into a malloc'd, NUL-terminated buffer (NULL on failure); its length
+ * goes to *len when len is non-NULL. The caller frees it. */
+char *kt_slurp(const char *path, long *len);
+
 /* Deterministic PRNG for test data (xorshift). */
 float kt_randf(unsigned *state);
 #endif

@@ -379,7 +379,7 @@ int ds_cmd_run(int argc, char **argv) {
     /* Failed previews surface below as failed jobs ("no usable preview"). */
   }
   /* Phase 2: my render jobs, minus finished ones and rejected variants. */
-  int *todo = malloc(sizeof(int) * (size_t)(nmine + 1)), ntodo = 0, nrej_var = 0;
+  int *pending = malloc(sizeof(int) * (size_t)(nmine + 1)), npending = 0, nrej_var = 0;
   char last_rejected[DS_PATH] = "";
   for (int q = 0; q < nmine && rc == 0; q++) {
     const ds_job *j = &m.jobs[mine[q]];
@@ -421,13 +421,13 @@ int ds_cmd_run(int argc, char **argv) {
         continue;
       }
     }
-    todo[ntodo++] = mine[q];
+    pending[npending++] = mine[q];
   }
   if (o.dry_run) {
-    for (int i = 0; i < ntodo; i++)
-      printf("would render %s\n", m.jobs[todo[i]].id);
-  } else if (rc == 0 && ntodo) {
-    if (run_pool(&o, &m, todo, ntodo, &c, t0) != 0) rc = 130;
+    for (int i = 0; i < npending; i++)
+      printf("would render %s\n", m.jobs[pending[i]].id);
+  } else if (rc == 0 && npending) {
+    if (run_pool(&o, &m, pending, npending, &c, t0) != 0) rc = 130;
     if (ds_isatty()) fputc('\n', stderr);
   }
   if (!o.dry_run)
@@ -435,7 +435,7 @@ int ds_cmd_run(int argc, char **argv) {
            "failed %d, %.1f s%s\n",
            o.shard_i, o.shard_n, nmine, c.done, c.skipped, c.rejected_jobs, nrej_var, c.failed,
            ds_now() - t0, rc == 130 ? " (interrupted; run again to resume)" : "");
-  free(todo);
+  free(pending);
   free(pv);
   free(mine);
   ds_manifest_free(&m);
