@@ -4,6 +4,9 @@
  *   bench_denoise --size WxH      another frame size
  *   bench_denoise --4k            paper preset, tiled, on a 3840x2160 frame: time + peak RSS
  *                                 (run alone so the process's peak RSS is this frame's)
+ *   bench_denoise --bf16-quality  PSNR of bf16 vs fp32 inference with the shipped model on a
+ *                                 fresh 16-spp render of the held-out main-job scene against
+ *                                 its bundled reference (also part of the default run)
  *   --threads N  --tile N  --preset NAME (only that preset)  --no-baselines
  *   --max-tiles N                 stop (through the progress callback) after N tiles of the
  *                                 diffuse pass: peak memory is reached by the first full tile
@@ -21,6 +24,12 @@
 #include <sys/resource.h>
 
 #include "kpcn/denoise.h"
+#include "kpcn/exr.h"
+#include "kpcn/metrics.h"
+#ifdef KPCN_HAVE_EMBREE
+#include "kpcn/render.h"
+#include "kpcn/scene.h"
+#endif
 #include "synth.h"
 #include "testutil.h"
 
@@ -118,8 +127,72 @@ static void bench_kpcn(kpcn_aov_set *a, const char *preset, int bf16, int tile, 
   free(out);
 }
 
+/* bf16 changes the denoised image by rounding weights and activations to 8 mantissa bits;
+ * what matters is the change in quality on a real render with real (trained) weights. */
+static void bench_bf16_quality(int nthreads) {
+#ifdef KPCN_HAVE_EMBREE
+  const char *scene_path = KPCN_TESTDATA "/scenes/diffuse-interreflection/scene.json";
+  const char *ref_path = KPCN_TESTDATA "/references/diffuse-interreflection_256.exr";
+  const char *model_path = KPCN_TESTDATA "/models/kpcn-cpu.safetensors";
+  kpcn_scene *sc = NULL;
+  kpcn_aov_set *noisy = NULL, *ref = NULL;
+  kpcn_model *m = NULL;
+  if (kpcn_scene_load(scene_path, &sc) != KPCN_OK || kpcn_exr_read_aov(ref_path, &ref) != KPCN_OK ||
+      kpcn_model_load(model_path, &m) != KPCN_OK) {
+    printf("bf16 quality: skipped (%s)\n", kpcn_last_error());
+    goto done;
+  }
+  kpcn_render_settings rs = kpcn_render_settings_defaults();
+  rs.spp = 16, rs.seed = 1, rs.width = ref->width, rs.height = ref->height;
+  rs.nthreads = nthreads;
+  if (kpcn_render(sc, &rs, &noisy) != KPCN_OK) {
+    printf("bf16 quality: render failed: %s\n", kpcn_last_error());
+    goto done;
+  }
+  double psnr[2] = {0, 0}, ms[2] = {0, 0};
+  size_t P = kpcn_aov_plane_size(noisy);
+  float *out = malloc(sizeof(float) * 3 * P);
+  for (int b = 0; b < 2 && out; b++) {
+    kpcn_denoiser_options o;
+    kpcn_denoiser_options_defaults(&o);
+    o.bf16 = b;
+    o.nthreads = nthreads;
+    kpcn_denoiser *d = NULL;
+    kpcn_metric_options mo;
+    kpcn_metric_options_defaults(&mo);
+    kpcn_metric_result r;
+    if (kpcn_denoiser_create_with_model(&d, m, &o) != KPCN_OK ||
+        kpcn_denoiser_execute_aov(d, noisy, out) != KPCN_OK ||
+        kpcn_metric_planar(KPCN_METRIC_PSNR, out, ref->buf[KPCN_BUF_COLOR], noisy->width,
+                           noisy->height, 3, &mo, &r, NULL) != KPCN_OK) {
+      printf("bf16 quality: %s\n", kpcn_last_error());
+      kpcn_denoiser_destroy(d);
+      free(out);
+      goto done;
+    }
+    kpcn_denoise_stats st;
+    kpcn_denoiser_get_stats(d, &st);
+    psnr[b] = r.value, ms[b] = st.total_s * 1e3;
+    kpcn_denoiser_destroy(d);
+  }
+  free(out);
+  printf("bf16 quality (shipped kpcn-cpu model, diffuse-interreflection %dx%d at 16 spp vs the "
+         "bundled reference): PSNR fp32 %.3f dB, bf16 %.3f dB, change %+.3f dB (target |change| "
+         "<= 0.1); %.0f ms vs %.0f ms\n",
+         noisy->width, noisy->height, psnr[0], psnr[1], psnr[1] - psnr[0], ms[0], ms[1]);
+done:
+  kpcn_aov_destroy(noisy);
+  kpcn_aov_destroy(ref);
+  kpcn_model_destroy(m);
+  kpcn_scene_destroy(sc);
+#else
+  (void)nthreads;
+  printf("bf16 quality: skipped (built without the renderer)\n");
+#endif
+}
+
 int main(int argc, char **argv) {
-  int W = 1024, H = 1024, nthreads = 0, tile = 0, k4 = 0, baselines = 1;
+  int W = 1024, H = 1024, nthreads = 0, tile = 0, k4 = 0, baselines = 1, quality_only = 0;
   const char *only = NULL;
   for (int i = 1; i < argc; i++) {
     if (!strcmp(argv[i], "--size") && i + 1 < argc) {
@@ -136,11 +209,17 @@ int main(int argc, char **argv) {
       baselines = 0;
     } else if (!strcmp(argv[i], "--4k")) {
       k4 = 1;
+    } else if (!strcmp(argv[i], "--bf16-quality")) {
+      quality_only = 1;
     } else {
       fprintf(stderr, "usage: bench_denoise [--size WxH] [--4k] [--threads N] [--tile N] "
-                      "[--preset NAME] [--no-baselines] [--max-tiles N]\n");
+                      "[--preset NAME] [--no-baselines] [--max-tiles N] [--bf16-quality]\n");
       return 2;
     }
+  }
+  if (quality_only) {
+    bench_bf16_quality(nthreads);
+    return 0;
   }
   if (k4) {
     W = 3840;
@@ -160,6 +239,7 @@ int main(int argc, char **argv) {
     bench_baseline(a, KPCN_DENOISE_BILATERAL, nthreads);
     bench_baseline(a, KPCN_DENOISE_NLMEANS, nthreads);
   }
+  if (!only) bench_bf16_quality(nthreads);
   const char *presets[] = {"cpu", "paper"};
   for (int p = 0; p < 2; p++) {
     if (only && strcmp(only, presets[p])) continue;

@@ -13,6 +13,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 static const char *g_store;
 /* kt_tmpfile rotates 8 static buffers; the tests keep many paths alive */
@@ -201,6 +202,62 @@ static void test_validation(void) {
   CHECK(strstr(kpcn_last_error(), "/nonexistent/val.exr") != NULL);
 }
 
+/* --best keeps the model of the lowest validation relMSE; --lr2 is the base lr of stage 2 */
+static void test_best_and_stage2_lr(void) {
+  kpcn_aov_set *n, *r;
+  CHECK(tf_make_pair(&n, &r, 40, 32, 9, 0) == 0);
+  const char *np = tf_tmp("best_noisy.exr"), *rp = tf_tmp("best_ref.exr");
+  CHECK(kpcn_exr_write_aov(np, n, NULL) == KPCN_OK);
+  CHECK(kpcn_exr_write_aov(rp, r, NULL) == KPCN_OK);
+  kpcn_aov_destroy(n), kpcn_aov_destroy(r);
+  kpcn_train_settings s;
+  settings(&s, tf_tmp("b.safetensors"));
+  const char *vn[1] = {np}, *vr[1] = {rp}, *best = tf_tmp("b.best.safetensors");
+  s.nval = 1, s.val_noisy = vn, s.val_ref = vr, s.val_every = 1, s.log_every = 1;
+  s.best_path = best;
+  s.stage2_lr = 1e-4;
+  s.adam.lr = 5e-2; /* large steps: validation goes up and down, so best != last */
+  s.nthreads = 1;
+  kpcn_trainer *t;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (!t) return;
+  for (int i = 0; i < 3; i++)
+    CHECK(kpcn_trainer_step(t, NULL) == KPCN_OK);
+  CHECK(kpcn_adam_get_settings(t->adam[0])->lr == 5e-2); /* stage 1 */
+  CHECK(kpcn_trainer_step(t, NULL) == KPCN_OK);
+  CHECK(kpcn_adam_get_settings(t->adam[0])->lr == 1e-4 &&
+        kpcn_adam_get_settings(t->adam[1])->lr == 1e-4);
+  kpcn_trainer_destroy(t);
+  unlink(best);
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+  /* the best file holds the iteration whose CSV val_relmse is the minimum */
+  FILE *f = fopen(tf_tmp("b.safetensors.csv"), "r");
+  char line[512];
+  double bestv = 1e300;
+  long long bestit = -1;
+  while (f && fgets(line, sizeof line, f)) {
+    if (line[0] == 'i') continue;
+    const char *c = line;
+    for (int k = 0; k < 6 && c; k++)
+      c = strchr(c, ','), c = c ? c + 1 : NULL;
+    if (c && *c != ',' && strtod(c, NULL) < bestv) bestv = strtod(c, NULL), bestit = atoll(line);
+  }
+  if (f) fclose(f);
+  kpcn_model *m = NULL;
+  CHECK(bestit > 0 && kpcn_model_load(best, &m) == KPCN_OK);
+  if (m) {
+    const char *it = kpcn_model_get_meta(m, "train.iterations");
+    CHECK(it && atoll(it) == bestit);
+    kpcn_model_destroy(m);
+  }
+  /* best without validation images is refused */
+  s.nval = 0;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "validation") != NULL);
+}
+
 static void test_bad_stores(void) {
   kpcn_train_settings s;
   kpcn_trainer *t = NULL;
@@ -290,6 +347,7 @@ int main(void) {
   test_batch_wiring();
   test_determinism_and_resume();
   test_validation();
+  test_best_and_stage2_lr();
   test_bad_stores();
   return kt_summary("train_pipeline");
 }

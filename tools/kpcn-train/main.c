@@ -29,12 +29,14 @@ static void usage(FILE *f) {
         "  --loss2 NAME              stage-2 loss (default: same as --loss)\n"
         "  --ssim-window N           SSIM window (odd, default 11), --loss-margin M\n"
         "  --lr X (1e-3) --lr-decay X (0.96) --decay-every N (100000) --staircase --clip X\n"
+        "  --lr2 X                   base learning rate of stage 2 (default: --lr)\n"
         "  --batch N (16) --patch P (64) --iters N (1000) --stage1-iters N (0.6*iters)\n"
         "  --threads N (0 = all) --seed N (1)\n"
         "  --val NOISY.exr,REF.exr   validation pair (repeatable); --val-from-store uses the\n"
         "                            store's sources of split 'val'\n"
         "  --val-every N --ckpt-every N --log-every N (10)\n"
         "  --ckpt PATH --csv PATH --plot PATH   (default MODEL.ckpt/.csv/.png; '' = none)\n"
+        "  --best PATH               also write the model with the lowest validation relMSE\n"
         "  --time-limit MINUTES      stop cleanly and checkpoint\n"
         "  --resume                  continue bit-exactly from the checkpoint\n"
         "  --no-colorswap --no-mirror --no-rotate --no-shift   disable augmentations\n"
@@ -238,6 +240,7 @@ int main(int argc, char **argv) {
     STR("--ckpt", s.ckpt_path)
     STR("--csv", s.csv_path)
     STR("--plot", s.plot_path)
+    STR("--best", s.best_path)
     STR("--loss2", loss2)
     INT("--layers", 1, KPCN_NN_MAX_LAYERS - 1, layers)
     INT("--channels", 1, 1024, channels)
@@ -256,6 +259,7 @@ int main(int argc, char **argv) {
     INT("--log-every", 1, (long long)1e12, s.log_every)
     INT("--decay-every", 0, (long long)1e12, s.adam.decay_every)
     DBL("--lr", 1e-12, 10, s.adam.lr)
+    DBL("--lr2", 1e-12, 1, s.stage2_lr)
     DBL("--lr-decay", 1e-6, 1, s.adam.lr_decay)
     DBL("--clip", 0, 1e12, s.adam.clip_norm)
     DBL("--time-limit", 0, 1e7, s.time_limit_s)

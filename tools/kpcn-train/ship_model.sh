@@ -7,7 +7,10 @@
 # environment (defaults): MINUTES (60) training budget, PRESET (cpu), ITERS (100000; the time
 #   limit normally ends the run first), STAGE1_FRACTION (0.6 of the iterations, or of the
 #   budget when time-limited: see below), LOSS2 (l1), THREADS (0), SEED (1),
-#   NAME (kpcn-$PRESET), DATASET_RECIPE (free text: how the store was made), KPCN_TRAIN.
+#   NAME (kpcn-$PRESET), DATASET_RECIPE (free text: how the store was made), KPCN_TRAIN,
+#   LR (1e-3), LR2 (stage-2 lr, default LR), DECAY_EVERY (iterations per x0.96, default
+#   iters/20), TIME_LIMIT (minutes, none), KEEP_BEST (1: ship the model of the validation
+#   with the lowest relMSE instead of the last one; needs validation pairs).
 # With a time budget the iteration count is unknown in advance, so the script first measures
 # the speed (20 iterations) and sets --iters to fit MINUTES, --stage1-iters to STAGE1_FRACTION.
 # Resumable: if the run is interrupted, re-running continues from its checkpoint.
@@ -41,18 +44,29 @@ else
   echo "$iters" > "$work/iters"
 fi
 stage1=$(awk -v n="$iters" -v f="$FRAC" 'BEGIN { print int(n * f) }')
+LR=${LR:-1e-3} DECAY_EVERY=${DECAY_EVERY:-$((iters / 20 > 0 ? iters / 20 : 1))}
 args=(--store "$store" -o "$work/model.safetensors" --preset "$PRESET" --iters "$iters"
-  --stage1-iters "$stage1" --loss l1 --loss2 "$LOSS2" --threads "$THREADS" --seed "$SEED"
-  --val-every $((iters / 20 > 0 ? iters / 20 : 1)) --ckpt-every 100 "${val[@]}")
+  --stage1-iters "$stage1" --loss l1 --loss2 "$LOSS2" --lr "$LR" --decay-every "$DECAY_EVERY"
+  --threads "$THREADS" --seed "$SEED" --val-every $((iters / 28 > 0 ? iters / 28 : 1))
+  --ckpt-every 100 "${val[@]}")
+[ -n "${LR2:-}" ] && args+=(--lr2 "$LR2")
+[ -n "${TIME_LIMIT:-}" ] && args+=(--time-limit "$TIME_LIMIT")
+shipped=$work/model.safetensors
+if [ "${KEEP_BEST:-0}" = 1 ]; then
+  args+=(--best "$work/best.safetensors")
+  shipped=$work/best.safetensors
+fi
 resume=()
 [ -f "$work/model.safetensors.ckpt" ] && resume=(--resume)
 echo "ship_model.sh: $bin ${args[*]} ${resume[*]}"
 "$bin" "${args[@]}" "${resume[@]}"
 
-cp "$work/model.safetensors" "$outdir/$NAME.safetensors"
+cp "$shipped" "$outdir/$NAME.safetensors"
 cp "$work/model.safetensors.png" "$outdir/$NAME-curves.png"
 cp "$work/model.safetensors.csv" "$outdir/$NAME-log.csv"
 last=$(awk -F, 'NR > 1 && $7 != "" { r = $7; s = $8; p = $9; it = $1 } END { print it "," r "," s "," p }' "$work/model.safetensors.csv")
+best=$(awk -F, 'NR > 1 && $7 != "" && (b == "" || $7 < b) { b = $7; s = $8; p = $9; it = $1 } END { print it "," b "," s "," p }' "$work/model.safetensors.csv")
+done_iters=$(awk -F, 'NR > 1 { it = $1 } END { print it }' "$work/model.safetensors.csv")
 secs=$(awk -F, 'NR > 1 { s = $6 } END { print s }' "$work/model.safetensors.csv")
 cpu=$(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -1)
 {
@@ -67,10 +81,11 @@ cpu=$(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -1)
   echo "| preset | $PRESET |"
   echo "| patch store | \`$(basename "$store")\` |"
   echo "| dataset recipe | ${DATASET_RECIPE:-see docs/dataset.md} |"
-  echo "| iterations | $iters (stage 1: $stage1, stage-2 loss $LOSS2) |"
+  echo "| iterations | $done_iters of $iters planned (stage 1: $stage1, stage-2 loss $LOSS2) |"
   echo "| training time | ${secs} s |"
   echo "| hardware | ${cpu:-unknown CPU}, $(nproc) cores, threads=$THREADS |"
-  echo "| final validation (iter, relMSE, SSIM, PSNR dB) | $last |"
+  echo "| last validation (iter, relMSE, SSIM, PSNR dB) | $last |"
+  [ "${KEEP_BEST:-0}" = 1 ] && echo "| shipped: best validation (iter, relMSE, SSIM, PSNR dB) | $best |"
   echo
   echo "Exact command:"
   echo

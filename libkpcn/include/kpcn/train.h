@@ -127,6 +127,8 @@ void kpcn_adam_set_steps(kpcn_adam *a, int64_t t);
 float *kpcn_adam_moment1(kpcn_adam *a);
 float *kpcn_adam_moment2(kpcn_adam *a);
 const kpcn_adam_settings *kpcn_adam_get_settings(const kpcn_adam *a);
+/* Changes the base learning rate of later steps (the decay schedule still applies). */
+void kpcn_adam_set_lr(kpcn_adam *a, double lr);
 
 /* ============================================================ curves: PNG plot ====
  * Draws up to KPCN_PLOT_MAX_SERIES poly-lines on shared axes (x linear, y linear or
@@ -197,6 +199,8 @@ typedef struct kpcn_train_settings {
   kpcn_loss_settings loss; /* defaults */
   int loss_margin;         /* 0 */
   kpcn_adam_settings adam; /* defaults; decay_every default 100000 */
+  double stage2_lr;        /* base lr of stage-2 steps; 0 = adam.lr (fine-tuning the whole
+                              pipeline usually wants a smaller step than pre-training) */
   kpcn_augment_draw_settings augment; /* defaults of augment.h (colour swap, mirror, rot90) */
   int crop_jitter;                    /* 1: random crop offset (shift); 0: centred crop */
   int batch;                          /* 16 */
@@ -213,10 +217,12 @@ typedef struct kpcn_train_settings {
   const char *ckpt_path;              /* NULL = "<out_path>.ckpt" */
   const char *csv_path;               /* NULL = "<out_path>.csv"; "" = none */
   const char *plot_path;              /* NULL = "<out_path>.png"; "" = none */
-  int resume;                         /* 1: continue from ckpt_path (must exist) */
-  int nval;                           /* validation image pairs (full images) */
-  const char *const *val_noisy;       /* noisy AOV EXRs */
-  const char *const *val_ref;         /* reference EXRs (color R G B used) */
+  const char *best_path;        /* NULL/"" = none: after every validation that improves the mean
+                                   val relMSE, the model is also written here (atomically) */
+  int resume;                   /* 1: continue from ckpt_path (must exist) */
+  int nval;                     /* validation image pairs (full images) */
+  const char *const *val_noisy; /* noisy AOV EXRs */
+  const char *const *val_ref;   /* reference EXRs (color R G B used) */
   kpcn_log_fn log;
   void *log_user;
   kpcn_train_progress_fn progress;

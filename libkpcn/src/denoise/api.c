@@ -231,15 +231,21 @@ static kpcn_status assemble(const kpcn_denoiser *d, int W, int H, kpcn_aov_set *
 /* Runs the configured method on a planar AOV set into planar RGB out. */
 static kpcn_status run_method(kpcn_denoiser *d, const kpcn_aov_set *aov, float *out) {
   d->prog.cancelled = 0;
+  unsigned csr = kpcn_fast_fp_begin(d->opt.nthreads);
+  kpcn_status s;
   switch (d->opt.method) {
   case KPCN_DENOISE_BILATERAL:
-    return kpcn_baseline_bilateral(aov, &d->opt.bilateral, out, d->opt.nthreads, &d->prog);
+    s = kpcn_baseline_bilateral(aov, &d->opt.bilateral, out, d->opt.nthreads, &d->prog);
+    break;
   case KPCN_DENOISE_NLMEANS:
-    return kpcn_baseline_nlmeans(aov, &d->opt.nlmeans, out, d->opt.nthreads, &d->prog);
+    s = kpcn_baseline_nlmeans(aov, &d->opt.nlmeans, out, d->opt.nthreads, &d->prog);
+    break;
   default:
-    return kpcn_pipeline_run(d->model, aov, d->opt.tile, d->opt.bf16, d->opt.nthreads, &d->prog,
-                             out, &d->stats);
+    s = kpcn_pipeline_run(d->model, aov, d->opt.tile, d->opt.bf16, d->opt.nthreads, &d->prog, out,
+                          &d->stats);
   }
+  kpcn_fast_fp_end(csr, d->opt.nthreads);
+  return s;
 }
 
 kpcn_status kpcn_denoiser_execute(kpcn_denoiser *d, float *out, int width, int height,

@@ -76,16 +76,22 @@ static double now_s(void) {
 }
 
 /* oneDNN's OpenMP runtime sizes its parallel regions from omp_get_max_threads() of the
- * calling thread, both when a primitive is created and when it runs. */
+ * calling thread, both when a primitive is created and when it runs; its kernels also run
+ * with denormals flushed (see kpcn_fast_fp_begin). */
 typedef struct thr_guard {
-  int saved;
+  int saved, n;
+  unsigned csr;
 } thr_guard;
 static thr_guard thr_push(int n) {
-  thr_guard g = {omp_get_max_threads()};
+  thr_guard g = {omp_get_max_threads(), n, 0};
   omp_set_num_threads(n);
+  g.csr = kpcn_fast_fp_begin(n);
   return g;
 }
-static void thr_pop(thr_guard g) { omp_set_num_threads(g.saved); }
+static void thr_pop(thr_guard g) {
+  kpcn_fast_fp_end(g.csr, g.n);
+  omp_set_num_threads(g.saved);
+}
 
 static void *net_alloc(kpcn_net *n, size_t bytes, const char *what) {
   void *p = kpcn_aligned_alloc(bytes ? bytes : 64, what);

@@ -12,11 +12,9 @@
 #include <math.h>
 #include <omp.h>
 #include <stdio.h>
-#include <pmmintrin.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
-#include <xmmintrin.h>
 
 kpcn_render_settings kpcn_render_settings_defaults(void) {
   kpcn_render_settings s;
@@ -107,13 +105,10 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   volatile int cancel = 0;
   int rows_done = 0;
   uint64_t total_rays = 0, nonfinite = 0;
-  unsigned saved_csr = _mm_getcsr();
+  unsigned saved_csr = kpcn_fast_fp_begin(nthreads); /* radiance never needs denormals */
   double t0 = now_s();
 #pragma omp parallel num_threads(nthreads) reduction(+ : total_rays, nonfinite)
   {
-    /* denormals are slow and never matter for radiance */
-    _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
-    _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
 #pragma omp for schedule(dynamic, 1)
     for (int row = 0; row < chh; row++) {
       if (cancel) continue;
@@ -170,7 +165,7 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
       }
     }
   }
-  _mm_setcsr(saved_csr);
+  kpcn_fast_fp_end(saved_csr, nthreads);
   double secs = now_s() - t0;
   if (cancel) {
     kpcn_aov_destroy(set);

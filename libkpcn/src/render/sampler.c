@@ -4,7 +4,6 @@
 #include <pthread.h>
 
 uint32_t kpcn_sobol1_rev_table[4][256];
-uint8_t kpcn_rev8_table[256];
 static pthread_once_t once = PTHREAD_ONCE_INIT;
 
 static void build(void) {
@@ -23,12 +22,6 @@ static void build(void) {
         if (r & (1U << bit)) rr |= 1U << (31 - bit);
       kpcn_sobol1_rev_table[b][x] = rr;
     }
-  for (int x = 0; x < 256; x++) {
-    int r = 0;
-    for (int bit = 0; bit < 8; bit++)
-      if (x & (1 << bit)) r |= 1 << (7 - bit);
-    kpcn_rev8_table[x] = (uint8_t)r;
-  }
 }
 
 void kpcn_sampler_init(void) { pthread_once(&once, build); }

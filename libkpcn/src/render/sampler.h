@@ -3,15 +3,21 @@
  * dimensions (a (0,2)-sequence) with its own index shuffle and its own nested uniform
  * scramble, both keyed on a hash of (seed, pixel, pair), so pixels are decorrelated and each
  * pixel's sequence depends only on (seed, pixel, sample index): results do not depend on
- * which thread renders the pixel. Power-of-two sample counts are stratified per pair. */
+ * which thread renders the pixel. Power-of-two sample counts are stratified per pair.
+ *
+ * Pairs from KPCN_SAMPLER_LD_PAIRS on (the camera and the first two bounces are below it) are
+ * plain hashed uniforms: stratification of the third and later bounces no longer lowers the
+ * pixel error measurably (the integrand there is already a sum over many paths), while the
+ * Owen-Sobol construction cost 15% of the render time at deep bounces. */
 #ifndef KPCN_RENDER_SAMPLER_H
 #define KPCN_RENDER_SAMPLER_H
 
 #include <stdint.h>
 
-/* Per-pixel cache of the pair seeds (they depend on seed, pixel and pair, not on the sample
- * index), filled lazily; pairs beyond KPCN_SAMPLER_CACHE are hashed on the fly. */
-#define KPCN_SAMPLER_CACHE 64
+/* Per-pixel cache of the Owen-Sobol pair seeds (they depend on seed, pixel and pair, not on
+ * the sample index), filled lazily. */
+#define KPCN_SAMPLER_LD_PAIRS 8
+#define KPCN_SAMPLER_CACHE KPCN_SAMPLER_LD_PAIRS
 typedef struct kpcn_sampler_cache {
   uint32_t pixel_seed;
   uint32_t filled; /* pairs [0, filled) are valid */
@@ -40,11 +46,13 @@ static inline uint32_t kpcn_hash_combine(uint32_t seed, uint32_t v) {
   return seed ^ (kpcn_hash32(v) + 0x9e3779b9U + (seed << 6) + (seed >> 2));
 }
 
-extern uint8_t kpcn_rev8_table[256];
+/* byte swap, then swap nibbles, bit pairs and bits: register-only, no table loads on the
+ * sampler's dependency chain */
 static inline uint32_t kpcn_reverse_bits(uint32_t x) {
-  return ((uint32_t)kpcn_rev8_table[x & 255U] << 24) |
-         ((uint32_t)kpcn_rev8_table[(x >> 8) & 255U] << 16) |
-         ((uint32_t)kpcn_rev8_table[(x >> 16) & 255U] << 8) | (uint32_t)kpcn_rev8_table[x >> 24];
+  x = __builtin_bswap32(x);
+  x = ((x >> 4) & 0x0f0f0f0fU) | ((x & 0x0f0f0f0fU) << 4);
+  x = ((x >> 2) & 0x33333333U) | ((x & 0x33333333U) << 2);
+  return ((x >> 1) & 0x55555555U) | ((x & 0x55555555U) << 1);
 }
 
 /* Laine-Karras style hash permutation, improved constants from Burley 2020. */
@@ -115,10 +123,18 @@ static inline float kpcn_u32_to_unit(uint32_t x) { return (float)(x >> 8) * (1.0
 
 /* Nested uniform scrambling is rev(LK(rev(x))); working in the reversed domain saves the
  * inner reversals: dimension 0 of Sobol is rev(i), dimension 1 comes reversed from the table. */
-static inline void kpcn_sampler_2d(kpcn_sampler *s, float *u, float *v) {
+__attribute__((always_inline)) static inline void kpcn_sampler_2d(kpcn_sampler *s, float *u,
+                                                                  float *v) {
   uint32_t tmp[3];
   const uint32_t *sd;
   uint32_t pair = s->pair++;
+  if (pair >= KPCN_SAMPLER_LD_PAIRS) {
+    uint32_t h = kpcn_hash32(kpcn_hash_combine(s->pixel_seed ^ 0x2c1b3c6dU,
+                                               s->index * 0x9e3779b9U + pair * 0x85ebca6bU));
+    *u = kpcn_u32_to_unit(h);
+    *v = kpcn_u32_to_unit(kpcn_hash32(h ^ 0x297a2d39U));
+    return;
+  }
   kpcn_sampler_cache *c = s->cache;
   if (c && pair < KPCN_SAMPLER_CACHE) {
     while (c->filled <= pair) {

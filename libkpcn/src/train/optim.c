@@ -104,6 +104,9 @@ int64_t kpcn_adam_steps(const kpcn_adam *a) { return a->t; }
 float *kpcn_adam_moment1(kpcn_adam *a) { return a->m; }
 float *kpcn_adam_moment2(kpcn_adam *a) { return a->v; }
 void kpcn_adam_set_steps(kpcn_adam *a, int64_t t) { a->t = t; }
+void kpcn_adam_set_lr(kpcn_adam *a, double lr) {
+  if (a && lr > 0) a->s.lr = lr;
+}
 const kpcn_adam_settings *kpcn_adam_get_settings(const kpcn_adam *a) { return &a->s; }
 
 #define NORM_CHUNK 4096

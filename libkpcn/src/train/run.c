@@ -16,9 +16,13 @@
 
 #define CSV_HEADER "iter,stage,lr,loss,its_per_s,elapsed_s,val_relmse,val_ssim,val_psnr\n"
 
-/* Opens the CSV for appending: fresh (header only) or cut back to rows <= keep_iter. */
-static kpcn_status csv_open(const char *path, int resume, int64_t keep_iter, FILE **out) {
+/* Opens the CSV for appending: fresh (header only) or cut back to rows <= keep_iter.
+ * best_val receives the lowest val_relmse among the kept rows (+inf if none), so a resumed
+ * run keeps the best-model record of the interrupted one. */
+static kpcn_status csv_open(const char *path, int resume, int64_t keep_iter, FILE **out,
+                            double *best_val) {
   *out = NULL;
+  *best_val = INFINITY;
   if (!path || !*path) return KPCN_OK;
   char *kept = NULL;
   size_t klen = 0;
@@ -36,6 +40,13 @@ static kpcn_status csv_open(const char *path, int resume, int64_t keep_iter, FIL
         if (strncmp(line, "iter,", 5) == 0) continue;
         long long it = strtoll(line, NULL, 10);
         if (it > keep_iter) continue;
+        const char *c = line; /* column 7 (val_relmse) follows the sixth comma */
+        for (int k = 0; k < 6 && c; k++)
+          c = strchr(c, ','), c = c ? c + 1 : NULL;
+        if (c && *c && *c != ',') {
+          double v = strtod(c, NULL);
+          if (v < *best_val) *best_val = v;
+        }
         size_t l = strlen(line);
         if (klen + l + 1 > cap) {
           char *nk = realloc(kept, cap * 2 + l);
@@ -72,7 +83,7 @@ static kpcn_status csv_open(const char *path, int resume, int64_t keep_iter, FIL
   return KPCN_OK;
 }
 
-static kpcn_status save_model(kpcn_trainer *t, double elapsed) {
+static kpcn_status save_model(kpcn_trainer *t, double elapsed, const char *path) {
   char buf[64];
   snprintf(buf, sizeof buf, "%lld", (long long)t->iter);
   KPCN_TRY(kpcn_model_set_meta(t->model, "train.iterations", buf));
@@ -88,7 +99,7 @@ static kpcn_status save_model(kpcn_trainer *t, double elapsed) {
   KPCN_TRY(kpcn_model_set_meta(t->model, "train.batch", buf));
   const char *slash = strrchr(t->store_path, '/');
   KPCN_TRY(kpcn_model_set_meta(t->model, "train.dataset", slash ? slash + 1 : t->store_path));
-  return kpcn_model_save(t->model, t->out_path);
+  return kpcn_model_save(t->model, path);
 }
 
 static kpcn_status checkpoint(kpcn_trainer *t, double elapsed) {
@@ -106,7 +117,9 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
   if (!t) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_trainer_run: NULL trainer");
   if (stopped) *stopped = 0;
   FILE *csv = NULL;
-  KPCN_TRY(csv_open(t->csv_path, t->s.resume, t->iter, &csv));
+  double best_csv;
+  KPCN_TRY(csv_open(t->csv_path, t->s.resume, t->iter, &csv, &best_csv));
+  if (t->s.resume) t->best_val = best_csv;
   const double t0 = kt_now();
   double last_t = t0, acc = 0;
   int64_t last_it = t->iter, nacc = 0, last_val_it = -1, start_it = t->iter;
@@ -121,7 +134,7 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
       break;
     }
     int stage = t->iter < t->s.stage1_iters ? 1 : 2;
-    double lr = kpcn_adam_lr_at(&t->s.adam, t->iter), loss = 0;
+    double lr = kt_lr_at(t, t->iter), loss = 0;
     if ((st = kpcn_trainer_step(t, &loss)) != KPCN_OK) break;
     acc += loss, nacc++;
     int64_t it = t->iter;
@@ -137,6 +150,13 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
     }
     double now = kt_now();
     elapsed = t->elapsed_prev + (now - t0);
+    if (p.has_val && t->best_path && p.val_relmse < t->best_val) {
+      if ((st = save_model(t, elapsed, t->best_path)) != KPCN_OK) break;
+      t->best_val = p.val_relmse;
+      kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_INFO,
+               "best model so far (val relMSE %.4g) written to '%s' at iteration %lld",
+               p.val_relmse, t->best_path, (long long)it);
+    }
     p.iter = it;
     p.total = t->s.iters;
     p.stage = stage;
@@ -169,10 +189,14 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
   if (st == KPCN_OK && t->nval && last_val_it != t->iter && t->iter > start_it) {
     double v[3];
     st = kpcn_trainer_validate(t, &v[0], &v[1], &v[2]);
+    if (st == KPCN_OK && t->best_path && v[0] < t->best_val) {
+      st = save_model(t, t->elapsed_prev + (kt_now() - t0), t->best_path);
+      if (st == KPCN_OK) t->best_val = v[0];
+    }
     if (st == KPCN_OK && csv) {
       double now = kt_now();
       fprintf(csv, "%lld,%d,%.6g,", (long long)t->iter, t->iter - 1 < t->s.stage1_iters ? 1 : 2,
-              kpcn_adam_lr_at(&t->s.adam, t->iter - 1));
+              kt_lr_at(t, t->iter - 1));
       if (nacc) fprintf(csv, "%.9g", acc / (double)nacc);
       fprintf(csv, ",%.4g,%.2f,%.9g,%.9g,%.6g\n",
               (double)(t->iter - last_it) / fmax(now - last_t, 1e-9), t->elapsed_prev + (now - t0),
@@ -183,7 +207,7 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
   if (st != KPCN_OK) return st;
   double elapsed = t->elapsed_prev + (kt_now() - t0);
   KPCN_TRY(checkpoint(t, elapsed));
-  KPCN_TRY(save_model(t, elapsed));
+  KPCN_TRY(save_model(t, elapsed, t->out_path));
   if (t->plot_path && *t->plot_path && t->csv_path && *t->csv_path)
     KPCN_TRY(kpcn_train_plot_csv(t->csv_path, t->plot_path, "kpcn-train"));
   if (stopped) *stopped = stop;

@@ -12,7 +12,7 @@
 
 struct kpcn_trainer {
   kpcn_train_settings s; /* copy; the string members below own their text */
-  char *store_path, *out_path, *ckpt_path, *csv_path, *plot_path, *init_model;
+  char *store_path, *out_path, *ckpt_path, *csv_path, *plot_path, *init_model, *best_path;
   int nt; /* resolved thread count */
 
   /* patch store */
@@ -56,6 +56,7 @@ struct kpcn_trainer {
   kpcn_train_timing timing;
   double last_val[3];
   int have_val;
+  double best_val; /* lowest mean val relMSE written to best_path (run.c), +inf if none */
 };
 
 /* batch.c */
@@ -72,5 +73,7 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path);
 
 /* trainer.c */
 double kt_now(void);
+/* Learning rate of the step after `iter` completed steps (stage 2 uses stage2_lr). */
+double kt_lr_at(const kpcn_trainer *t, int64_t iter);
 
 #endif

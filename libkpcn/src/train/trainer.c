@@ -18,6 +18,12 @@ double kt_now(void) {
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
+double kt_lr_at(const kpcn_trainer *t, int64_t iter) {
+  kpcn_adam_settings a = t->s.adam;
+  if (iter >= t->s.stage1_iters && t->s.stage2_lr > 0) a.lr = t->s.stage2_lr;
+  return kpcn_adam_lr_at(&a, iter);
+}
+
 void kpcn_train_settings_defaults(kpcn_train_settings *s) {
   memset(s, 0, sizeof *s);
   kpcn_arch_preset("cpu", &s->arch);
@@ -70,7 +76,7 @@ void kpcn_trainer_destroy(kpcn_trainer *t) {
   }
   free(t->val_aov), free(t->val_ref);
   free(t->store_path), free(t->out_path), free(t->ckpt_path), free(t->csv_path);
-  free(t->plot_path), free(t->init_model);
+  free(t->plot_path), free(t->init_model), free(t->best_path);
   free(t);
 }
 
@@ -167,6 +173,12 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   if (s->loss_margin < 0 || 2 * s->loss_margin >= s->patch)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "loss margin %d too large for patch %d",
                      s->loss_margin, s->patch);
+  if (!(s->stage2_lr >= 0) || s->stage2_lr > 1)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "stage-2 learning rate %g out of range",
+                     s->stage2_lr);
+  if (s->best_path && *s->best_path && !s->nval)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "keeping the best model needs validation images (--val)");
   if (s->nval < 0 || (s->nval && (!s->val_noisy || !s->val_ref)))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "validation list is inconsistent");
   kpcn_trainer *t = kpcn_calloc(1, sizeof *t, "trainer");
@@ -180,6 +192,9 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   t->csv_path = s->csv_path ? dup_or_null(s->csv_path) : with_suffix(s->out_path, ".csv");
   t->plot_path = s->plot_path ? dup_or_null(s->plot_path) : with_suffix(s->out_path, ".png");
   t->init_model = dup_or_null(s->init_model);
+  t->best_path = s->best_path && *s->best_path ? dup_or_null(s->best_path) : NULL;
+  t->s.best_path = t->best_path;
+  t->best_val = INFINITY;
   t->s.store_path = t->store_path, t->s.out_path = t->out_path, t->s.ckpt_path = t->ckpt_path;
   t->s.csv_path = t->csv_path, t->s.plot_path = t->plot_path, t->s.init_model = t->init_model;
   t->nt = kpcn_resolve_threads(s->nthreads);
@@ -302,8 +317,17 @@ static kpcn_status branch_backward_step(kpcn_trainer *t, int b) {
   return st;
 }
 
+static kpcn_status trainer_step(kpcn_trainer *t, double *loss);
+
 kpcn_status kpcn_trainer_step(kpcn_trainer *t, double *loss) {
   if (!t) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_trainer_step: NULL trainer");
+  unsigned csr = kpcn_fast_fp_begin(t->nt);
+  kpcn_status s = trainer_step(t, loss);
+  kpcn_fast_fp_end(csr, t->nt);
+  return s;
+}
+
+static kpcn_status trainer_step(kpcn_trainer *t, double *loss) {
   double t_start = kt_now();
   KPCN_TRY(kt_batch_assemble(t));
   t->timing.batch_s += kt_now() - t_start;
@@ -320,6 +344,9 @@ kpcn_status kpcn_trainer_step(kpcn_trainer *t, double *loss) {
     }
   } else {
     size_t n = (size_t)t->N * 3 * t->P * t->P;
+    if (t->s.stage2_lr > 0)
+      for (int b = 0; b < KT_NB; b++)
+        kpcn_adam_set_lr(t->adam[b], t->s.stage2_lr);
     for (int b = 0; b < KT_NB; b++)
       KPCN_TRY(branch_forward(t, b));
     tl = kt_now();
