@@ -8,6 +8,8 @@
 
 #include <stdlib.h>
 #include <string.h>
+#include <omp.h>
+#include <xmmintrin.h>
 
 typedef struct cfg {
   int n_in, n_hidden, ch, K, N, H, W;
@@ -84,7 +86,15 @@ static void check_vs_ref(const cfg *c, int seed) {
   if (s != KPCN_OK) fprintf(stderr, "net create: %s\n", kpcn_last_error());
   CHECK(s == KPCN_OK);
   if (net) {
+    /* the net flushes denormals while it runs and gives the caller's threads their own
+     * floating-point mode back (kpcn_fast_fp_begin/_end) */
+    unsigned csr_before[64] = {0}, csr_after[64] = {0}, csr_in = _mm_getcsr();
+#pragma omp parallel num_threads(2)
+    csr_before[omp_get_thread_num() & 63] = _mm_getcsr();
     CHECK(kpcn_net_forward(net, in, lg) == KPCN_OK);
+#pragma omp parallel num_threads(2)
+    csr_after[omp_get_thread_num() & 63] = _mm_getcsr();
+    CHECK(_mm_getcsr() == csr_in && memcmp(csr_before, csr_after, sizeof csr_before) == 0);
     double e = rel_err(lg, rl, nout);
     printf("cfg in=%d L=%d C=%d K=%d N=%d %dx%d: fwd %.2e", c->n_in, c->n_hidden, c->ch, c->K, c->N,
            c->H, c->W, e);
