@@ -163,18 +163,29 @@ static void test_determinism_and_resume(void) {
   free(w0), free(w1), free(w2), free(w3);
 }
 
-static void test_validation(void) {
+/* Writes a synthetic 40x32 validation pair as EXRs (names from tf_tmp) into the settings. */
+static void with_val_pair(kpcn_train_settings *s, const char *prefix, const char **vn,
+                          const char **vr) {
   kpcn_aov_set *n, *r;
+  char name[64];
   CHECK(tf_make_pair(&n, &r, 40, 32, 9, 0) == 0);
-  const char *np = tf_tmp("val_noisy.exr"), *rp = tf_tmp("val_ref.exr");
-  CHECK(kpcn_exr_write_aov(np, n, NULL) == KPCN_OK);
-  CHECK(kpcn_exr_write_aov(rp, r, NULL) == KPCN_OK);
+  snprintf(name, sizeof name, "%s_noisy.exr", prefix);
+  vn[0] = tf_tmp(name);
+  snprintf(name, sizeof name, "%s_ref.exr", prefix);
+  vr[0] = tf_tmp(name);
+  CHECK(kpcn_exr_write_aov(vn[0], n, NULL) == KPCN_OK);
+  CHECK(kpcn_exr_write_aov(vr[0], r, NULL) == KPCN_OK);
   kpcn_aov_destroy(n), kpcn_aov_destroy(r);
+  s->nval = 1, s->val_noisy = vn, s->val_ref = vr;
+  s->nthreads = 1;
+}
+
+static void test_validation(void) {
   kpcn_train_settings s;
   settings(&s, tf_tmp("v.safetensors"));
-  const char *vn[1] = {np}, *vr[1] = {rp};
-  s.nval = 1, s.val_noisy = vn, s.val_ref = vr, s.val_every = 3;
-  s.nthreads = 1;
+  const char *vn[1], *vr[1];
+  with_val_pair(&s, "val", vn, vr);
+  s.val_every = 3;
   kpcn_trainer *t;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
   if (!t) {
@@ -204,20 +215,14 @@ static void test_validation(void) {
 
 /* --best keeps the model of the lowest validation relMSE; --lr2 is the base lr of stage 2 */
 static void test_best_and_stage2_lr(void) {
-  kpcn_aov_set *n, *r;
-  CHECK(tf_make_pair(&n, &r, 40, 32, 9, 0) == 0);
-  const char *np = tf_tmp("best_noisy.exr"), *rp = tf_tmp("best_ref.exr");
-  CHECK(kpcn_exr_write_aov(np, n, NULL) == KPCN_OK);
-  CHECK(kpcn_exr_write_aov(rp, r, NULL) == KPCN_OK);
-  kpcn_aov_destroy(n), kpcn_aov_destroy(r);
   kpcn_train_settings s;
   settings(&s, tf_tmp("b.safetensors"));
-  const char *vn[1] = {np}, *vr[1] = {rp}, *best = tf_tmp("b.best.safetensors");
-  s.nval = 1, s.val_noisy = vn, s.val_ref = vr, s.val_every = 1, s.log_every = 1;
+  const char *vn[1], *vr[1], *best = tf_tmp("b.best.safetensors");
+  with_val_pair(&s, "best", vn, vr);
+  s.val_every = 1, s.log_every = 1;
   s.best_path = best;
   s.stage2_lr = 1e-4;
   s.adam.lr = 5e-2; /* large steps: validation goes up and down, so best != last */
-  s.nthreads = 1;
   kpcn_trainer *t;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
   if (!t) return;
