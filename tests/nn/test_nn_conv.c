@@ -125,6 +125,18 @@ static void check_vs_ref(const cfg *c, int seed) {
     CHECK(kpcn_net_forward(net, in, lg2) == KPCN_OK);
     CHECK(rel_err(lg2, rl, nout) <= 1e-5);
     CHECK(kpcn_net_backward(net, dl, NULL) == KPCN_ERR_INVALID_ARGUMENT);
+    /* the logits left in the net's own layout are the same numbers */
+    const float *nl;
+    kpcn_logits_layout lay;
+    CHECK(kpcn_net_forward_logits(net, in, &nl, &lay) == KPCN_OK);
+    int same = 1;
+    for (int b = 0; b < c->N; b++)
+      for (int t = 0; t < K2; t++)
+        for (size_t p = 0; p < (size_t)c->H * c->W; p++)
+          same &= nl[b * lay.image_stride + (size_t)(t / lay.block) * lay.block_stride +
+                     p * (size_t)lay.pixel_stride + (size_t)(t % lay.block)] ==
+                  lg2[((size_t)b * K2 + t) * c->H * c->W + p];
+    CHECK(same);
     kpcn_net_destroy(net);
   }
   nn_ref_free(&ref);

@@ -73,6 +73,31 @@ static void forward_vs_naive(int K, int n, int nc, int h, int w, float scale) {
   CHECK(kpcn_kpa_forward(K, n, nc, h, w, lg2, nz, out2, lg2, 1) == KPCN_OK);
   CHECK(memcmp(out, out2, nn * 4) == 0);
   CHECK(memcmp(wt, lg2, nl * 4) == 0);
+  /* the same logits laid out pixel-major (nhwc, padded to K2+3 per pixel) and channel-
+   * blocked (nChw16c, channels padded to a multiple of 16) give bit-identical results */
+  const int blocks[2] = {K2, 16}, pstr[2] = {K2 + 3, 16};
+  for (int v = 0; v < 2; v++) {
+    kpcn_logits_layout lay;
+    lay.block = blocks[v], lay.pixel_stride = pstr[v];
+    const int nb = (K2 + lay.block - 1) / lay.block;
+    lay.block_stride = pl * (size_t)lay.pixel_stride;
+    lay.image_stride = (size_t)nb * lay.block_stride;
+    float *alt = malloc((size_t)n * lay.image_stride * 4);
+    for (size_t i = 0; i < (size_t)n * lay.image_stride; i++)
+      alt[i] = 1e30f; /* padding must never be read */
+    for (int b = 0; b < n; b++)
+      for (int t = 0; t < K2; t++)
+        for (size_t p = 0; p < pl; p++)
+          alt[b * lay.image_stride + (size_t)(t / lay.block) * lay.block_stride +
+              p * (size_t)lay.pixel_stride + (size_t)(t % lay.block)] =
+              lg[((size_t)b * K2 + t) * pl + p];
+    memset(out2, 0, nn * 4);
+    memset(lg2, 0, nl * 4);
+    CHECK(kpcn_kpa_forward_layout(K, n, nc, h, w, alt, &lay, nz, out2, lg2, 2) == KPCN_OK);
+    CHECK(memcmp(out, out2, nn * 4) == 0);
+    CHECK(memcmp(wt, lg2, nl * 4) == 0);
+    free(alt);
+  }
   free(lg), free(nz), free(out), free(wt), free(out2), free(lg2);
 }
 
@@ -154,5 +179,8 @@ int main(void) {
   CHECK(kpcn_kpa_forward(4, 1, 3, 4, 4, &x, &x, &x, NULL, 1) == KPCN_ERR_INVALID_ARGUMENT);
   CHECK(kpcn_kpa_forward(3, 1, 3, 0, 4, &x, &x, &x, NULL, 1) != KPCN_OK);
   CHECK(kpcn_kpa_backward(3, 1, 3, 4, 4, NULL, &x, &x, &x, NULL, 1) == KPCN_ERR_INVALID_ARGUMENT);
+  kpcn_logits_layout bad = {16, 16, 16, 4}; /* pixels overlapping inside a block */
+  CHECK(kpcn_kpa_forward_layout(3, 1, 3, 4, 4, &x, &bad, &x, &x, NULL, 1) ==
+        KPCN_ERR_INVALID_ARGUMENT);
   return kt_summary("test_nn_kpa");
 }

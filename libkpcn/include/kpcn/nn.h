@@ -169,6 +169,24 @@ void kpcn_net_destroy(kpcn_net *net);
  * model's weights each call. */
 kpcn_status kpcn_net_forward(kpcn_net *net, const float *input, float *logits);
 
+/* Where logit t of pixel (x, y) of image b lies: at
+ *   b * image_stride + (t / block) * block_stride + (y * W + x) * pixel_stride + t % block
+ * floats. Planar [N][K²][H][W]: block 1, block_stride H*W, pixel_stride 1; pixel-major
+ * (nhwc): block >= K², pixel_stride K²; oneDNN's nChw16c: block 16, pixel_stride 16. */
+typedef struct kpcn_logits_layout {
+  size_t image_stride, block_stride;
+  int block, pixel_stride;
+} kpcn_logits_layout;
+/* The planar layout of an N x K² x H x W tensor. */
+kpcn_logits_layout kpcn_logits_layout_planar(int K2, int h, int w);
+
+/* Forward without the final reorder: *logits points at the last layer's output inside the
+ * net (valid until the next forward or destroy) and *layout says how it is laid out, so the
+ * kernel-prediction layer can read it in place (kpcn_kpa_forward_layout). When oneDNN's
+ * layout is none of the above, the logits are reordered into a planar buffer of the net. */
+kpcn_status kpcn_net_forward_logits(kpcn_net *net, const float *input, const float **logits,
+                                    kpcn_logits_layout *layout);
+
 /* Backward of the last forward (training nets only): dlogits [N][K²][H][W] -> parameter
  * gradients (overwritten, not accumulated; see kpcn_net_params) and, when the net was
  * created with input_grad, dinput [N][n_inputs][H][W] (may be NULL otherwise). */
@@ -207,6 +225,11 @@ const char *kpcn_net_impl_name(const kpcn_net *net, int layer);
  * alias logits (in-place). */
 kpcn_status kpcn_kpa_forward(int K, int n, int nc, int h, int w, const float *logits,
                              const float *noisy, float *out, float *weights, int nthreads);
+/* Same, with logits in any layout kpcn_logits_layout describes (weights, when given, are
+ * written planar). */
+kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const float *logits,
+                                    const kpcn_logits_layout *layout, const float *noisy,
+                                    float *out, float *weights, int nthreads);
 
 /* Backward: given the softmax weights from the forward, the noisy input and dL/dout,
  * writes dL/dlogits [N][K²][H][W] (may alias weights) and, if dnoisy is non-NULL,

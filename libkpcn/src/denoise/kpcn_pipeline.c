@@ -65,7 +65,7 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov, int ti
   const kpcn_arch *arch = kpcn_model_arch(model);
   KPCN_TRY(kpcn_features_check_arch(arch));
   KPCN_TRY(require_all(aov));
-  const int W = aov->width, H = aov->height, K = arch->kernel_size, K2 = K * K;
+  const int W = aov->width, H = aov->height, K = arch->kernel_size;
   const int ov = kpcn_denoise_tile_overlap(arch);
   const float eps = arch->eps;
   const size_t P = kpcn_aov_plane_size(aov);
@@ -95,12 +95,11 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov, int ti
   const size_t mp = (size_t)maxp;
   float *feat = kpcn_aligned_alloc(sizeof(float) * mp * KPCN_FEATURES_COUNT, "denoiser features");
   float *noisy = kpcn_aligned_alloc(sizeof(float) * mp * 3, "denoiser noisy tile");
-  float *logits = kpcn_aligned_alloc(sizeof(float) * mp * (size_t)K2, "denoiser logits");
   float *filt = kpcn_aligned_alloc(sizeof(float) * mp * 3, "denoiser filtered tile");
   kpcn_net *net = NULL;
   int net_w = 0, net_h = 0;
   kpcn_status s = KPCN_OK;
-  if (!feat || !noisy || !logits || !filt) {
+  if (!feat || !noisy || !filt) {
     s = KPCN_ERR_OUT_OF_MEMORY;
     goto done;
   }
@@ -145,10 +144,13 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov, int ti
                                      nthreads);
       if (s != KPCN_OK) goto done;
       double tb = now_s();
-      s = kpcn_net_forward(net, feat, logits);
+      /* the kpa layer reads the logits where and as the net left them (no reorder) */
+      const float *logits;
+      kpcn_logits_layout lay;
+      s = kpcn_net_forward_logits(net, feat, &logits, &lay);
       if (s != KPCN_OK) goto done;
       double tc = now_s();
-      s = kpcn_kpa_forward(K, 1, 3, t->ph, t->pw, logits, noisy, filt, NULL, nthreads);
+      s = kpcn_kpa_forward_layout(K, 1, 3, t->ph, t->pw, logits, &lay, noisy, filt, NULL, nthreads);
       if (s != KPCN_OK) goto done;
       double td = now_s();
       st->features_s += tb - ta;
@@ -179,7 +181,6 @@ done:
   kpcn_net_destroy(net);
   kpcn_aligned_free(feat);
   kpcn_aligned_free(noisy);
-  kpcn_aligned_free(logits);
   kpcn_aligned_free(filt);
   free(tiles);
   return s;

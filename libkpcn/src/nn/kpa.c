@@ -76,29 +76,48 @@ static inline float exp_nonpos(float x) {
 
 /* One output row y of one image. A separate function (all sizes by value) so the compiler
  * sees loop bounds and pointers that the stores cannot alias; inside the OpenMP region it
- * reloaded them from the shared-variable block and did not vectorize. */
-static void fwd_row(int K, int nc, int h, int w, int y, const float *logits, const float *noisy,
-                    float *out, float *weights, float *restrict wt) {
+ * reloaded them from the shared-variable block and did not vectorize. logits points at the
+ * image's first logit; planar logits are read in place, any other layout is first gathered
+ * into the row's softmax buffer wt ([K2][w]), where the exponentials then overwrite it. */
+static void fwd_row(int K, int nc, int h, int w, int y, const float *logits,
+                    const kpcn_logits_layout *lay, const float *noisy, float *out, float *weights,
+                    float *restrict wt) {
   const int r = K / 2, K2 = K * K;
   const size_t plane = (size_t)h * w;
   float *restrict mx = wt + (size_t)K2 * w, *restrict sum = mx + w, *restrict pr = sum + w;
-  const float *L = logits + (size_t)y * w;
+  const int planar = lay->block == 1 && lay->pixel_stride == 1;
+  const float *L; /* row y of logit 0; logit t's row starts at L + t * lstride */
+  size_t lstride;
+  if (planar) {
+    L = logits + (size_t)y * w, lstride = lay->block_stride;
+  } else {
+    const int ps = lay->pixel_stride, bl = lay->block;
+    for (int t0 = 0; t0 < K2; t0 += bl) {
+      const float *src = logits + (size_t)(t0 / bl) * lay->block_stride + (size_t)y * w * ps;
+      const int nb = K2 - t0 < bl ? K2 - t0 : bl;
+      for (int x = 0; x < w; x++)
+        for (int j = 0; j < nb; j++)
+          wt[(size_t)(t0 + j) * w + x] = src[(size_t)x * ps + j];
+    }
+    L = wt, lstride = (size_t)w;
+  }
   for (int x = 0; x < w; x++)
     mx[x] = L[x];
   for (int t = 1; t < K2; t++) {
-    const float *restrict Lt = L + (size_t)t * plane;
+    const float *restrict Lt = L + (size_t)t * lstride;
     for (int x = 0; x < w; x++)
       mx[x] = Lt[x] > mx[x] ? Lt[x] : mx[x]; /* fmaxf won't vectorize */
   }
   for (int x = 0; x < w; x++)
     sum[x] = 0.f;
   for (int t = 0; t < K2; t++) {
-    float *restrict wr = wt + (size_t)t * w;
-    const float *restrict Lt = L + (size_t)t * plane;
+    float *wr = wt + (size_t)t * w; /* may be Lt itself (gathered layouts): same element */
+    const float *Lt = L + (size_t)t * lstride;
 #pragma omp simd
     for (int x = 0; x < w; x++) {
-      wr[x] = exp_nonpos(Lt[x] - mx[x]);
-      sum[x] += wr[x];
+      float e = exp_nonpos(Lt[x] - mx[x]);
+      wr[x] = e;
+      sum[x] += e;
     }
   }
   for (int x = 0; x < w; x++)
@@ -142,12 +161,28 @@ static void fwd_row(int K, int nc, int h, int w, int y, const float *logits, con
   }
 }
 
-kpcn_status kpcn_kpa_forward(int K, int n, int nc, int h, int w, const float *logits,
-                             const float *noisy, float *out, float *weights, int nthreads) {
+kpcn_logits_layout kpcn_logits_layout_planar(int K2, int h, int w) {
+  kpcn_logits_layout l;
+  l.block_stride = (size_t)h * w;
+  l.image_stride = (size_t)K2 * l.block_stride;
+  l.block = 1;
+  l.pixel_stride = 1;
+  return l;
+}
+
+kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const float *logits,
+                                    const kpcn_logits_layout *layout, const float *noisy,
+                                    float *out, float *weights, int nthreads) {
   KPCN_TRY(check_args("kpcn_kpa_forward", K, n, nc, h, w));
-  if (!logits || !noisy || !out)
+  if (!logits || !noisy || !out || !layout)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_kpa_forward: NULL buffer");
   const int r = K / 2, K2 = K * K, nt = kpcn_resolve_threads(nthreads);
+  const kpcn_logits_layout lay = *layout;
+  if (lay.block < 1 || lay.pixel_stride < 1 || (lay.block < K2 && lay.pixel_stride < lay.block) ||
+      (lay.block >= K2 && lay.pixel_stride < K2))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "kpcn_kpa_forward: logits layout (block %d, pixel stride %d) overlaps itself",
+                     lay.block, lay.pixel_stride);
   const size_t plane = (size_t)h * w;
   /* per thread: softmax row [K2][w], max and sum rows, K padded rows (forward) */
   const size_t scratch = (size_t)K2 * w + 2 * (size_t)w + (size_t)K * (w + 2 * r) + 64;
@@ -156,12 +191,19 @@ kpcn_status kpcn_kpa_forward(int K, int n, int nc, int h, int w, const float *lo
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++) {
     const int b = (int)(row / h), y = (int)(row % h);
-    fwd_row(K, nc, h, w, y, logits + (size_t)b * K2 * plane, noisy + (size_t)b * nc * plane,
-            out + (size_t)b * nc * plane, weights ? weights + (size_t)b * K2 * plane : NULL,
-            thread_scratch(buf, scratch));
+    fwd_row(K, nc, h, w, y, logits + (size_t)b * lay.image_stride, &lay,
+            noisy + (size_t)b * nc * plane, out + (size_t)b * nc * plane,
+            weights ? weights + (size_t)b * K2 * plane : NULL, thread_scratch(buf, scratch));
   }
   kpcn_aligned_free(buf);
   return KPCN_OK;
+}
+
+kpcn_status kpcn_kpa_forward(int K, int n, int nc, int h, int w, const float *logits,
+                             const float *noisy, float *out, float *weights, int nthreads) {
+  KPCN_TRY(check_args("kpcn_kpa_forward", K, n, nc, h, w));
+  kpcn_logits_layout lay = kpcn_logits_layout_planar(K * K, h, w);
+  return kpcn_kpa_forward_layout(K, n, nc, h, w, logits, &lay, noisy, out, weights, nthreads);
 }
 
 kpcn_status kpcn_kpa_backward(int K, int n, int nc, int h, int w, const float *weights,

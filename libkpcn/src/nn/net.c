@@ -67,6 +67,9 @@ struct kpcn_net {
   int n_slow;
   kpcn_net_stats st;
   char impl[KPCN_NN_MAX_LAYERS][64];
+  int native_ok;             /* the last layer's output layout is readable by the kpa */
+  kpcn_logits_layout native; /* ... and this is it */
+  float *planar_logits;      /* fallback buffer of kpcn_net_forward_logits */
 };
 
 static double now_s(void) {
@@ -326,6 +329,33 @@ static kpcn_status bind_buffers(kpcn_net *n, size_t scratch) {
   return KPCN_OK;
 }
 
+/* The kpa layer reads planar, pixel-major and channel-blocked f32 layouts in place (see
+ * kpcn_logits_layout); anything else oneDNN might pick returns 0 (then we reorder). */
+static int logits_layout_of(const dnnl_memory_desc_t *md, int C, int H, int W,
+                            kpcn_logits_layout *out) {
+  if (md->ndims != 4 || md->data_type != dnnl_f32 || md->format_kind != dnnl_blocked ||
+      md->offset0 != 0)
+    return 0;
+  const dnnl_blocking_desc_t *b = &md->format_desc.blocking;
+  const dnnl_dim_t *st = b->strides;
+  if (st[2] != (dnnl_dim_t)W * st[3]) return 0; /* rows of pixels must be contiguous */
+  out->image_stride = (size_t)st[0];
+  out->pixel_stride = (int)st[3];
+  if (b->inner_nblks == 0 && st[1] == 1 && st[3] >= C) { /* pixel-major (nhwc) */
+    out->block = C, out->block_stride = 0;
+    return 1;
+  }
+  if (b->inner_nblks == 0 && st[3] == 1) { /* planar (nchw) */
+    out->block = 1, out->block_stride = (size_t)st[1];
+    return st[1] >= (dnnl_dim_t)H * W;
+  }
+  if (b->inner_nblks == 1 && b->inner_idxs[0] == 1 && st[3] == b->inner_blks[0]) { /* nChwXc */
+    out->block = (int)b->inner_blks[0], out->block_stride = (size_t)st[1];
+    return 1;
+  }
+  return 0;
+}
+
 static kpcn_status build(kpcn_net *n) {
   const kpcn_arch *a = &n->model->arch;
   const int N = n->o.batch, H = n->o.height, W = n->o.width;
@@ -373,6 +403,7 @@ static kpcn_status build(kpcn_net *n) {
   dnnl_memory_desc_t user_out;
   DN(dnnl_memory_desc_init_by_tag(&user_out, 4, od, dnnl_f32, dnnl_nchw));
   KPCN_TRY(make_reorder(n, &n->out, &last->dst_md, &user_out, &scratch));
+  n->native_ok = logits_layout_of(&last->dst_md, last->cout, H, W, &n->native);
   if (n->o.training) {
     KPCN_TRY(make_reorder(n, &n->dout_in, &user_out, &last->dst_md, &scratch));
     if (n->o.input_grad)
@@ -471,6 +502,7 @@ void kpcn_net_destroy(kpcn_net *n) {
   kpcn_aligned_free(n->wbuf);
   kpcn_aligned_free(n->grads);
   kpcn_aligned_free(n->scratch);
+  kpcn_aligned_free(n->planar_logits);
   if (n->attr) dnnl_primitive_attr_destroy(n->attr);
   if (n->attr_relu) dnnl_primitive_attr_destroy(n->attr_relu);
   if (n->stream) dnnl_stream_destroy(n->stream);
@@ -495,7 +527,7 @@ static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
     DN(dnnl_stream_wait(n->stream));
     n->st.fwd_conv_s += now_s() - t0;
   }
-  return run_reorder(n, &n->out, n->L[n->nl - 1].act, logits);
+  return logits ? run_reorder(n, &n->out, n->L[n->nl - 1].act, logits) : KPCN_OK;
 }
 
 kpcn_status kpcn_net_forward(kpcn_net *n, const float *input, float *logits) {
@@ -507,6 +539,26 @@ kpcn_status kpcn_net_forward(kpcn_net *n, const float *input, float *logits) {
   n->st.fwd_s += now_s() - t0;
   n->st.n_fwd++;
   thr_pop(g);
+  return s;
+}
+
+kpcn_status kpcn_net_forward_logits(kpcn_net *n, const float *input, const float **logits,
+                                    kpcn_logits_layout *layout) {
+  if (!n || !input || !logits || !layout)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_forward_logits: NULL argument");
+  const int N = n->o.batch, H = n->o.height, W = n->o.width, C = n->L[n->nl - 1].cout;
+  if (!n->native_ok && !n->planar_logits) {
+    n->planar_logits = net_alloc(n, sizeof(float) * (size_t)N * C * H * W, "planar logits");
+    if (!n->planar_logits) return KPCN_ERR_OUT_OF_MEMORY;
+  }
+  thr_guard g = thr_push(n->nt);
+  double t0 = now_s();
+  kpcn_status s = forward(n, input, n->native_ok ? NULL : n->planar_logits);
+  n->st.fwd_s += now_s() - t0;
+  n->st.n_fwd++;
+  thr_pop(g);
+  *logits = n->native_ok ? (const float *)n->L[n->nl - 1].act : n->planar_logits;
+  *layout = n->native_ok ? n->native : kpcn_logits_layout_planar(C, H, W);
   return s;
 }
 
