@@ -42,6 +42,7 @@ for s in "${scenes[@]}"; do
     for m in noisy bilateral nlmeans kpcn; do
       j=$("$tool" "$work/$m.exr" "$ref" --ch R,G,B --relmse --ssim:display=srgb --psnr:display=srgb --json)
       /usr/bin/python3 -c "import json,sys; d=json.loads(sys.argv[1]); print('| $s | $spp | $m | %.3e | %.4f | %.2f |' % (d['relmse'], d['ssim'], d['psnr']))" "$j" >> "$md"
+      /usr/bin/python3 -c "import json,sys; d=json.loads(sys.argv[1]); print('$s\t$spp\t$m\t%.9g\t%.9g' % (d['relmse'], d['ssim']))" "$j" >> "$work/rows.tsv"
     done
     "$tool" "$work/noisy.exr" "$work/bilateral.exr" "$work/nlmeans.exr" "$work/kpcn.exr" "$ref" --ch R,G,B \
       --mosaic:n=5:labels=noisy,bilateral,nlmeans,kpcn,reference --ociodisplay:view=Filmic \
@@ -49,6 +50,33 @@ for s in "${scenes[@]}"; do
   done
   echo >> "$md"
 done
+# The targets of the training issue, computed from the rows above (16 spp when measured).
+/usr/bin/python3 - "$work/rows.tsv" >> "$md" <<'PY'
+import sys
+rows = [l.rstrip('\n').split('\t') for l in open(sys.argv[1])]
+at = {}
+for scene, spp, method, rel, ssim in rows:
+    at.setdefault((scene, spp), {})[method] = (float(rel), float(ssim))
+spp = '16' if any(k[1] == '16' for k in at) else sorted({k[1] for k in at})[0]
+print('\n## Against the targets (%s spp, held-out scenes)\n' % spp)
+print('| scene | kpcn vs noisy (target >= 20x lower relMSE) | kpcn vs better baseline (target >= 2x) | kpcn SSIM |')
+print('|---|---|---|---|')
+ssims, ok_noisy, ok_base = [], True, True
+for (scene, s), m in sorted(at.items()):
+    if s != spp or 'kpcn' not in m:
+        continue
+    k = m['kpcn'][0]
+    base = min(('bilateral', 'nlmeans'), key=lambda b: m[b][0])
+    r1, r2 = m['noisy'][0] / k, m[base][0] / k
+    ok_noisy &= r1 >= 20
+    ok_base &= r2 >= 2
+    ssims.append(m['kpcn'][1])
+    print('| %s | %.1fx lower | %.2fx %s (%s) | %.3f |' % (scene, r1, r2 if r2 >= 1 else 1 / r2, 'lower' if r2 >= 1 else 'HIGHER', base, m['kpcn'][1]))
+avg = sum(ssims) / len(ssims)
+print('\nAverage kpcn SSIM %.3f: %s the >= 0.98 target. 20x below noisy: %s. 2x below the better '
+      'baseline: %s.' % (avg, 'meets' if avg >= 0.98 else 'misses', 'met' if ok_noisy else 'NOT met',
+                         'met' if ok_base else 'NOT met'))
+PY
 {
   echo
   echo "## Mosaics"
