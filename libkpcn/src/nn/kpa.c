@@ -122,11 +122,15 @@ static void fwd_row(int K, int nc, int h, int w, int y, const float *logits,
   }
   for (int x = 0; x < w; x++)
     sum[x] = 1.f / sum[x];
-  for (int t = 0; t < K2; t++) {
-    float *restrict wr = wt + (size_t)t * w;
-    for (int x = 0; x < w; x++)
-      wr[x] *= sum[x];
-  }
+  /* Normalized weights are only materialized when the caller keeps them (training); for
+   * inference the 1/sum scale is applied once per output pixel instead of once per tap. */
+  const int scale_out = weights == NULL;
+  if (!scale_out)
+    for (int t = 0; t < K2; t++) {
+      float *restrict wr = wt + (size_t)t * w;
+      for (int x = 0; x < w; x++)
+        wr[x] *= sum[x];
+    }
   /* Apply: all K clamped source rows of a channel are padded once, then each chunk of XB
    * pixels accumulates its K² taps in registers (one store per pixel instead of K²). */
   const int pw = w + 2 * r;
@@ -151,7 +155,11 @@ static void fwd_row(int K, int nc, int h, int w, int y, const float *logits,
             for (int i = 0; i < nx; i++)
               acc[i] += wr[i] * src[i];
         }
-      memcpy(o + x0, acc, (size_t)nx * sizeof(float));
+      if (scale_out)
+        for (int i = 0; i < nx; i++)
+          o[x0 + i] = acc[i] * sum[x0 + i];
+      else
+        memcpy(o + x0, acc, (size_t)nx * sizeof(float));
     }
   }
   if (weights) { /* written last so weights may alias logits */
