@@ -93,13 +93,12 @@ static void bench_kpcn(kpcn_aov_set *a, const char *preset, int bf16, int tile, 
   if (es == KPCN_ERR_CANCELLED) {
     kpcn_denoise_stats st;
     kpcn_denoiser_get_stats(d, &st);
-    int T = tile > 0 ? tile : 512; /* KPCN_DEFAULT_TILE */
-    int nt = ((a->width + T - 1) / T) * ((a->height + T - 1) / T);
+    const int nt = st.tiles_total;
     double per = st.tiles ? st.total_s / st.tiles : 0.0;
-    printf("kpcn %-6s %-4s tile %d: stopped after %d of %d tiles (diffuse pass) in %.1f s, "
+    printf("kpcn %-6s %-4s tiles %dx%d: stopped after %d of %d tiles (diffuse pass) in %.1f s, "
            "%.1f s/tile -> full frame ~%.0f s (2 branches); peak RSS %.0f MiB\n",
-           preset, bf16 ? "bf16" : "fp32", T, st.tiles, nt, st.total_s, per, per * 2 * nt,
-           peak_rss_mib());
+           preset, bf16 ? "bf16" : "fp32", st.tile_w, st.tile_h, st.tiles, nt, st.total_s, per,
+           per * 2 * nt, peak_rss_mib());
   } else if (es != KPCN_OK) {
     printf("kpcn %s failed: %s\n", preset, kpcn_last_error());
   }
@@ -113,10 +112,12 @@ static void bench_kpcn(kpcn_aov_set *a, const char *preset, int bf16, int tile, 
   kpcn_denoiser_get_stats(d, &st);
   double px = (double)kpcn_aov_plane_size(a), mpx = px * 1e-6;
   double useful = 2.0 * kpcn_arch_flops_per_pixel(&arch) * px;
-  printf("kpcn %-6s %-4s tile %-5d %9.1f ms/Mpx  conv %6.1f GFLOP/s  e2e %6.1f GFLOP/s  "
+  char grid[32];
+  snprintf(grid, sizeof grid, "%dx%d", st.tile_w, st.tile_h);
+  printf("kpcn %-6s %-4s tile %-9s %9.1f ms/Mpx  conv %6.1f GFLOP/s  e2e %6.1f GFLOP/s  "
          "outside convs %4.1f%% (features %.1f%%, kpa %.1f%%, net non-conv %.1f%%, other %.1f%%)"
          "  tiles %d  peak RSS %.0f MiB\n",
-         preset, bf16 ? "bf16" : "fp32", tile, st.total_s * 1e3 / mpx,
+         preset, bf16 ? "bf16" : "fp32", grid, st.total_s * 1e3 / mpx,
          st.conv_s > 0 ? st.conv_flops / st.conv_s * 1e-9 : 0.0, useful / st.total_s * 1e-9,
          100.0 * (1.0 - st.conv_s / st.total_s), 100.0 * st.features_s / st.total_s,
          100.0 * st.kpa_s / st.total_s, 100.0 * (st.net_s - st.conv_s) / st.total_s,

@@ -147,7 +147,7 @@ static void test_values(void) {
     /* region == crop of the full features, bit for bit */
     const int rx = 5, ry = 3, rw = 11, rh = 9;
     float *g = malloc(sizeof(float) * (size_t)rw * rh * 36);
-    CHECK(kpcn_features_build_region(a, b, EPS, &n, rx, ry, rw, rh, g, NULL, 2) == KPCN_OK);
+    CHECK(kpcn_features_build_region(a, b, EPS, &n, rx, ry, rw, rh, g, 0, NULL, 2) == KPCN_OK);
     int diff = 0;
     for (int ch = 0; ch < 36; ch++)
       for (int y = 0; y < rh; y++)
@@ -170,7 +170,7 @@ static void test_values(void) {
   }
   /* errors */
   CHECK(kpcn_features_build(a, 0, 0.0f, &n, f, NULL, 1) == KPCN_ERR_INVALID_ARGUMENT);
-  CHECK(kpcn_features_build_region(a, 0, EPS, &n, 20, 0, 5, 5, f, NULL, 1) ==
+  CHECK(kpcn_features_build_region(a, 0, EPS, &n, 20, 0, 5, 5, f, 0, NULL, 1) ==
         KPCN_ERR_INVALID_ARGUMENT);
   free(a->var[KPCN_BUF_VISIBILITY]);
   a->var[KPCN_BUF_VISIBILITY] = NULL;

@@ -109,10 +109,12 @@ kpcn_status kpcn_features_build(const kpcn_aov_set *aov, int branch, float eps,
 
 /* Same for the region [x0, x0+w) x [y0, y0+h) of `aov` (must lie inside it). Gradients
  * at the region's edge use the pixels outside it (replicated only at the IMAGE border),
- * so the result equals the crop of the full-image features. Outputs are w*h planes. */
+ * so the result equals the crop of the full-image features. Outputs are w*h planes;
+ * out_planar's planes lie out_stride floats apart (0 = w*h; see kpcn_plane_stride). */
 kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, float eps,
                                        const kpcn_features_norm *norm, int x0, int y0, int w, int h,
-                                       float *out_planar, float *noisy_pre, int nthreads);
+                                       float *out_planar, size_t out_stride, float *noisy_pre,
+                                       int nthreads);
 
 /* ---- Forward/inverse colour transforms (per element, n = number of floats) ---- */
 
@@ -172,9 +174,11 @@ typedef struct kpcn_denoiser_options {
   int method;             /* kpcn_denoise_method */
   const char *model_path; /* safetensors model (method KPCN); copied at create */
   int bf16;               /* 1: bf16 inference (convolutions) */
-  int tile;               /* KPCN tile size (output pixels per side); 0 = default (512);
-                             a tile >= the image size denoises in one piece. Tiles overlap
-                             by kpcn_denoise_tile_overlap(arch) pixels; the result does not
+  int tile;               /* KPCN tile size (output pixels per side); 0 = automatic: the
+                             grid with the least overlap whose padded tile needs <= 1 GiB
+                             (a 1 Mpx frame with the cpu preset: one or two tiles). A tile
+                             >= the image size denoises in one piece. Tiles overlap by
+                             kpcn_denoise_tile_overlap(arch) pixels; the result does not
                              depend on the tile size. */
   int nthreads;           /* 0 = all cores */
   kpcn_baseline_params bilateral;
@@ -219,14 +223,16 @@ kpcn_status kpcn_denoiser_execute_aov(kpcn_denoiser *d, const kpcn_aov_set *aov,
 
 /* Timing of the last execute (seconds), for benchmarks. */
 typedef struct kpcn_denoise_stats {
-  double total_s;    /* whole execute, including input assembly */
-  double features_s; /* feature building */
-  double net_s;      /* network forward (kpcn_net_forward) */
-  double conv_s;     /* part of net_s inside oneDNN convolution primitives */
-  double kpa_s;      /* softmax + kernel apply */
-  double other_s;    /* recombination, copies, net creation */
-  double conv_flops; /* convolution FLOPs executed (both branches, overlap included) */
-  int tiles;         /* tiles processed (per branch) */
+  double total_s;     /* whole execute, including input assembly */
+  double features_s;  /* feature building */
+  double net_s;       /* network forward (kpcn_net_forward) */
+  double conv_s;      /* part of net_s inside oneDNN convolution primitives */
+  double kpa_s;       /* softmax + kernel apply */
+  double other_s;     /* recombination, copies, net creation */
+  double conv_flops;  /* convolution FLOPs executed (both branches, overlap included) */
+  int tiles;          /* tiles processed (per branch) */
+  int tiles_total;    /* tiles of the grid (per branch) */
+  int tile_w, tile_h; /* output size of a full tile of that grid */
 } kpcn_denoise_stats;
 void kpcn_denoiser_get_stats(const kpcn_denoiser *d, kpcn_denoise_stats *s);
 

@@ -154,7 +154,15 @@ typedef struct kpcn_net_options {
   int input_grad;           /* 1: backward also computes dL/dinput */
   int nthreads;             /* 0 = all cores */
   kpcn_layout layout;       /* activation layout, AUTO by default */
+  /* Floats from one input plane to the next (and from one image's to the next's, times
+   * n_inputs); 0 = H*W, dense NCHW. A padded stride (kpcn_plane_stride) keeps the planes off
+   * the same cache sets when H*W is a multiple of a power of two such as 1024x1024. */
+  size_t input_plane_stride;
 } kpcn_net_options;
+
+/* The padded plane stride for `pixels` floats: rounded up to 16 floats (64 bytes), then to
+ * an odd multiple of 16, so consecutive planes start on different cache sets. */
+size_t kpcn_plane_stride(size_t pixels);
 
 void kpcn_net_options_defaults(kpcn_net_options *o); /* N=1, 64x64, F32, inference, 0 */
 
@@ -165,8 +173,8 @@ kpcn_status kpcn_net_create(kpcn_model *m, kpcn_branch b, const kpcn_net_options
                             kpcn_net **out);
 void kpcn_net_destroy(kpcn_net *net);
 
-/* Forward: input [N][n_inputs][H][W] fp32 -> logits [N][K²][H][W] fp32. Re-reads the
- * model's weights each call. */
+/* Forward: input [N][n_inputs][H][W] fp32 (planes input_plane_stride apart) -> logits
+ * [N][K²][H][W] fp32. Re-reads the model's weights each call. */
 kpcn_status kpcn_net_forward(kpcn_net *net, const float *input, float *logits);
 
 /* Where logit t of pixel (x, y) of image b lies: at

@@ -25,9 +25,9 @@ kpcn_status kpcn_baseline_bilateral(const kpcn_aov_set *aov, const kpcn_baseline
 kpcn_status kpcn_baseline_nlmeans(const kpcn_aov_set *aov, const kpcn_baseline_params *p,
                                   float *out, int nthreads, kpcn_progress *prog);
 
-/* Default KPCN tile (output pixels per side): the paper preset's padded 552² tile keeps the
- * logits at 0.5 GiB; the overlap overhead is (552/512)² - 1 = 16%. */
-#define KPCN_DEFAULT_TILE 512
+/* Memory for one padded tile's buffers when no tile size is given (tile_grid in
+ * kpcn_pipeline.c chooses the grid with the least overlap that fits it). */
+#define KPCN_TILE_BUDGET_BYTES ((size_t)1 << 30)
 
 /* Runs the two-branch KPCN on `aov` into out (planar RGB [3][H][W]); accumulates timings
  * into *st. */

@@ -99,7 +99,8 @@ static inline float grad_src(const src_ctx *s, int g, size_t i) {
 
 kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, float eps,
                                        const kpcn_features_norm *norm, int x0, int y0, int w, int h,
-                                       float *out, float *noisy_pre, int nthreads) {
+                                       float *out, size_t out_stride, float *noisy_pre,
+                                       int nthreads) {
   if (!aov) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "features_build: aov is NULL");
   if (!kpcn_branch_name(branch))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "features_build: bad branch %d", branch);
@@ -135,6 +136,11 @@ kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, floa
               *avar = aov->var[KPCN_BUF_ALBEDO], *zvar = aov->var[KPCN_BUF_DEPTH],
               *vis = aov->buf[KPCN_BUF_VISIBILITY], *visvar = aov->var[KPCN_BUF_VISIBILITY];
   const size_t Q = (size_t)w * h;
+  if (out_stride && out_stride < Q)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "features_build: plane stride %zu is smaller than the %dx%d region",
+                     out_stride, w, h);
+  const size_t S = out_stride ? out_stride : Q; /* feature plane stride */
   const int nt = kpcn_resolve_threads(nthreads);
 
 #pragma omp parallel for num_threads(nt) schedule(static)
@@ -160,22 +166,22 @@ kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, floa
           noisy_pre[c * Q + o] = pc[c];
       if (!out) continue;
       for (int c = 0; c < 3; c++) {
-        out[(F_COLOR + c) * Q + o] = pc[c];
-        out[(F_N + c) * Q + o] = s.nrm[c][i];
-        out[(F_ALB + c) * Q + o] = s.alb[c][i];
+        out[(F_COLOR + c) * S + o] = pc[c];
+        out[(F_N + c) * S + o] = s.nrm[c][i];
+        out[(F_ALB + c) * S + o] = s.alb[c][i];
       }
-      out[F_COLOR_VAR * Q + o] = cvar[i] * (vscale / 3.0f);
-      out[F_N_VAR * Q + o] = nvar[i];
-      out[F_ALB_VAR * Q + o] = avar[i];
-      out[F_Z * Q + o] = (s.z[i] - s.zoff) * s.zscale;
-      out[F_Z_VAR * Q + o] = zvar[i] * s.zscale * s.zscale;
-      out[F_VIS * Q + o] = vis[i];
-      out[F_VIS_VAR * Q + o] = visvar[i];
+      out[F_COLOR_VAR * S + o] = cvar[i] * (vscale / 3.0f);
+      out[F_N_VAR * S + o] = nvar[i];
+      out[F_ALB_VAR * S + o] = avar[i];
+      out[F_Z * S + o] = (s.z[i] - s.zoff) * s.zscale;
+      out[F_Z_VAR * S + o] = zvar[i] * s.zscale * s.zscale;
+      out[F_VIS * S + o] = vis[i];
+      out[F_VIS_VAR * S + o] = visvar[i];
       const size_t il = (size_t)y * W + xm, ir = (size_t)y * W + xp;
       const size_t iu = (size_t)ym * W + x, id = (size_t)yp * W + x;
       for (int g = 0; g < N_GRAD; g++) {
-        out[(F_DX + g) * Q + o] = 0.5f * (grad_src(&s, g, ir) - grad_src(&s, g, il));
-        out[(F_DY + g) * Q + o] = 0.5f * (grad_src(&s, g, id) - grad_src(&s, g, iu));
+        out[(F_DX + g) * S + o] = 0.5f * (grad_src(&s, g, ir) - grad_src(&s, g, il));
+        out[(F_DY + g) * S + o] = 0.5f * (grad_src(&s, g, id) - grad_src(&s, g, iu));
       }
     }
   }
@@ -187,7 +193,7 @@ kpcn_status kpcn_features_build(const kpcn_aov_set *aov, int branch, float eps,
                                 int nthreads) {
   if (!aov) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "features_build: aov is NULL");
   return kpcn_features_build_region(aov, branch, eps, norm, 0, 0, aov->width, aov->height,
-                                    out_planar, noisy_pre, nthreads);
+                                    out_planar, 0, noisy_pre, nthreads);
 }
 
 /* ---- element-wise transforms ---- */

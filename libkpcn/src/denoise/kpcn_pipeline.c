@@ -7,8 +7,7 @@
  * padded tile every core pixel sees exactly the inputs the untiled net would see (the conv
  * stack reads within its radius, the kernel within K/2, and features come from the full
  * image), so tiled == untiled up to floating-point summation order inside oneDNN.
- * Memory is bounded by the padded tile, not the image: for T = 512 with the paper preset
- * the largest buffers are the logits (K² = 441 planes of 552² floats = 0.5 GiB). */
+ * Memory is bounded by the padded tile, not the image (see tile_grid for the default). */
 #include "core/internal.h"
 #include "denoise_internal.h"
 
@@ -44,6 +43,45 @@ static int tile_cmp(const void *a, const void *b) {
   return s->x0 < t->x0 ? -1 : s->x0 > t->x0;
 }
 
+/* Floats a padded tile pixel costs while its net runs: features, noisy and filtered colour,
+ * two hidden activations (ping-pong) and the K² logits. Matches peak RSS within ~10 %. */
+static size_t floats_per_pixel(const kpcn_arch *a) {
+  return KPCN_FEATURES_COUNT + 6 + 2 * (size_t)a->channels +
+         (size_t)a->kernel_size * a->kernel_size;
+}
+
+/* Tile grid. An explicit tile size gives square tiles of that size. Otherwise (tile = 0)
+ * the grid is the one with the least padded area (overlap is recomputed work) whose
+ * largest padded tile fits KPCN_TILE_BUDGET_BYTES: a 1024x1024 frame with the cpu preset
+ * runs as two 1024x512 tiles (4.3 % overlap) instead of four 512x512 ones (8.8 %), a 4K
+ * frame with the paper preset still stays far below 4 GiB. Ties go to fewer tiles. */
+static void tile_grid(const kpcn_arch *a, int W, int H, int ov, int tile, int *tw, int *th) {
+  if (tile > 0) {
+    *tw = *th = tile;
+    return;
+  }
+  const double budget = (double)KPCN_TILE_BUDGET_BYTES / (4.0 * (double)floats_per_pixel(a));
+  double best = -1.0;
+  int best_n = 0;
+  *tw = *th = 64;
+  for (int nx = 1; nx <= (W + 63) / 64; nx++) {
+    const int Tx = (W + nx - 1) / nx, pw = Tx + 2 * ov < W ? Tx + 2 * ov : W;
+    for (int ny = 1; ny <= (H + 63) / 64; ny++) {
+      const int Ty = (H + ny - 1) / ny, ph = Ty + 2 * ov < H ? Ty + 2 * ov : H;
+      const int fits = (double)pw * ph <= budget;
+      if (!fits && !(Tx <= 64 && Ty <= 64)) continue;
+      const double area = (double)(W + 2 * ov * (nx - 1)) * (double)(H + 2 * ov * (ny - 1));
+      if (best < 0.0 || area < best || (area == best && nx * ny < best_n)) {
+        best = area;
+        best_n = nx * ny;
+        *tw = Tx;
+        *th = Ty;
+      }
+      if (fits) break; /* more rows only add overlap */
+    }
+  }
+}
+
 static kpcn_status require_all(const kpcn_aov_set *aov) {
   const kpcn_buffer need[] = {KPCN_BUF_DIFFUSE, KPCN_BUF_SPECULAR, KPCN_BUF_ALBEDO,
                               KPCN_BUF_NORMAL,  KPCN_BUF_DEPTH,    KPCN_BUF_VISIBILITY};
@@ -69,21 +107,25 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov, int ti
   const int ov = kpcn_denoise_tile_overlap(arch);
   const float eps = arch->eps;
   const size_t P = kpcn_aov_plane_size(aov);
-  const int T = tile > 0 ? tile : KPCN_DEFAULT_TILE;
+  int TW, TH;
+  tile_grid(arch, W, H, ov, tile, &TW, &TH);
   kpcn_features_norm norm;
   KPCN_TRY(kpcn_features_norm_compute(aov, &norm));
 
-  const int nx = (W + T - 1) / T, ny = (H + T - 1) / T, nt = nx * ny;
+  const int nx = (W + TW - 1) / TW, ny = (H + TH - 1) / TH, nt = nx * ny;
+  st->tiles_total = nt;
+  st->tile_w = TW;
+  st->tile_h = TH;
   tile_t *tiles = kpcn_alloc(sizeof(tile_t) * (size_t)nt, "denoiser tile list");
   if (!tiles) return KPCN_ERR_OUT_OF_MEMORY;
   int maxp = 0;
   for (int j = 0; j < ny; j++)
     for (int i = 0; i < nx; i++) {
       tile_t *t = &tiles[j * nx + i];
-      t->x0 = i * T;
-      t->y0 = j * T;
-      t->x1 = t->x0 + T < W ? t->x0 + T : W;
-      t->y1 = t->y0 + T < H ? t->y0 + T : H;
+      t->x0 = i * TW;
+      t->y0 = j * TH;
+      t->x1 = t->x0 + TW < W ? t->x0 + TW : W;
+      t->y1 = t->y0 + TH < H ? t->y0 + TH : H;
       t->px0 = t->x0 - ov > 0 ? t->x0 - ov : 0;
       t->py0 = t->y0 - ov > 0 ? t->y0 - ov : 0;
       t->pw = (t->x1 + ov < W ? t->x1 + ov : W) - t->px0;
@@ -93,7 +135,11 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov, int ti
   qsort(tiles, (size_t)nt, sizeof(tile_t), tile_cmp);
 
   const size_t mp = (size_t)maxp;
-  float *feat = kpcn_aligned_alloc(sizeof(float) * mp * KPCN_FEATURES_COUNT, "denoiser features");
+  /* feature planes at a padded stride: 36 planes of exactly 2^k floats (a 1024x1024 tile)
+   * would all map to the same cache sets, which made feature building 3x and the net's input
+   * reorder 2x slower (bench_denoise --size 1024x1024 --tile 1024) */
+  float *feat = kpcn_aligned_alloc(sizeof(float) * kpcn_plane_stride(mp) * KPCN_FEATURES_COUNT,
+                                   "denoiser features");
   float *noisy = kpcn_aligned_alloc(sizeof(float) * mp * 3, "denoiser noisy tile");
   float *filt = kpcn_aligned_alloc(sizeof(float) * mp * 3, "denoiser filtered tile");
   kpcn_net *net = NULL;
@@ -128,6 +174,7 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov, int ti
         no.height = t->ph;
         no.precision = bf16 ? KPCN_PREC_BF16 : KPCN_PREC_F32;
         no.nthreads = nthreads;
+        no.input_plane_stride = kpcn_plane_stride((size_t)t->pw * t->ph);
         s = kpcn_net_create(model, (kpcn_branch)b, &no, &net);
         if (s != KPCN_OK) {
           kpcn_fail_context("KPCN denoiser: creating the %dx%d %s network", t->pw, t->ph,
@@ -140,8 +187,8 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov, int ti
       }
       const size_t Q = (size_t)t->pw * t->ph;
       double ta = now_s();
-      s = kpcn_features_build_region(aov, b, eps, &norm, t->px0, t->py0, t->pw, t->ph, feat, noisy,
-                                     nthreads);
+      s = kpcn_features_build_region(aov, b, eps, &norm, t->px0, t->py0, t->pw, t->ph, feat,
+                                     kpcn_plane_stride(Q), noisy, nthreads);
       if (s != KPCN_OK) goto done;
       double tb = now_s();
       /* the kpa layer reads the logits where and as the net left them (no reorder) */

@@ -79,12 +79,12 @@ static inline float exp_nonpos(float x) {
  * reloaded them from the shared-variable block and did not vectorize. logits points at the
  * image's first logit; planar logits are read in place, any other layout is first gathered
  * into the row's softmax buffer wt ([K2][w]), where the exponentials then overwrite it. */
-static void fwd_row(int K, int nc, int h, int w, int y, const float *logits,
+static void fwd_row(int K, int nc, int h, int w, size_t ws, int y, const float *logits,
                     const kpcn_logits_layout *lay, const float *noisy, float *out, float *weights,
                     float *restrict wt) {
   const int r = K / 2, K2 = K * K;
   const size_t plane = (size_t)h * w;
-  float *restrict mx = wt + (size_t)K2 * w, *restrict sum = mx + w, *restrict pr = sum + w;
+  float *restrict mx = wt + (size_t)K2 * ws, *restrict sum = mx + w, *restrict pr = sum + w;
   const int planar = lay->block == 1 && lay->pixel_stride == 1;
   const float *L; /* row y of logit 0; logit t's row starts at L + t * lstride */
   size_t lstride;
@@ -97,9 +97,9 @@ static void fwd_row(int K, int nc, int h, int w, int y, const float *logits,
       const int nb = K2 - t0 < bl ? K2 - t0 : bl;
       for (int x = 0; x < w; x++)
         for (int j = 0; j < nb; j++)
-          wt[(size_t)(t0 + j) * w + x] = src[(size_t)x * ps + j];
+          wt[(size_t)(t0 + j) * ws + x] = src[(size_t)x * ps + j];
     }
-    L = wt, lstride = (size_t)w;
+    L = wt, lstride = ws;
   }
   for (int x = 0; x < w; x++)
     mx[x] = L[x];
@@ -111,7 +111,7 @@ static void fwd_row(int K, int nc, int h, int w, int y, const float *logits,
   for (int x = 0; x < w; x++)
     sum[x] = 0.f;
   for (int t = 0; t < K2; t++) {
-    float *wr = wt + (size_t)t * w; /* may be Lt itself (gathered layouts): same element */
+    float *wr = wt + (size_t)t * ws; /* may be Lt itself (gathered layouts): same element */
     const float *Lt = L + (size_t)t * lstride;
 #pragma omp simd
     for (int x = 0; x < w; x++) {
@@ -127,7 +127,7 @@ static void fwd_row(int K, int nc, int h, int w, int y, const float *logits,
   const int scale_out = weights == NULL;
   if (!scale_out)
     for (int t = 0; t < K2; t++) {
-      float *restrict wr = wt + (size_t)t * w;
+      float *restrict wr = wt + (size_t)t * ws;
       for (int x = 0; x < w; x++)
         wr[x] *= sum[x];
     }
@@ -146,7 +146,7 @@ static void fwd_row(int K, int nc, int h, int w, int y, const float *logits,
         acc[i] = 0.f;
       for (int dy = 0; dy < K; dy++)
         for (int dx = 0; dx < K; dx++) {
-          const float *restrict wr = wt + (size_t)(dy * K + dx) * w + x0;
+          const float *restrict wr = wt + (size_t)(dy * K + dx) * ws + x0;
           const float *restrict src = pr + (size_t)dy * pw + dx + x0;
           if (nx == XB)
             for (int i = 0; i < XB; i++)
@@ -165,7 +165,7 @@ static void fwd_row(int K, int nc, int h, int w, int y, const float *logits,
   if (weights) { /* written last so weights may alias logits */
     float *W = weights + (size_t)y * w;
     for (int t = 0; t < K2; t++)
-      memcpy(W + t * plane, wt + (size_t)t * w, (size_t)w * 4);
+      memcpy(W + t * plane, wt + (size_t)t * ws, (size_t)w * 4);
   }
 }
 
@@ -192,14 +192,17 @@ kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const fl
                      "kpcn_kpa_forward: logits layout (block %d, pixel stride %d) overlaps itself",
                      lay.block, lay.pixel_stride);
   const size_t plane = (size_t)h * w;
-  /* per thread: softmax row [K2][w], max and sum rows, K padded rows (forward) */
-  const size_t scratch = (size_t)K2 * w + 2 * (size_t)w + (size_t)K * (w + 2 * r) + 64;
+  /* per thread: softmax rows [K2][ws], max and sum rows, K padded rows. The row stride ws
+   * is padded (kpcn_plane_stride) so the K2 rows the apply loop reads together do not all
+   * fall on one cache set when w is a power of two. */
+  const size_t ws = kpcn_plane_stride((size_t)w);
+  const size_t scratch = (size_t)K2 * ws + 2 * (size_t)w + (size_t)K * (w + 2 * r) + 64;
   float *buf = kpcn_aligned_alloc((size_t)nt * scratch * sizeof(float), "kpa scratch");
   if (!buf) return KPCN_ERR_OUT_OF_MEMORY;
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++) {
     const int b = (int)(row / h), y = (int)(row % h);
-    fwd_row(K, nc, h, w, y, logits + (size_t)b * lay.image_stride, &lay,
+    fwd_row(K, nc, h, w, ws, y, logits + (size_t)b * lay.image_stride, &lay,
             noisy + (size_t)b * nc * plane, out + (size_t)b * nc * plane,
             weights ? weights + (size_t)b * K2 * plane : NULL, thread_scratch(buf, scratch));
   }

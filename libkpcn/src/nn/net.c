@@ -168,6 +168,11 @@ static kpcn_status make_pd(kpcn_net *n, dnnl_primitive_desc_t *pd, const void *d
   return KPCN_OK;
 }
 
+size_t kpcn_plane_stride(size_t pixels) {
+  size_t blocks = (pixels + 15) / 16;
+  return 16 * (blocks | 1);
+}
+
 void kpcn_net_options_defaults(kpcn_net_options *o) {
   memset(o, 0, sizeof *o);
   o->batch = 1;
@@ -377,7 +382,9 @@ static kpcn_status build(kpcn_net *n) {
   dnnl_memory_desc_t xany, user_in;
   dnnl_format_tag_t tag = n->o.layout == KPCN_LAYOUT_NCHW16C ? dnnl_nChw16c : dnnl_nhwc;
   DN(dnnl_memory_desc_init_by_tag(&xany, 4, xd, adt, tag));
-  DN(dnnl_memory_desc_init_by_tag(&user_in, 4, xd, dnnl_f32, dnnl_nchw));
+  const dnnl_dim_t ps = n->o.input_plane_stride ? (dnnl_dim_t)n->o.input_plane_stride : H * W;
+  dnnl_dims_t xstrides = {a->n_inputs * ps, ps, W, 1};
+  DN(dnnl_memory_desc_init_by_strides(&user_in, 4, xd, dnnl_f32, xstrides));
   for (int l = 0; l < n->nl; l++)
     KPCN_TRY(build_layer(n, l, l == 0 ? &xany : &n->L[l - 1].dst_md, &scratch));
   /* We asked backward for the exact forward layouts; make sure oneDNN honoured them. */
@@ -423,6 +430,10 @@ kpcn_status kpcn_net_create(kpcn_model *m, kpcn_branch b, const kpcn_net_options
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_create: batch = %d not in [1, 4096]",
                      o->batch);
   KPCN_TRY(kpcn_check_size(o->width, o->height, "kpcn_net_create"));
+  if (o->input_plane_stride && o->input_plane_stride < (size_t)o->width * (size_t)o->height)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "kpcn_net_create: input plane stride %zu is smaller than the %dx%d plane",
+                     o->input_plane_stride, o->width, o->height);
   if ((int64_t)o->batch * o->width * o->height > KPCN_MAX_PIXELS)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_create: batch x pixels too large");
   if (o->precision != KPCN_PREC_F32 && o->precision != KPCN_PREC_BF16)
