@@ -74,6 +74,26 @@ static inline float exp_nonpos(float x) {
   return p * u.f;
 }
 
+/* o[i] = scale[i] * sum over the K² taps t of wt[t][i] * pr[dy][dx + i] for i < n (scale
+ * NULL: 1), wt rows ws floats apart, padded source rows pw apart. Inlined with n = XB the
+ * accumulators are registers; a variable n only serves the row's last chunk. */
+static inline __attribute__((always_inline)) void
+apply_chunk(const int n, int K, const float *restrict wt, size_t ws, const float *restrict pr,
+            int pw, const float *restrict scale, float *restrict o) {
+  float acc[XB];
+  for (int i = 0; i < XB; i++)
+    acc[i] = 0.f;
+  for (int dy = 0; dy < K; dy++)
+    for (int dx = 0; dx < K; dx++) {
+      const float *restrict wr = wt + (size_t)(dy * K + dx) * ws;
+      const float *restrict src = pr + (size_t)dy * pw + dx;
+      for (int i = 0; i < n; i++)
+        acc[i] += wr[i] * src[i];
+    }
+  for (int i = 0; i < n; i++)
+    o[i] = scale ? acc[i] * scale[i] : acc[i];
+}
+
 /* One output row y of one image. A separate function (all sizes by value) so the compiler
  * sees loop bounds and pointers that the stores cannot alias; inside the OpenMP region it
  * reloaded them from the shared-variable block and did not vectorize. logits points at the
@@ -140,26 +160,11 @@ static void fwd_row(int K, int nc, int h, int w, size_t ws, int y, const float *
                  noisy + (size_t)c * plane + (size_t)clampi(y + dy - r, 0, h - 1) * w, w, r);
     float *o = out + (size_t)c * plane + (size_t)y * w;
     for (int x0 = 0; x0 < w; x0 += XB) {
-      const int nx = w - x0 < XB ? w - x0 : XB;
-      float acc[XB];
-      for (int i = 0; i < XB; i++)
-        acc[i] = 0.f;
-      for (int dy = 0; dy < K; dy++)
-        for (int dx = 0; dx < K; dx++) {
-          const float *restrict wr = wt + (size_t)(dy * K + dx) * ws + x0;
-          const float *restrict src = pr + (size_t)dy * pw + dx + x0;
-          if (nx == XB)
-            for (int i = 0; i < XB; i++)
-              acc[i] += wr[i] * src[i];
-          else
-            for (int i = 0; i < nx; i++)
-              acc[i] += wr[i] * src[i];
-        }
-      if (scale_out)
-        for (int i = 0; i < nx; i++)
-          o[x0 + i] = acc[i] * sum[x0 + i];
+      const float *scale = scale_out ? sum + x0 : NULL;
+      if (w - x0 >= XB) /* constant width: the accumulators stay in registers */
+        apply_chunk(XB, K, wt + x0, ws, pr + x0, pw, scale, o + x0);
       else
-        memcpy(o + x0, acc, (size_t)nx * sizeof(float));
+        apply_chunk(w - x0, K, wt + x0, ws, pr + x0, pw, scale, o + x0);
     }
   }
   if (weights) { /* written last so weights may alias logits */
