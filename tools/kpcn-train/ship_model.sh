@@ -10,13 +10,15 @@
 #   NAME (kpcn-$PRESET), DATASET_RECIPE (free text: how the store was made), KPCN_TRAIN,
 #   LR (1e-3), LR2 (stage-2 lr, default LR), DECAY_EVERY (iterations per x0.96, default
 #   iters/20), TIME_LIMIT (minutes, none), KEEP_BEST (1: ship the model of the validation
-#   with the lowest relMSE instead of the last one; needs validation pairs).
+#   with the lowest relMSE instead of the last one; needs validation pairs), INIT (a model to
+#   fine-tune: kpcn-train --init), SHIP_IF_BELOW (a validation relMSE: replace the shipped
+#   model only if this run's shipped validation relMSE is lower, e.g. the current model's).
 # With a time budget the iteration count is unknown in advance, so the script first measures
 # the speed (20 iterations) and sets --iters to fit MINUTES, --stage1-iters to STAGE1_FRACTION.
 # Resumable: if the run is interrupted, re-running continues from its checkpoint.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/../.." && pwd)
-[ $# -ge 1 ] || { sed -n 2,14p "$0"; exit 2; }
+[ $# -ge 1 ] || { sed -n 2,18p "$0"; exit 2; }
 store=$1
 shift
 bin=${KPCN_TRAIN:-$here/build/tools/kpcn-train/kpcn-train}
@@ -50,6 +52,7 @@ args=(--store "$store" -o "$work/model.safetensors" --preset "$PRESET" --iters "
   --threads "$THREADS" --seed "$SEED" --val-every $((iters / 28 > 0 ? iters / 28 : 1))
   --ckpt-every 100 "${val[@]}")
 [ -n "${LR2:-}" ] && args+=(--lr2 "$LR2")
+[ -n "${INIT:-}" ] && args+=(--init "$INIT")
 [ -n "${TIME_LIMIT:-}" ] && args+=(--time-limit "$TIME_LIMIT")
 shipped=$work/model.safetensors
 if [ "${KEEP_BEST:-0}" = 1 ]; then
@@ -61,6 +64,14 @@ resume=()
 echo "ship_model.sh: $bin ${args[*]} ${resume[*]}"
 "$bin" "${args[@]}" "${resume[@]}"
 
+if [ -n "${SHIP_IF_BELOW:-}" ]; then
+  col=$([ "${KEEP_BEST:-0}" = 1 ] && echo best || echo last)
+  got=$(awk -F, -v w="$col" 'NR > 1 && $7 != "" { if (w == "last" || b == "" || $7 < b) b = $7 } END { print b }' "$work/model.safetensors.csv")
+  if ! awk -v g="$got" -v t="$SHIP_IF_BELOW" 'BEGIN { exit !(g != "" && g + 0 < t + 0) }'; then
+    echo "ship_model.sh: validation relMSE ${got:-none} is not below $SHIP_IF_BELOW: the shipped model stays; this run is in $work"
+    exit 0
+  fi
+fi
 cp "$shipped" "$outdir/$NAME.safetensors"
 cp "$work/model.safetensors.png" "$outdir/$NAME-curves.png"
 cp "$work/model.safetensors.csv" "$outdir/$NAME-log.csv"
@@ -81,6 +92,7 @@ cpu=$(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -1)
   echo "| preset | $PRESET |"
   echo "| patch store | \`$(basename "$store")\` |"
   echo "| dataset recipe | ${DATASET_RECIPE:-see docs/dataset.md} |"
+  [ -n "${INIT:-}" ] && echo "| initialised from | \`$(basename "$INIT")\` (the previously shipped model; its own README is in git history) |"
   echo "| iterations | $done_iters of $iters planned (stage 1: $stage1, stage-2 loss $LOSS2) |"
   echo "| training time | ${secs} s |"
   echo "| hardware | ${cpu:-unknown CPU}, $(nproc) cores, threads=$THREADS |"
