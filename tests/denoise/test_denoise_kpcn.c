@@ -242,6 +242,7 @@ static void test_api(void) {
   kpcn_denoise_stats st;
   kpcn_denoiser_get_stats(d, &st);
   CHECK(st.tiles == 6); /* ceil(40/16) * ceil(30/16) */
+  CHECK(st.tiles_total == 6 && st.tile_w == 16 && st.tile_h == 16);
   CHECK(st.conv_flops > 0 && st.total_s > 0);
   /* cancellation: 6 tiles, the third progress call cancels */
   g_calls = 0;
@@ -249,6 +250,20 @@ static void test_api(void) {
   CHECK(kpcn_denoiser_execute(d, out, W, H, 0, 0) == KPCN_ERR_CANCELLED);
   CHECK(g_calls == 3);
   kpcn_denoiser_destroy(d);
+
+  /* tile 0: the automatic grid; a small frame fits the memory budget in one tile, and the
+   * result equals the explicitly tiled one */
+  o.tile = 0;
+  CHECK(kpcn_denoiser_create(&d, &o) == KPCN_OK);
+  if (d) {
+    kpcn_denoiser_set_progress(d, NULL, NULL);
+    CHECK(kpcn_denoiser_execute_aov(d, a, out) == KPCN_OK);
+    kpcn_denoiser_get_stats(d, &st);
+    CHECK(st.tiles_total == 1 && st.tile_w == W && st.tile_h == H);
+    CHECK(max_rel(out, ref, 3 * P) < 2e-6);
+    kpcn_denoiser_destroy(d);
+  }
+  o.tile = 16;
 
   /* missing specular through the convenience call */
   free(a->buf[KPCN_BUF_SPECULAR]);
