@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The main job: set up + build, render a held-out scene at low spp with kpcn-render, denoise
 # it with the shipped KPCN model (and non-local means for comparison), write the EXRs, a
-# labelled comparison mosaic PNG through the OCIO display transform, a relMSE error map and
-# the metrics against the bundled reference.
+# labelled comparison mosaic PNG (OCIO display transform, plus a false-colour relMSE error
+# map), the error map as EXR and the metrics against the bundled reference.
 #   tools/main-job.sh [outdir]        (default: out/)
 # Environment: KPCN_SCENE, KPCN_REF, KPCN_MODEL, KPCN_SPP, KPCN_RES override the defaults.
 set -euo pipefail
@@ -24,8 +24,13 @@ echo "== denoise: KPCN ($(basename "$model")) and non-local means"
 "$tool" "$out/noisy.exr" --denoise:model="$model" -o "$out/kpcn.exr"
 "$tool" "$out/noisy.exr" --denoise:method=nlmeans -o "$out/nlmeans.exr"
 echo "== mosaic and error map"
-"$tool" "$out/noisy.exr" --ch R,G,B "$out/nlmeans.exr" "$out/kpcn.exr" "$ref" --ch R,G,B \
-  --mosaic:n=4:labels=noisy,nlmeans,kpcn,reference --ociodisplay:view=Filmic -o "$out/mosaic.png"
+# four images through the OCIO Filmic view, then kpcn's per-pixel relMSE in false colour
+# (inferno, 0 .. 0.01: ten times the image mean of a good result) as the fifth panel
+view=--ociodisplay:view=Filmic
+"$tool" "$out/noisy.exr" --ch R,G,B $view "$out/nlmeans.exr" $view "$out/kpcn.exr" $view \
+  "$ref" --ch R,G,B $view "$out/kpcn.exr" "$ref" --ch R,G,B --errormap:metric=relmse \
+  --colormap:max=0.01 --mosaic:n=5:labels="noisy,nlmeans,kpcn,reference,kpcn relMSE 0-0.01" \
+  -o "$out/mosaic.png"
 "$tool" "$out/kpcn.exr" "$ref" --ch R,G,B --errormap:metric=relmse -o "$out/kpcn_relmse.exr"
 echo "== metrics against the reference ($(basename "$ref"))"
 for name in noisy nlmeans kpcn; do

@@ -48,4 +48,26 @@ OCIO=$PWD/alt.ocio expect_fail "view 'Standard'" std.exr c.exr --ociodisplay:vie
 # AOV images: only R,G,B are transformed.
 run_ok "$NOISY" --ociodisplay:view=Filmic -o aov.png
 oiiotool --info aov.png | grep -q "3 channel" && pass "AOV -> RGB png" || fail "$(oiiotool --info aov.png)"
+# --colormap against oiiotool's own colour maps: a ramp over [0, 2] with max=2 equals
+# oiiotool's map of the ramp / 2; an RGB image maps its channel mean; the default max is the
+# 99th percentile (a constant image maps to the top of the map).
+oiiotool --pattern fill:left=0:right=2 9x1 1 -o ramp.exr
+oiiotool ramp.exr --mulc 0.5 --colormap inferno -o ramp_oiio.exr
+oiiotool ramp.exr --mulc 0.5 --colormap viridis -o ramp_oiio_v.exr
+oiiotool --pattern constant:color=0.1,0.2,0.6 4x2 3 -o rgb.exr
+oiiotool --pattern constant:color=0.3 4x2 1 --colormap inferno -o rgb_oiio.exr
+oiiotool --pattern constant:color=1 4x2 1 --colormap inferno -o top_oiio.exr
+run_ok ramp.exr --colormap:max=2 ramp_oiio.exr --l1 --json
+grep -q '"l1": 0}' out.txt && pass "colormap inferno == oiiotool" || fail "colormap: $(cat out.txt)"
+run_ok ramp.exr --colormap:max=2:map=viridis ramp_oiio_v.exr --l1 --json
+grep -q '"l1": 0}' out.txt && pass "colormap viridis == oiiotool" || fail "viridis: $(cat out.txt)"
+run_ok rgb.exr --colormap:max=1 rgb_oiio.exr --l1 --json
+$PY -c 'import json,sys; sys.exit(json.load(open("out.txt"))["l1"] > 1e-6)' &&
+  pass "colormap of RGB = map of the channel mean" || fail "rgb mean: $(cat out.txt)"
+run_ok rgb.exr --colormap top_oiio.exr --l1 --json
+grep -q '"l1": 0}' out.txt && pass "colormap default max = 99th percentile" || fail "auto max: $(cat out.txt)"
+expect_fail "colour map 'nope'" cm.png ramp.exr --colormap:map=nope -o cm.png
+expect_fail "modifier 'max' must be positive" cm.png ramp.exr --colormap:max=0 -o cm.png
+oiiotool --pattern constant:color=0 4x2 1 -o zero.exr
+expect_fail "give a positive :max=" cm.png zero.exr --colormap -o cm.png
 finish

@@ -1,4 +1,4 @@
-// Core kpcntool commands: -o, --threads, --json, --info, --ch, --ociodisplay, --mosaic,
+// Core kpcntool commands: -o, --threads, --json, --info, --ch, --ociodisplay, --colormap, --mosaic,
 // plus the shared read_image / write_image helpers (see kpcntool.h, docs/kpcntool.md).
 #include "kpcntool.h"
 
@@ -9,6 +9,7 @@
 #include <OpenImageIO/imagebufalgo.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
@@ -302,6 +303,64 @@ bool cmd_ociodisplay(Context &ctx, const Modifiers &m, const std::vector<std::st
   return true;
 }
 
+// False-colour display of a scalar image (an error map): the per-pixel mean of the channels,
+// divided by max (default: its 99th percentile over the finite pixels) and clamped to [0, 1],
+// through OIIO's colour map. The result is display-referred RGB: write it as is, do not pass
+// it through --ociodisplay. Non-finite pixels map to 0.
+bool cmd_colormap(Context &ctx, const Modifiers &m, const std::vector<std::string> &,
+                  std::string &err) {
+  const ImageBuf &src = ctx.top();
+  const ImageSpec &ss = src.spec();
+  const int nch = ss.nchannels;
+  std::vector<float> all((size_t)ss.width * ss.height * nch), finite;
+  if (!src.get_pixels(src.roi(), TypeDesc::FLOAT, all.data())) {
+    err = src.geterror();
+    return false;
+  }
+  ImageBuf mean(ImageSpec(ss.width, ss.height, 1, TypeDesc::FLOAT));
+  float *mp = (float *)mean.localpixels();
+  finite.reserve((size_t)ss.width * ss.height);
+  for (size_t i = 0; i < (size_t)ss.width * ss.height; ++i) {
+    double v = 0.0;
+    for (int c = 0; c < nch; ++c)
+      v += all[i * nch + c];
+    v /= nch;
+    if (std::isfinite(v))
+      finite.push_back((float)v);
+    else
+      v = 0.0;
+    mp[i] = (float)v;
+  }
+  double mx = m.num("max", 0.0);
+  if (m.str("max").empty() && !finite.empty()) {
+    size_t k = (size_t)std::floor(0.99 * (double)(finite.size() - 1));
+    std::nth_element(finite.begin(), finite.begin() + (long)k, finite.end());
+    mx = finite[k];
+  }
+  if (!(mx > 0.0) || !std::isfinite(mx)) {
+    err = m.str("max").empty()
+              ? "the image's 99th percentile is " + std::to_string(mx) + ": give a positive :max="
+              : "modifier 'max' must be positive (got '" + m.str("max") + "')";
+    return false;
+  }
+  ImageBuf scaled;
+  if (!IBA::mul(scaled, mean, (float)(1.0 / mx), {}, ctx.nthreads) ||
+      !IBA::clamp(scaled, scaled, 0.0f, 1.0f, false, {}, ctx.nthreads)) {
+    err = scaled.geterror();
+    return false;
+  }
+  std::string map = m.str("map", "inferno");
+  ImageBuf dst = IBA::color_map(scaled, 0, map, {}, ctx.nthreads);
+  if (dst.has_error()) {
+    err = "colour map '" + map + "': " + dst.geterror();
+    return false;
+  }
+  dst.specmod().attribute("oiio:ColorSpace", "sRGB");
+  ctx.pop();
+  ctx.push(std::move(dst));
+  return true;
+}
+
 bool cmd_mosaic(Context &ctx, const Modifiers &m, const std::vector<std::string> &,
                 std::string &err) {
   std::vector<std::string> labels = kpcn::ops::split_names(m.str("labels"));
@@ -383,6 +442,13 @@ bool r6 = register_command({"ociodisplay",
                             "OCIO display transform of the top image (default config: "
                             "$OCIO or testdata/ocio/config.ocio)",
                             cmd_ociodisplay});
+bool r7b =
+    register_command({"colormap",
+                      0,
+                      {"map", "max"},
+                      "false-colour display of the top image's channel mean / max "
+                      "(map=inferno|viridis|magma|plasma|turbo|heat|..., max=99th percentile)",
+                      cmd_colormap});
 bool r7 = register_command({"mosaic",
                             0,
                             {"n", "labels", "font", "fontsize"},
