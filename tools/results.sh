@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Measures noisy / cross-bilateral / non-local means / KPCN against the references on the
 # held-out (test split) scenes of a kpcn-dataset directory at several spp, and writes
-# docs/results.md plus labelled mosaics (OCIO Filmic view) in docs/img/.
+# docs/results.md plus labelled mosaics (OCIO Filmic view, and kpcn's relMSE error map in
+# false colour) in docs/img/.
 #   tools/results.sh DATASET_DIR MODEL [scene ...]     (default scenes: the test split)
 # Environment: SPPS (default "4 16 64"), KPCN_BIN (default build/tools).
 set -euo pipefail
@@ -44,8 +45,10 @@ for s in "${scenes[@]}"; do
       /usr/bin/python3 -c "import json,sys; d=json.loads(sys.argv[1]); print('| $s | $spp | $m | %.3e | %.4f | %.2f |' % (d['relmse'], d['ssim'], d['psnr']))" "$j" >> "$md"
       /usr/bin/python3 -c "import json,sys; d=json.loads(sys.argv[1]); print('$s\t$spp\t$m\t%.9g\t%.9g' % (d['relmse'], d['ssim']))" "$j" >> "$work/rows.tsv"
     done
-    "$tool" "$work/noisy.exr" "$work/bilateral.exr" "$work/nlmeans.exr" "$work/kpcn.exr" "$ref" --ch R,G,B \
-      --mosaic:n=5:labels=noisy,bilateral,nlmeans,kpcn,reference --ociodisplay:view=Filmic \
+    v=--ociodisplay:view=Filmic
+    "$tool" "$work/noisy.exr" $v "$work/bilateral.exr" $v "$work/nlmeans.exr" $v "$work/kpcn.exr" $v \
+      "$ref" --ch R,G,B $v "$work/kpcn.exr" "$ref" --ch R,G,B --errormap:metric=relmse \
+      --colormap:max=0.01 --mosaic:n=6:labels="noisy,bilateral,nlmeans,kpcn,reference,kpcn relMSE 0-0.01" \
       -o "$here/docs/img/${s}_${spp}spp.png"
   done
   echo >> "$md"
