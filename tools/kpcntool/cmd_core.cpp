@@ -310,27 +310,18 @@ bool cmd_ociodisplay(Context &ctx, const Modifiers &m, const std::vector<std::st
 bool cmd_colormap(Context &ctx, const Modifiers &m, const std::vector<std::string> &,
                   std::string &err) {
   const ImageBuf &src = ctx.top();
-  const ImageSpec &ss = src.spec();
-  const int nch = ss.nchannels;
-  std::vector<float> all((size_t)ss.width * ss.height * nch), finite;
-  if (!src.get_pixels(src.roi(), TypeDesc::FLOAT, all.data())) {
-    err = src.geterror();
+  const int nch = src.nchannels();
+  ImageBuf mean =
+      IBA::channel_sum(src, std::vector<float>((size_t)nch, 1.0f / nch), {}, ctx.nthreads);
+  std::vector<float> finite(mean.spec().image_pixels());
+  if (mean.has_error() || !mean.get_pixels(mean.roi(), TypeDesc::FLOAT, finite.data())) {
+    err = mean.geterror();
     return false;
   }
-  ImageBuf mean(ImageSpec(ss.width, ss.height, 1, TypeDesc::FLOAT));
-  float *mp = (float *)mean.localpixels();
-  finite.reserve((size_t)ss.width * ss.height);
-  for (size_t i = 0; i < (size_t)ss.width * ss.height; ++i) {
-    double v = 0.0;
-    for (int c = 0; c < nch; ++c)
-      v += all[i * nch + c];
-    v /= nch;
-    if (std::isfinite(v))
-      finite.push_back((float)v);
-    else
-      v = 0.0;
-    mp[i] = (float)v;
-  }
+  finite.erase(
+      std::remove_if(finite.begin(), finite.end(), [](float v) { return !std::isfinite(v); }),
+      finite.end());
+  IBA::fixNonFinite(mean, mean, IBA::NONFINITE_BLACK, nullptr, {}, ctx.nthreads);
   double mx = m.num("max", 0.0);
   if (m.str("max").empty() && !finite.empty()) {
     size_t k = (size_t)std::floor(0.99 * (double)(finite.size() - 1));
