@@ -8,6 +8,7 @@
  *                                 fresh 16-spp render of the held-out main-job scene against
  *                                 its bundled reference (also part of the default run)
  *   --threads N  --tile N  --preset NAME (only that preset)  --no-baselines
+ *   --direct-conv                 fp32 without Winograd convolutions (the pre-Winograd path)
  *   --max-tiles N                 stop (through the progress callback) after N tiles of the
  *                                 diffuse pass: peak memory is reached by the first full tile
  *                                 (buffers are sized once), so --4k --max-tiles 2 measures the
@@ -39,7 +40,7 @@ static double peak_rss_mib(void) {
   return (double)ru.ru_maxrss / 1024.0;
 }
 
-static int g_max_tiles = 0, g_calls = 0;
+static int g_max_tiles = 0, g_calls = 0, g_direct = 0;
 static int stop_after(void *user, double f) {
   (void)user;
   (void)f;
@@ -82,6 +83,7 @@ static void bench_kpcn(kpcn_aov_set *a, const char *preset, int bf16, int tile, 
   o.bf16 = bf16;
   o.tile = tile;
   o.nthreads = nthreads;
+  o.direct_conv = g_direct;
   kpcn_denoiser *d = NULL;
   float *out = malloc(sizeof(float) * 3 * kpcn_aov_plane_size(a));
   kpcn_status es = kpcn_denoiser_create_with_model(&d, m, &o);
@@ -128,8 +130,10 @@ static void bench_kpcn(kpcn_aov_set *a, const char *preset, int bf16, int tile, 
   free(out);
 }
 
-/* bf16 changes the denoised image by rounding weights and activations to 8 mantissa bits;
- * what matters is the change in quality on a real render with real (trained) weights. */
+/* bf16 changes the denoised image by rounding weights and activations to 8 mantissa bits,
+ * Winograd (the fp32 default) by computing 3x3 convolutions in a transformed basis; what
+ * matters is the change in quality on a real render with real (trained) weights, measured
+ * against fp32 direct convolution. */
 static void bench_bf16_quality(int nthreads) {
 #ifdef KPCN_HAVE_EMBREE
   const char *scene_path = KPCN_TESTDATA "/scenes/diffuse-interreflection/scene.json";
@@ -150,13 +154,14 @@ static void bench_bf16_quality(int nthreads) {
     printf("bf16 quality: render failed: %s\n", kpcn_last_error());
     goto done;
   }
-  double psnr[2] = {0, 0}, ms[2] = {0, 0};
+  double psnr[3] = {0, 0, 0}, ms[3] = {0, 0, 0};
   size_t P = kpcn_aov_plane_size(noisy);
   float *out = malloc(sizeof(float) * 3 * P);
-  for (int b = 0; b < 2 && out; b++) {
+  for (int b = 0; b < 3 && out; b++) { /* fp32 direct, fp32 (Winograd where possible), bf16 */
     kpcn_denoiser_options o;
     kpcn_denoiser_options_defaults(&o);
-    o.bf16 = b;
+    o.direct_conv = b == 0;
+    o.bf16 = b == 2;
     o.nthreads = nthreads;
     kpcn_denoiser *d = NULL;
     kpcn_metric_options mo;
@@ -177,10 +182,12 @@ static void bench_bf16_quality(int nthreads) {
     kpcn_denoiser_destroy(d);
   }
   free(out);
-  printf("bf16 quality (shipped kpcn-cpu model, diffuse-interreflection %dx%d at 16 spp vs the "
-         "bundled reference): PSNR fp32 %.3f dB, bf16 %.3f dB, change %+.3f dB (target |change| "
-         "<= 0.1); %.0f ms vs %.0f ms\n",
-         noisy->width, noisy->height, psnr[0], psnr[1], psnr[1] - psnr[0], ms[0], ms[1]);
+  printf("quality (shipped kpcn-cpu model, diffuse-interreflection %dx%d at 16 spp vs the "
+         "bundled reference): PSNR fp32 direct %.4f dB; fp32 default (Winograd) %.4f dB, change "
+         "%+.4f dB; bf16 %.4f dB, change %+.4f dB (target |change| <= 0.1); %.0f / %.0f / %.0f "
+         "ms\n",
+         noisy->width, noisy->height, psnr[0], psnr[1], psnr[1] - psnr[0], psnr[2],
+         psnr[2] - psnr[0], ms[0], ms[1], ms[2]);
 done:
   kpcn_aov_destroy(noisy);
   kpcn_aov_destroy(ref);
@@ -212,9 +219,12 @@ int main(int argc, char **argv) {
       k4 = 1;
     } else if (!strcmp(argv[i], "--bf16-quality")) {
       quality_only = 1;
+    } else if (!strcmp(argv[i], "--direct-conv")) {
+      g_direct = 1;
     } else {
       fprintf(stderr, "usage: bench_denoise [--size WxH] [--4k] [--threads N] [--tile N] "
-                      "[--preset NAME] [--no-baselines] [--max-tiles N] [--bf16-quality]\n");
+                      "[--preset NAME] [--no-baselines] [--max-tiles N] [--bf16-quality] "
+                      "[--direct-conv]\n");
       return 2;
     }
   }

@@ -181,6 +181,7 @@ typedef struct kpcn_denoiser_options {
                              kpcn_denoise_tile_overlap(arch) pixels; the result does not
                              depend on the tile size. */
   int nthreads;           /* 0 = all cores */
+  int direct_conv;        /* 1: no Winograd convolutions (kpcn_net_options.direct_conv) */
   kpcn_baseline_params bilateral;
   kpcn_baseline_params nlmeans;
 } kpcn_denoiser_options;

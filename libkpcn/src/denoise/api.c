@@ -240,9 +240,7 @@ static kpcn_status run_method(kpcn_denoiser *d, const kpcn_aov_set *aov, float *
   case KPCN_DENOISE_NLMEANS:
     s = kpcn_baseline_nlmeans(aov, &d->opt.nlmeans, out, d->opt.nthreads, &d->prog);
     break;
-  default:
-    s = kpcn_pipeline_run(d->model, aov, d->opt.tile, d->opt.bf16, d->opt.nthreads, &d->prog, out,
-                          &d->stats);
+  default: s = kpcn_pipeline_run(d->model, aov, &d->opt, &d->prog, out, &d->stats);
   }
   kpcn_fast_fp_end(csr, d->opt.nthreads);
   return s;

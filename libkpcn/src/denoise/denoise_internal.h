@@ -29,10 +29,10 @@ kpcn_status kpcn_baseline_nlmeans(const kpcn_aov_set *aov, const kpcn_baseline_p
  * kpcn_pipeline.c chooses the grid with the least overlap that fits it). */
 #define KPCN_TILE_BUDGET_BYTES ((size_t)1 << 30)
 
-/* Runs the two-branch KPCN on `aov` into out (planar RGB [3][H][W]); accumulates timings
- * into *st. */
-kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov, int tile, int bf16,
-                              int nthreads, kpcn_progress *prog, float *out,
+/* Runs the two-branch KPCN on `aov` into out (planar RGB [3][H][W]) with o's tile, bf16,
+ * nthreads and direct_conv; accumulates timings into *st. */
+kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
+                              const kpcn_denoiser_options *o, kpcn_progress *prog, float *out,
                               kpcn_denoise_stats *st);
 
 #endif

@@ -65,9 +65,9 @@ static void tile_grid(const kpcn_arch *a, int W, int H, int ov, int tile, int *t
   int best_n = 0;
   *tw = *th = 64;
   for (int nx = 1; nx <= (W + 63) / 64; nx++) {
-    const int Tx = (W + nx - 1) / nx, pw = Tx + 2 * ov < W ? Tx + 2 * ov : W;
+    const int Tx = (W + nx - 1) / nx, pw = Tx + 2 * ov + 3 < W ? Tx + 2 * ov + 3 : W;
     for (int ny = 1; ny <= (H + 63) / 64; ny++) {
-      const int Ty = (H + ny - 1) / ny, ph = Ty + 2 * ov < H ? Ty + 2 * ov : H;
+      const int Ty = (H + ny - 1) / ny, ph = Ty + 2 * ov + 3 < H ? Ty + 2 * ov + 3 : H;
       const int fits = (double)pw * ph <= budget;
       if (!fits && !(Tx <= 64 && Ty <= 64)) continue;
       const double area = (double)(W + 2 * ov * (nx - 1)) * (double)(H + 2 * ov * (ny - 1));
@@ -97,9 +97,10 @@ static void add_net_stats(kpcn_net *net, kpcn_denoise_stats *st) {
   st->conv_s += ns.fwd_conv_s;
 }
 
-kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov, int tile, int bf16,
-                              int nthreads, kpcn_progress *prog, float *out,
+kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
+                              const kpcn_denoiser_options *o, kpcn_progress *prog, float *out,
                               kpcn_denoise_stats *st) {
+  const int tile = o->tile, bf16 = o->bf16, nthreads = o->nthreads;
   const kpcn_arch *arch = kpcn_model_arch(model);
   KPCN_TRY(kpcn_features_check_arch(arch));
   KPCN_TRY(require_all(aov));
@@ -126,10 +127,15 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov, int ti
       t->y0 = j * TH;
       t->x1 = t->x0 + TW < W ? t->x0 + TW : W;
       t->y1 = t->y0 + TH < H ? t->y0 + TH : H;
-      t->px0 = t->x0 - ov > 0 ? t->x0 - ov : 0;
-      t->py0 = t->y0 - ov > 0 ? t->y0 - ov : 0;
-      t->pw = (t->x1 + ov < W ? t->x1 + ov : W) - t->px0;
-      t->ph = (t->y1 + ov < H ? t->y1 + ov : H) - t->py0;
+      /* One pixel more than the overlap, and even padded origins: the Winograd logits layer
+       * (net.c) computes 2x2 output blocks anchored at the tile's origin, and its rounding
+       * depends on the block's whole 4x4 input window; so every block then sees the same
+       * inputs as in an untiled run, and the result stays independent of the tile size bit
+       * for bit. */
+      t->px0 = t->x0 - ov - 1 > 0 ? (t->x0 - ov - 1) & ~1 : 0;
+      t->py0 = t->y0 - ov - 1 > 0 ? (t->y0 - ov - 1) & ~1 : 0;
+      t->pw = (t->x1 + ov + 1 < W ? t->x1 + ov + 1 : W) - t->px0;
+      t->ph = (t->y1 + ov + 1 < H ? t->y1 + ov + 1 : H) - t->py0;
       if (t->pw * t->ph > maxp) maxp = t->pw * t->ph;
     }
   qsort(tiles, (size_t)nt, sizeof(tile_t), tile_cmp);
@@ -174,6 +180,7 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov, int ti
         no.height = t->ph;
         no.precision = bf16 ? KPCN_PREC_BF16 : KPCN_PREC_F32;
         no.nthreads = nthreads;
+        no.direct_conv = o->direct_conv;
         no.input_plane_stride = kpcn_plane_stride((size_t)t->pw * t->ph);
         s = kpcn_net_create(model, (kpcn_branch)b, &no, &net);
         if (s != KPCN_OK) {
