@@ -12,13 +12,16 @@
 #   iters/20), TIME_LIMIT (minutes, none), KEEP_BEST (1: ship the model of the validation
 #   with the lowest relMSE instead of the last one; needs validation pairs), INIT (a model to
 #   fine-tune: kpcn-train --init), SHIP_IF_BELOW (a validation relMSE: replace the shipped
-#   model only if this run's shipped validation relMSE is lower, e.g. the current model's).
+#   model only if this run's shipped validation relMSE is lower, e.g. the current model's),
+#   INIT_NOTE (README text on where INIT came from; default: the previously shipped model),
+#   README_ONLY (1: train nothing, copy nothing; rewrite README.md from the finished run in
+#   WORK, e.g. after editing INIT_NOTE; same environment as the run).
 # With a time budget the iteration count is unknown in advance, so the script first measures
 # the speed (20 iterations) and sets --iters to fit MINUTES, --stage1-iters to STAGE1_FRACTION.
 # Resumable: if the run is interrupted, re-running continues from its checkpoint.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/../.." && pwd)
-[ $# -ge 1 ] || { sed -n 2,18p "$0"; exit 2; }
+[ $# -ge 1 ] || { sed -n 2,21p "$0"; exit 2; }
 store=$1
 shift
 bin=${KPCN_TRAIN:-$here/build/tools/kpcn-train/kpcn-train}
@@ -61,6 +64,7 @@ if [ "${KEEP_BEST:-0}" = 1 ]; then
 fi
 resume=()
 [ -f "$work/model.safetensors.ckpt" ] && resume=(--resume)
+if [ "${README_ONLY:-0}" != 1 ]; then
 echo "ship_model.sh: $bin ${args[*]} ${resume[*]}"
 "$bin" "${args[@]}" "${resume[@]}"
 
@@ -75,6 +79,7 @@ fi
 cp "$shipped" "$outdir/$NAME.safetensors"
 cp "$work/model.safetensors.png" "$outdir/$NAME-curves.png"
 cp "$work/model.safetensors.csv" "$outdir/$NAME-log.csv"
+fi
 last=$(awk -F, 'NR > 1 && $7 != "" { r = $7; s = $8; p = $9; it = $1 } END { print it "," r "," s "," p }' "$work/model.safetensors.csv")
 best=$(awk -F, 'NR > 1 && $7 != "" && (b == "" || $7 < b) { b = $7; s = $8; p = $9; it = $1 } END { print it "," b "," s "," p }' "$work/model.safetensors.csv")
 done_iters=$(awk -F, 'NR > 1 { it = $1 } END { print it }' "$work/model.safetensors.csv")
@@ -92,7 +97,7 @@ cpu=$(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -1)
   echo "| preset | $PRESET |"
   echo "| patch store | \`$(basename "$store")\` |"
   echo "| dataset recipe | ${DATASET_RECIPE:-see docs/dataset.md} |"
-  [ -n "${INIT:-}" ] && echo "| initialised from | \`$(basename "$INIT")\` (the previously shipped model; its own README is in git history) |"
+  [ -n "${INIT:-}" ] && echo "| initialised from | \`$(basename "$INIT")\` (${INIT_NOTE:-the previously shipped model; its own README is in git history}) |"
   echo "| iterations | $done_iters of $iters planned (stage 1: $stage1, stage-2 loss $LOSS2) |"
   echo "| training time | ${secs} s |"
   echo "| hardware | ${cpu:-unknown CPU}, $(nproc) cores, threads=$THREADS |"
