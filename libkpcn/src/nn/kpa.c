@@ -74,24 +74,33 @@ static inline float exp_nonpos(float x) {
   return p * u.f;
 }
 
-/* o[i] = scale[i] * sum over the K² taps t of wt[t][i] * pr[dy][dx + i] for i < n (scale
- * NULL: 1), wt rows ws floats apart, padded source rows pw apart. Inlined with n = XB the
- * accumulators are registers; a variable n only serves the row's last chunk. */
-static inline __attribute__((always_inline)) void
-apply_chunk(const int n, int K, const float *restrict wt, size_t ws, const float *restrict pr,
-            int pw, const float *restrict scale, float *restrict o) {
-  float acc[XB];
-  for (int i = 0; i < XB; i++)
-    acc[i] = 0.f;
+/* For channels c < nch: o[c * os + i] = scale[i] * sum over the K² taps t of
+ * wt[t][i] * pr[c][dy][dx + i] for i < n (scale NULL: 1); wt rows ws floats apart, padded
+ * source rows pw apart, K of them per channel. Inlined with constant n = XB the
+ * accumulators are registers (a variable n only serves the row's last chunk); with nch = 3
+ * each weight is loaded once for all three colour channels instead of three times (loads,
+ * not FMAs, bound this loop). */
+static inline __attribute__((always_inline)) void apply_chunk(const int n, const int nch, int K,
+                                                              const float *restrict wt, size_t ws,
+                                                              const float *restrict pr, int pw,
+                                                              const float *restrict scale,
+                                                              float *restrict o, size_t os) {
+  float acc[3][XB];
+  for (int c = 0; c < nch; c++)
+    for (int i = 0; i < XB; i++)
+      acc[c][i] = 0.f;
+  const size_t pc = (size_t)K * pw;
   for (int dy = 0; dy < K; dy++)
     for (int dx = 0; dx < K; dx++) {
       const float *restrict wr = wt + (size_t)(dy * K + dx) * ws;
       const float *restrict src = pr + (size_t)dy * pw + dx;
       for (int i = 0; i < n; i++)
-        acc[i] += wr[i] * src[i];
+        for (int c = 0; c < nch; c++)
+          acc[c][i] += wr[i] * src[c * pc + i];
     }
-  for (int i = 0; i < n; i++)
-    o[i] = scale ? acc[i] * scale[i] : acc[i];
+  for (int c = 0; c < nch; c++)
+    for (int i = 0; i < n; i++)
+      o[c * os + i] = scale ? acc[c][i] * scale[i] : acc[c][i];
 }
 
 /* One output row y of one image. A separate function (all sizes by value) so the compiler
@@ -151,21 +160,29 @@ static void fwd_row(int K, int nc, int h, int w, size_t ws, int y, const float *
       for (int x = 0; x < w; x++)
         wr[x] *= sum[x];
     }
-  /* Apply: all K clamped source rows of a channel are padded once, then each chunk of XB
-   * pixels accumulates its K² taps in registers (one store per pixel instead of K²). */
+  /* Apply: the K clamped source rows of each channel are padded once, then each chunk of
+   * XB pixels accumulates its K² taps in registers (one store per pixel instead of K²),
+   * three channels at a time (RGB: the usual case) or one. */
   const int pw = w + 2 * r;
-  for (int c = 0; c < nc; c++) {
-    for (int dy = 0; dy < K; dy++)
-      padded_row(pr + (size_t)dy * pw,
-                 noisy + (size_t)c * plane + (size_t)clampi(y + dy - r, 0, h - 1) * w, w, r);
-    float *o = out + (size_t)c * plane + (size_t)y * w;
+  for (int c0 = 0; c0 < nc;) {
+    const int nch = nc - c0 >= 3 ? 3 : 1;
+    for (int c = 0; c < nch; c++)
+      for (int dy = 0; dy < K; dy++)
+        padded_row(pr + (size_t)(c * K + dy) * pw,
+                   noisy + (size_t)(c0 + c) * plane + (size_t)clampi(y + dy - r, 0, h - 1) * w, w,
+                   r);
+    float *o = out + (size_t)c0 * plane + (size_t)y * w;
     for (int x0 = 0; x0 < w; x0 += XB) {
       const float *scale = scale_out ? sum + x0 : NULL;
-      if (w - x0 >= XB) /* constant width: the accumulators stay in registers */
-        apply_chunk(XB, K, wt + x0, ws, pr + x0, pw, scale, o + x0);
+      /* constant width and channel count: the accumulators stay in registers */
+      if (w - x0 >= XB && nch == 3)
+        apply_chunk(XB, 3, K, wt + x0, ws, pr + x0, pw, scale, o + x0, plane);
+      else if (w - x0 >= XB)
+        apply_chunk(XB, 1, K, wt + x0, ws, pr + x0, pw, scale, o + x0, plane);
       else
-        apply_chunk(w - x0, K, wt + x0, ws, pr + x0, pw, scale, o + x0);
+        apply_chunk(w - x0, nch, K, wt + x0, ws, pr + x0, pw, scale, o + x0, plane);
     }
+    c0 += nch;
   }
   if (weights) { /* written last so weights may alias logits */
     float *W = weights + (size_t)y * w;
@@ -197,11 +214,11 @@ kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const fl
                      "kpcn_kpa_forward: logits layout (block %d, pixel stride %d) overlaps itself",
                      lay.block, lay.pixel_stride);
   const size_t plane = (size_t)h * w;
-  /* per thread: softmax rows [K2][ws], max and sum rows, K padded rows. The row stride ws
+  /* per thread: softmax rows [K2][ws], max and sum rows, 3 x K padded rows. The row stride ws
    * is padded (kpcn_plane_stride) so the K2 rows the apply loop reads together do not all
    * fall on one cache set when w is a power of two. */
   const size_t ws = kpcn_plane_stride((size_t)w);
-  const size_t scratch = (size_t)K2 * ws + 2 * (size_t)w + (size_t)K * (w + 2 * r) + 64;
+  const size_t scratch = (size_t)K2 * ws + 2 * (size_t)w + 3 * (size_t)K * (w + 2 * r) + 64;
   float *buf = kpcn_aligned_alloc((size_t)nt * scratch * sizeof(float), "kpa scratch");
   if (!buf) return KPCN_ERR_OUT_OF_MEMORY;
 #pragma omp parallel for num_threads(nt) schedule(static)
