@@ -4,7 +4,8 @@
 # docs/results.md plus labelled mosaics (OCIO Filmic view, and kpcn's relMSE error map in
 # false colour) in docs/img/.
 #   tools/results.sh DATASET_DIR MODEL [scene ...]     (default scenes: the test split)
-# Environment: SPPS (default "4 16 64"), KPCN_BIN (default build/tools).
+# Environment: SPPS (default "4 16 64"), KPCN_BIN (default build/tools), MODEL_README (a
+# model's README.md, e.g. testdata/models/README.md: also write the held-out figures there).
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 ds=$1
@@ -89,3 +90,24 @@ PY
 } >> "$md"
 mv "$md" "$here/docs/results.md"
 echo "wrote docs/results.md"
+# The model's own README gets the held-out figures next to the commands that made it
+# (replacing an earlier such section; ship_model.sh writes the rest of that file).
+if [ -n "${MODEL_README:-}" ]; then
+  {
+    sed '/^<!-- results.sh -->$/,$d' "$MODEL_README"
+    echo "<!-- results.sh -->"
+    echo
+    echo "## Held-out results"
+    echo
+    echo "Written by \`MODEL_README=... tools/results.sh $ds $(basename "$model")\` on $(date -u +%Y-%m-%d)"
+    echo "(full tables with both baselines, mosaics: docs/results.md)."
+    echo
+    echo "| scene | spp | method | relMSE | SSIM | PSNR (dB) |"
+    echo "|---|---|---|---|---|---|"
+    grep -E '^\| [^|]+ \| [0-9]+ \| (noisy|kpcn) \|' "$here/docs/results.md"
+    echo
+    sed -n '/^## Against the targets/,/^## Mosaics/p' "$here/docs/results.md" | sed '$d' | sed 's/^## /### /'
+  } > "$work/readme.md"
+  mv "$work/readme.md" "$MODEL_README"
+  echo "wrote the held-out results into $MODEL_README"
+fi
