@@ -55,7 +55,20 @@ static size_t floats_per_pixel(const kpcn_arch *a) {
  * largest padded tile fits KPCN_TILE_BUDGET_BYTES: a 1024x1024 frame with the cpu preset
  * runs as two 1024x512 tiles (4.3 % overlap) instead of four 512x512 ones (8.8 %), a 4K
  * frame with the paper preset still stays far below 4 GiB. Ties go to fewer tiles. */
-static void tile_grid(const kpcn_arch *a, int W, int H, int ov, int tile, int *tw, int *th) {
+/* Pixels a tile is grown by on each side: one more than the overlap, and the padded origin
+ * is then rounded down to even (so up to pad + 1 on the left/top). The Winograd logits
+ * layer (net.c) computes 2x2 output blocks anchored at the tile's origin and its rounding
+ * depends on each block's whole 4x4 input window; aligned blocks with correct inputs keep
+ * the result independent of the tile size bit for bit. */
+static int tile_pad(const kpcn_arch *a) { return kpcn_denoise_tile_overlap(a) + 1; }
+
+/* Padded extent [*p0, *p1) of the core [c0, c1) in an image of size n. */
+static void pad_range(int c0, int c1, int n, int pad, int *p0, int *p1) {
+  *p0 = c0 - pad > 0 ? (c0 - pad) & ~1 : 0;
+  *p1 = c1 + pad < n ? c1 + pad : n;
+}
+
+static void tile_grid(const kpcn_arch *a, int W, int H, int pad, int tile, int *tw, int *th) {
   if (tile > 0) {
     *tw = *th = tile;
     return;
@@ -65,12 +78,12 @@ static void tile_grid(const kpcn_arch *a, int W, int H, int ov, int tile, int *t
   int best_n = 0;
   *tw = *th = 64;
   for (int nx = 1; nx <= (W + 63) / 64; nx++) {
-    const int Tx = (W + nx - 1) / nx, pw = Tx + 2 * ov + 3 < W ? Tx + 2 * ov + 3 : W;
+    const int Tx = (W + nx - 1) / nx, pw = Tx + 2 * pad + 1 < W ? Tx + 2 * pad + 1 : W;
     for (int ny = 1; ny <= (H + 63) / 64; ny++) {
-      const int Ty = (H + ny - 1) / ny, ph = Ty + 2 * ov + 3 < H ? Ty + 2 * ov + 3 : H;
+      const int Ty = (H + ny - 1) / ny, ph = Ty + 2 * pad + 1 < H ? Ty + 2 * pad + 1 : H;
       const int fits = (double)pw * ph <= budget;
       if (!fits && !(Tx <= 64 && Ty <= 64)) continue;
-      const double area = (double)(W + 2 * ov * (nx - 1)) * (double)(H + 2 * ov * (ny - 1));
+      const double area = (double)(W + 2 * pad * (nx - 1)) * (double)(H + 2 * pad * (ny - 1));
       if (best < 0.0 || area < best || (area == best && nx * ny < best_n)) {
         best = area;
         best_n = nx * ny;
@@ -105,11 +118,11 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
   KPCN_TRY(kpcn_features_check_arch(arch));
   KPCN_TRY(require_all(aov));
   const int W = aov->width, H = aov->height, K = arch->kernel_size;
-  const int ov = kpcn_denoise_tile_overlap(arch);
+  const int pad = tile_pad(arch);
   const float eps = arch->eps;
   const size_t P = kpcn_aov_plane_size(aov);
   int TW, TH;
-  tile_grid(arch, W, H, ov, tile, &TW, &TH);
+  tile_grid(arch, W, H, pad, tile, &TW, &TH);
   kpcn_features_norm norm;
   KPCN_TRY(kpcn_features_norm_compute(aov, &norm));
 
@@ -127,15 +140,11 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
       t->y0 = j * TH;
       t->x1 = t->x0 + TW < W ? t->x0 + TW : W;
       t->y1 = t->y0 + TH < H ? t->y0 + TH : H;
-      /* One pixel more than the overlap, and even padded origins: the Winograd logits layer
-       * (net.c) computes 2x2 output blocks anchored at the tile's origin, and its rounding
-       * depends on the block's whole 4x4 input window; so every block then sees the same
-       * inputs as in an untiled run, and the result stays independent of the tile size bit
-       * for bit. */
-      t->px0 = t->x0 - ov - 1 > 0 ? (t->x0 - ov - 1) & ~1 : 0;
-      t->py0 = t->y0 - ov - 1 > 0 ? (t->y0 - ov - 1) & ~1 : 0;
-      t->pw = (t->x1 + ov + 1 < W ? t->x1 + ov + 1 : W) - t->px0;
-      t->ph = (t->y1 + ov + 1 < H ? t->y1 + ov + 1 : H) - t->py0;
+      int px1, py1;
+      pad_range(t->x0, t->x1, W, pad, &t->px0, &px1);
+      pad_range(t->y0, t->y1, H, pad, &t->py0, &py1);
+      t->pw = px1 - t->px0;
+      t->ph = py1 - t->py0;
       if (t->pw * t->ph > maxp) maxp = t->pw * t->ph;
     }
   qsort(tiles, (size_t)nt, sizeof(tile_t), tile_cmp);
