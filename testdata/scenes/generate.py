@@ -176,6 +176,211 @@ def extra_scenes():
                         "res_u": 8, "res_v": 4}}]
     scene("textured-emitters", bs, ps, cam([0, 1.1, 3.0], [0, 0.6, -0.5], 45, [160, 120]))
 
+def write_png(path, w, h, pixel):
+    """8-bit RGB PNG from pixel(x, y) -> (r, g, b) in [0, 1]; stdlib only (no numpy here)."""
+    import struct, zlib
+    rows = bytearray()
+    for y in range(h):
+        rows.append(0)
+        for x in range(w):
+            rows += bytes(max(0, min(255, int(round(c * 255)))) for c in pixel(x, y))
+    def chunk(t, d):
+        return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xffffffff)
+    with open(path, "wb") as f:
+        f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
+                + chunk(b"IDAT", zlib.compress(bytes(rows), 9)) + chunk(b"IEND", b""))
+
+def value_noise(x, y, period, seed):
+    """Tileable smooth value noise in [0, 1] (hash lattice, smoothstep interpolation)."""
+    def h(i, j):
+        n = ((i % period) * 73856093 ^ (j % period) * 19349663 ^ seed * 83492791) & 0xffffffff
+        n = (n ^ (n >> 13)) * 1274126177 & 0xffffffff
+        return (n & 0xffff) / 65535.0
+    i, j = int(math.floor(x)), int(math.floor(y))
+    fx, fy = x - i, y - j
+    sx, sy = fx * fx * (3 - 2 * fx), fy * fy * (3 - 2 * fy)
+    a = h(i, j) + (h(i + 1, j) - h(i, j)) * sx
+    b = h(i, j + 1) + (h(i + 1, j + 1) - h(i, j + 1)) * sx
+    return a + (b - a) * sy
+
+def fbm(x, y, period, seed, octaves=4):
+    return sum(value_noise(x * 2 ** o, y * 2 ** o, period * 2 ** o, seed + o) / 2 ** (o + 1)
+               for o in range(octaves)) / (1 - 0.5 ** octaves)
+
+def training_textures(d):
+    """Bitmaps for the dataset-v3 training scenes; none of them appears in a held-out scene."""
+    os.makedirs(d, exist_ok=True)
+    n = 128
+    def tiles(x, y):   # square tiles with grout, per-tile tint
+        tx, ty, u, v = x // 16, y // 16, x % 16, y % 16
+        if u < 1 or v < 1:
+            return (0.3, 0.3, 0.28)
+        t = value_noise(tx * 3.1, ty * 1.7, 1 << 20, 5) * 0.15
+        return (0.75 - t, 0.72 - t, 0.62 - t)
+    def wood(x, y):    # rings along x, grain noise
+        r = 10 * fbm(x / 32.0, y / 128.0, 4, 9) + x / 9.0
+        k = 0.5 + 0.5 * math.sin(r * 2.2)
+        return (0.45 + 0.2 * k, 0.28 + 0.12 * k, 0.12 + 0.06 * k)
+    def stripes(x, y):  # fabric: two-colour stripes with a thin accent line
+        s = (x + y // 2) % 24
+        if s < 2:
+            return (0.9, 0.85, 0.2)
+        return (0.15, 0.25, 0.55) if s < 13 else (0.8, 0.8, 0.78)
+    def dots(x, y):    # polka dots
+        u, v = (x % 32) - 16, (y % 32) - 16
+        return (0.85, 0.15, 0.2) if u * u + v * v < 64 else (0.9, 0.88, 0.8)
+    def marble(x, y):  # veined stone
+        t = math.sin(x / 10.0 + 6 * fbm(x / 32.0, y / 32.0, 4, 3))
+        k = abs(t) ** 0.3
+        return (0.35 + 0.5 * k, 0.35 + 0.48 * k, 0.38 + 0.45 * k)
+    def grass(x, y):   # green noise, high frequency
+        k = fbm(x / 8.0, y / 8.0, 16, 17)
+        return (0.1 + 0.15 * k, 0.25 + 0.35 * k, 0.05 + 0.1 * k)
+    for name, fn in (("tiles", tiles), ("wood", wood), ("stripes", stripes), ("dots", dots),
+                     ("marble", marble), ("grass", grass)):
+        write_png(os.path.join(d, name + ".png"), n, n, fn)
+
+def box_room(w, h, d, bsdf_floor, bsdf_ceil, bsdf_back, bsdf_left, bsdf_right, bsdf_front=None):
+    """Box [-w/2,w/2]x[0,h]x[-d/2,d/2], faces pointing inwards; no front wall unless given."""
+    ps = [quad(bsdf_floor, [0, 0, 0], [w, 1, d]), quad(bsdf_ceil, [0, h, 0], [w, 1, d], (0, 0, 180)),
+          quad(bsdf_back, [0, h / 2, -d / 2], [w, 1, h], (90, 0, 0)),
+          quad(bsdf_left, [-w / 2, h / 2, 0], [h, 1, d], (0, 0, -90)),
+          quad(bsdf_right, [w / 2, h / 2, 0], [h, 1, d], (0, 0, 90))]
+    if bsdf_front:
+        ps.append(quad(bsdf_front, [0, h / 2, d / 2], [w, 1, h], (-90, 0, 0)))
+    return ps
+
+def table(bsdf, x, z, w, d, h, rot=0):
+    c, s = math.cos(math.radians(rot)), math.sin(math.radians(rot))
+    ps = [cube(bsdf, [x, h - 0.03, z], [w, 0.06, d], (0, rot, 0))]
+    for sx in (-1, 1):
+        for sz in (-1, 1):
+            lx, lz = sx * (w / 2 - 0.05), sz * (d / 2 - 0.05)
+            ps.append(cube(bsdf, [x + c * lx + s * lz, (h - 0.06) / 2, z - s * lx + c * lz],
+                           [0.05, h - 0.06, 0.05], (0, rot, 0)))
+    return ps
+
+def tex(name, file, kind="lambert", **kw):
+    b = {"name": name, "type": kind, "albedo": {"type": "bitmap", "file": "../train-textures/" + file}}
+    b.update(kw)
+    return b
+
+def training_scenes_v3():
+    """Dataset v3 (session 5): eight more training scenes, all different from the held-out
+    diffuse-interreflection and textures scenes but rich in what they test: indirect light in
+    closed rooms, colour bleeding, textures at several frequencies, many small objects."""
+    training_textures(os.path.join(HERE, "train-textures"))
+    light = {"name": "light", "type": "null"}
+
+    # living room: accent wall, table, sofa blocks, checker rug, ceiling light
+    bs = [lam("beige", [0.7, 0.62, 0.5]), lam("blue", [0.15, 0.25, 0.5]), lam("ceil", [0.8, 0.8, 0.8]),
+          tex("wood", "wood.png"), lam("sofa", [0.5, 0.12, 0.1]), light,
+          {"name": "rug", "type": "lambert", "albedo": {"type": "checker", "on_color": [0.6, 0.55, 0.3],
+                                                       "off_color": [0.2, 0.15, 0.1], "res_u": 6, "res_v": 6}}]
+    ps = box_room(4, 2.6, 4, "wood", "ceil", "blue", "beige", "beige")
+    ps += [quad("rug", [0.2, 0.005, -0.3], [1.8, 1, 1.3])]
+    ps += table("wood", 0.3, -0.3, 1.0, 0.6, 0.45, 15)
+    ps += [cube("sofa", [-1.3, 0.25, -0.6], [0.8, 0.5, 1.8]), cube("sofa", [-1.55, 0.55, -0.6], [0.3, 0.6, 1.8]),
+           sphere("beige", [1.4, 0.25, -1.4], 0.25),
+           quad("light", [0.3, 2.59, 0.0], [0.8, 1, 0.8], (0, 0, 180), emission=[9, 8.5, 7.5])]
+    scene("living-room", bs, ps, cam([1.2, 1.5, 1.9], [-0.3, 0.6, -0.8], 60, [160, 120]))
+
+    # closed room lit only through a window: sky and a small "sun" outside
+    bs = [lam("wall", [0.75, 0.73, 0.7]), lam("floor", [0.55, 0.45, 0.35]), lam("green", [0.2, 0.5, 0.25]),
+          lam("orange", [0.8, 0.4, 0.1]), light]
+    w, h, d = 3.0, 2.5, 3.0
+    ps = [quad("floor", [0, 0, 0], [w, 1, d]), quad("wall", [0, h, 0], [w, 1, d], (0, 0, 180)),
+          quad("wall", [0, h / 2, -d / 2], [w, 1, h], (90, 0, 0)),
+          quad("green", [w / 2, h / 2, 0], [h, 1, d], (0, 0, 90)),
+          quad("wall", [0, h / 2, d / 2], [w, 1, h], (-90, 0, 0))]
+    # left wall (x = -1.5) with a window opening y in [0.6, 2.1], z in [-1.1, 0.9]
+    for yc, hh, zc, ww in ((0.3, 0.6, 0, 3.0), (2.3, 0.4, 0, 3.0), (1.35, 1.5, -1.3, 0.4), (1.35, 1.5, 1.2, 0.6)):
+        ps.append(quad("wall", [-w / 2, yc, zc], [hh, 1, ww], (0, 0, -90)))
+    ps += [cube("orange", [0.6, 0.4, -0.8], [0.8, 0.8, 0.8], (0, 30, 0)), sphere("wall", [-0.3, 0.3, 0.3], 0.3),
+           sphere("light", [-9, 6, -1], 0.4, emission=[1600, 1450, 1200]),
+           {"type": "infinite_sphere", "emission": [0.9, 1.1, 1.5]}]
+    scene("window-room", bs, ps, cam([1.1, 1.3, 1.3], [-0.6, 0.8, -0.6], 65, [160, 120]), max_bounces=24)
+
+    # corridor: long, three small ceiling lights, pillars, strong falloff with depth
+    bs = [lam("wall", [0.7, 0.68, 0.6]), lam("floor", [0.4, 0.4, 0.42]), lam("pillar", [0.3, 0.35, 0.6]),
+          tex("tiles", "tiles.png"), light]
+    ps = box_room(2.0, 2.4, 10, "tiles", "wall", "wall", "wall", "wall")
+    for i in range(3):
+        ps.append(quad("light", [0, 2.39, 2.5 - 3.2 * i], [0.4, 1, 0.4], (0, 0, 180), emission=[25, 23, 20]))
+    for i in range(4):
+        for sx in (-1, 1):
+            ps.append(cube("pillar", [sx * 0.85, 1.2, 3.0 - 2.4 * i], [0.2, 2.4, 0.2]))
+    scene("corridor", bs, ps, cam([0.3, 1.4, 4.8], [-0.1, 1.0, -2], 55, [160, 120]))
+
+    # indirect only: an up-facing light bounces off the ceiling into a coloured room
+    bs = [lam("white", [0.8, 0.8, 0.78]), lam("yellow", [0.7, 0.6, 0.15]), lam("blue", [0.1, 0.2, 0.55]),
+          tex("marble", "marble.png"), light]
+    ps = box_room(3, 2.4, 3, "marble", "white", "white", "yellow", "blue")
+    ps += [quad("light", [0, 1.78, -0.6], [0.6, 1, 0.6], emission=[30, 28, 25]),
+           cube("white", [0, 0.87, -0.6], [0.3, 1.74, 0.3]), cube("white", [0, 1.76, -0.6], [0.7, 0.02, 0.7]),
+           sphere("yellow", [-0.8, 0.35, 0.2], 0.35), cube("white", [0.8, 0.3, 0.0], [0.6, 0.6, 0.6], (0, 40, 0))]
+    scene("bounce-light", bs, ps, cam([0.2, 1.3, 2.9], [0, 0.9, -0.5], 60, [160, 160]))
+
+    # textured room: tiles floor, marble wall, wood and dots objects, fine checker panels
+    bs = [tex("tiles", "tiles.png"), tex("marble", "marble.png"), tex("wood", "wood.png"),
+          tex("dots", "dots.png"), tex("stripes", "stripes.png", "rough_plastic", roughness=0.3, ior=1.5),
+          lam("wall", [0.6, 0.62, 0.65]),
+          {"name": "fine", "type": "lambert", "albedo": {"type": "checker", "on_color": [0.85, 0.85, 0.85],
+                                                        "off_color": [0.1, 0.1, 0.1], "res_u": 32, "res_v": 32}},
+          light]
+    ps = box_room(3.5, 2.5, 3.5, "tiles", "wall", "marble", "wall", "wall")
+    ps += [cube("wood", [-0.7, 0.35, -0.6], [0.7, 0.7, 0.7], (0, 20, 0)), sphere("dots", [0.5, 0.4, -0.3], 0.4),
+           cube("stripes", [0.9, 0.25, 0.6], [0.5, 0.5, 0.5], (0, -30, 0)),
+           quad("fine", [1.74, 1.2, -0.5], [1.0, 1, 1.0], (0, 0, 90)),
+           quad("light", [0.4, 2.49, 0.8], [1.2, 1, 1.2], (0, 0, 180), emission=[6, 6, 5.5])]
+    scene("textured-room", bs, ps, cam([-0.4, 1.4, 2.6], [0.2, 0.5, -0.5], 55, [160, 120]))
+
+    # block city: many boxes on grass under sky and a low sun (long hard shadows)
+    bs = [tex("grass", "grass.png"), lam("conc", [0.55, 0.55, 0.52]), lam("brick", [0.55, 0.25, 0.18]),
+          lam("glassish", [0.25, 0.3, 0.35]), light]
+    ps = [quad("grass", [0, 0, 0], [20, 1, 20])]
+    for i in range(5):
+        for j in range(4):
+            hgt = 0.3 + 1.4 * value_noise(i * 1.3, j * 2.1, 1 << 20, 23)
+            ps.append(cube(("conc", "brick", "glassish")[(i * 7 + j * 3) % 3],
+                           [-2 + i * 1.0, hgt / 2, -2.5 + j * 1.1], [0.6, hgt, 0.6], (0, 10 * ((i + j) % 3), 0)))
+    ps += [sphere("light", [8, 3, 4], 0.5, emission=[900, 800, 620]),
+           {"type": "infinite_sphere", "emission": [0.35, 0.5, 0.8]}]
+    scene("block-city", bs, ps, cam([0.5, 3.0, 4.5], [-0.3, 0.3, -1.0], 50, [160, 120]))
+
+    # shelf: many small coloured boxes and spheres in compartments, side area light
+    cols = [[0.7, 0.1, 0.1], [0.1, 0.5, 0.15], [0.15, 0.2, 0.7], [0.8, 0.7, 0.1], [0.6, 0.3, 0.6], [0.8, 0.8, 0.8]]
+    bs = [lam("c%d" % i, c) for i, c in enumerate(cols)] + [tex("wood", "wood.png"), lam("wall", [0.5, 0.5, 0.5]), light]
+    ps = [quad("wall", [0, 0, 0], [6, 1, 6]), quad("wall", [0, 1.5, -0.5], [6, 1, 3], (90, 0, 0))]
+    for k in range(4):
+        ps.append(cube("wood", [0, 0.05 + 0.5 * k, -0.25], [2.0, 0.04, 0.45]))
+    for sx in (-1, 0, 1):
+        ps.append(cube("wood", [sx * 1.0, 0.78, -0.25], [0.04, 1.56, 0.45]))
+    for k in range(3):
+        for i in range(8):
+            u = value_noise(i * 1.7, k * 3.3, 1 << 20, 31)
+            c = "c%d" % ((i * 5 + k * 2) % 6)
+            x, y = -0.9 + i * 0.25, 0.07 + 0.5 * k
+            if u < 0.5:
+                hh = 0.12 + 0.25 * u
+                ps.append(cube(c, [x, y + hh / 2, -0.2], [0.14, hh, 0.2], (0, 40 * u, 0)))
+            else:
+                ps.append(sphere(c, [x, y + 0.08, -0.15], 0.08))
+    ps.append(quad("light", [-2.2, 1.2, 1.0], [1.0, 1, 1.0], (0, 0, -60), emission=[14, 13, 12]))
+    scene("shelf", bs, ps, cam([0.2, 0.9, 2.4], [0, 0.75, -0.2], 50, [160, 120]))
+
+    # patterned objects under the environment map: stripes, dots, fine checker, marble
+    bs = [tex("marble", "marble.png"), tex("stripes", "stripes.png"), tex("dots", "dots.png", "plastic", ior=1.5),
+          {"name": "fine", "type": "lambert", "albedo": {"type": "checker", "on_color": [0.7, 0.7, 0.2],
+                                                        "off_color": [0.1, 0.1, 0.3], "res_u": 24, "res_v": 12}},
+          tex("tiles", "tiles.png")]
+    ps = [quad("tiles", [0, 0, 0], [6, 1, 6]), sphere("stripes", [-0.7, 0.35, 0], 0.35),
+          sphere("fine", [0.1, 0.3, -0.5], 0.3), cube("dots", [0.7, 0.3, 0.1], [0.6, 0.6, 0.6], (0, 35, 0)),
+          cube("marble", [-0.2, 0.15, 0.6], [0.5, 0.3, 0.3], (0, -15, 0)),
+          {"type": "infinite_sphere", "emission": "../materialtest/envmap.hdr", "sample": True,
+           "transform": {"rotation": [0, 150, 0]}}]
+    scene("patterns-envmap", bs, ps, cam([0.3, 1.3, 3.0], [0, 0.3, 0], 45, [160, 120], filt="tent"))
+
 def write_icosphere(path, subdiv):
     t = (1 + 5 ** 0.5) / 2
     v = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
@@ -210,3 +415,4 @@ def write_icosphere(path, subdiv):
 if __name__ == "__main__":
     main()
     extra_scenes()
+    training_scenes_v3()

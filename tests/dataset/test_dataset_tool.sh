@@ -107,6 +107,16 @@ ok '[ $rc -eq 1 ] && [ ! -e "$T/r/train2.kps" ] && grep -q "not rendered yet" "$
 "$DS" patches "$T/r" --size 8 --per-image 5 --allow-partial -o "$T/r/train2.kps" > /dev/null
 rc=$?
 ok '[ $rc -eq 0 ] && [ -s "$T/r/train2.kps" ]' "--allow-partial"
+# two dataset directories into one store: the pairs of both, the sources named with their directory
+np_r=$("$DS" patches "$T/r" --size 8 --per-image 5 --allow-partial -o "$T/r/one.kps" | sed 's/.*: \([0-9]*\) image pairs.*/\1/')
+np_d=$("$DS" patches "$T/d" --size 8 --per-image 5 -o "$T/d/one.kps" | sed 's/.*: \([0-9]*\) image pairs.*/\1/')
+np_rd=$("$DS" patches "$T/r" "$T/d" --size 8 --per-image 5 --allow-partial -o "$T/both.kps" | sed 's/.*: \([0-9]*\) image pairs.*/\1/')
+echo "two directories: $np_rd pairs = $np_r + $np_d"
+ok '[ -n "$np_r" ] && [ -n "$np_d" ] && [ "$np_rd" -eq $((np_r + np_d)) ]' "two directories: $np_rd pairs = $np_r + $np_d"
+ok 'grep -a -q "$T/d/renders/" "$T/both.kps" && grep -a -q "$T/r/renders/" "$T/both.kps"' "sources carry their directory"
+"$DS" patches "$T/r" "$T/nothing" --size 8 --allow-partial -o "$T/none.kps" 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && [ ! -e "$T/none.kps" ] && grep -q "nothing" "$T/err"' "a second directory without manifest"
 "$DS" patches "$T/r" --size 64 --allow-partial -o "$T/r/big.kps" 2> "$T/err"
 rc=$?
 ok '[ $rc -eq 1 ] && [ ! -e "$T/r/big.kps" ] && grep -q "does not fit" "$T/err"' "patch larger than image"

@@ -1,7 +1,9 @@
 /* `kpcn-dataset patches`: finished renders -> patch store (.kps) with flat-patch culling.
  * Only the chosen split (default train) is used; rejected variants are skipped; missing
  * renders are an error unless --allow-partial, so a half-finished run never silently
- * yields a smaller training set. */
+ * yields a smaller training set. Several dataset directories (made by separate `plan`s,
+ * e.g. a later batch of scenes) go into one store; with more than one, the store's source
+ * file names carry the directory. */
 #define _GNU_SOURCE
 #include "ds.h"
 #include "kpcn/augment.h"
@@ -38,17 +40,58 @@ static int spp_selected(const int *spps, int n, int spp) {
   return 0;
 }
 
+enum { MAX_DIRS = 16 };
+
+typedef struct pair_t {
+  int dir, job, ref; /* dataset directory index, noisy job, its variant's reference job */
+} pair_t;
+
+/* Appends to pairs every selected noisy job of one dataset directory with its variant's
+ * reference; counts rejected variants and (up to five printed) missing renders. */
+static void collect_pairs(const char *dir, int dir_index, const ds_manifest *m, const char *split,
+                          const int *spps, int nspp, int allow_partial, pair_t *pairs, int *np,
+                          int *missing, int *nrej) {
+  for (int i = 0; i < m->n; i++) {
+    const ds_job *j = &m->jobs[i];
+    if (j->kind != DS_NOISY || strcmp(j->split, split) != 0 || !spp_selected(spps, nspp, j->spp))
+      continue;
+    int r = -1;
+    for (int k = 0; k < m->n && r < 0; k++)
+      if (m->jobs[k].kind == DS_REFERENCE && !strcmp(m->jobs[k].scene, j->scene) &&
+          m->jobs[k].variant == j->variant)
+        r = k;
+    if (rejected(dir, j)) {
+      (*nrej)++;
+      continue;
+    }
+    char a[DS_PATH], b[DS_PATH];
+    ds_join(a, sizeof a, dir, j->out);
+    if (r >= 0) ds_join(b, sizeof b, dir, m->jobs[r].out);
+    if (r < 0 || !ds_exists(a) || !ds_exists(b)) {
+      if (!allow_partial && *missing < 5)
+        ds_err("patches: %s not rendered yet (%s)", j->id,
+               r < 0           ? "no reference job"
+               : !ds_exists(a) ? a
+                               : b);
+      (*missing)++;
+      continue;
+    }
+    pairs[*np] = (pair_t){dir_index, i, r};
+    (*np)++;
+  }
+}
+
 static void usage(void) {
   fprintf(
       stderr,
-      "usage: kpcn-dataset patches DATASET_DIR -o OUT.kps [--split train] [--spp 16,32|all]\n"
+      "usage: kpcn-dataset patches DATASET_DIR... -o OUT.kps [--split train] [--spp 16,32|all]\n"
       "         [--size 65] [--per-image 100 | --stride S] [--cull 0.9] [--cull-tol 0.05]\n"
       "         [--cull-abs 0.01] [--importance] [--seed 1] [--dtype f32|f16] [--allow-partial]\n");
 }
 
 int ds_cmd_patches(int argc, char **argv) {
-  const char *dir = NULL, *out = NULL, *split = "train", *spp_list = "all", *dtype = "f32";
-  int allow_partial = 0;
+  const char *dirs[MAX_DIRS], *out = NULL, *split = "train", *spp_list = "all", *dtype = "f32";
+  int ndirs = 0, allow_partial = 0;
   kpcn_patch_settings ps;
   kpcn_patch_settings_defaults(&ps);
   ps.count = 100;
@@ -67,11 +110,11 @@ int ds_cmd_patches(int argc, char **argv) {
       return 0;
     }
     if (a[0] != '-') {
-      if (dir) {
-        ds_err("patches: more than one dataset directory ('%s', '%s')", dir, a);
+      if (ndirs == MAX_DIRS) {
+        ds_err("patches: more than %d dataset directories", MAX_DIRS);
         return 2;
       }
-      dir = a;
+      dirs[ndirs++] = a;
       continue;
     }
     if (!v) {
@@ -115,7 +158,7 @@ int ds_cmd_patches(int argc, char **argv) {
     }
     i++;
   }
-  if (!dir || !out) {
+  if (!ndirs || !out) {
     usage();
     return 2;
   }
@@ -130,46 +173,35 @@ int ds_cmd_patches(int argc, char **argv) {
         return 2;
       }
   }
-  ds_manifest m;
-  if (ds_manifest_read(dir, &m) != 0) return 1;
-  /* Pair every selected noisy job with its variant's reference; check completeness first. */
-  int *pairs = malloc(sizeof(int) * 2 * (size_t)(m.n + 1)), np = 0, missing = 0, nrej = 0;
-  for (int i = 0; i < m.n; i++) {
-    const ds_job *j = &m.jobs[i];
-    if (j->kind != DS_NOISY || strcmp(j->split, split) != 0 || !spp_selected(spps, nspp, j->spp))
-      continue;
-    int r = -1;
-    for (int k = 0; k < m.n && r < 0; k++)
-      if (m.jobs[k].kind == DS_REFERENCE && !strcmp(m.jobs[k].scene, j->scene) &&
-          m.jobs[k].variant == j->variant)
-        r = k;
-    if (rejected(dir, j)) {
-      nrej++;
-      continue;
+  ds_manifest m[MAX_DIRS];
+  memset(m, 0, sizeof m);
+  pair_t *pairs = NULL;
+  int np = 0, missing = 0, nrej = 0, rc = 0;
+  for (int d = 0; d < ndirs && rc == 0; d++) {
+    if (ds_manifest_read(dirs[d], &m[d]) != 0) {
+      rc = 1;
+      break;
     }
-    char a[DS_PATH], b[DS_PATH];
-    ds_join(a, sizeof a, dir, j->out);
-    if (r >= 0) ds_join(b, sizeof b, dir, m.jobs[r].out);
-    if (r < 0 || !ds_exists(a) || !ds_exists(b)) {
-      if (!allow_partial && missing < 5)
-        ds_err("patches: %s not rendered yet (%s)", j->id,
-               r < 0           ? "no reference job"
-               : !ds_exists(a) ? a
-                               : b);
-      missing++;
-      continue;
+    pair_t *grown = realloc(pairs, sizeof *pairs * (size_t)(np + m[d].n + 1));
+    if (!grown) {
+      ds_err("patches: out of memory");
+      rc = 1;
+      break;
     }
-    pairs[2 * np] = i;
-    pairs[2 * np + 1] = r;
-    np++;
+    pairs = grown;
+    collect_pairs(dirs[d], d, &m[d], split, spps, nspp, allow_partial, pairs, &np, &missing, &nrej);
   }
-  if ((missing && !allow_partial) || np == 0) {
-    if (np == 0) ds_err("patches: no finished %s image pairs in '%s'", split, dir);
+  if (rc == 0 && ((missing && !allow_partial) || np == 0)) {
+    if (np == 0) ds_err("patches: no finished %s image pairs in '%s'%s", split, dirs[0],
+                        ndirs > 1 ? " and the other directories" : "");
     if (missing && !allow_partial)
       ds_err("patches: %d image pairs missing: finish `kpcn-dataset run` or pass --allow-partial",
              missing);
+    rc = 1;
+  }
+  if (rc != 0) {
     free(pairs);
-    ds_manifest_free(&m);
+    for (int d = 0; d < ndirs; d++) ds_manifest_free(&m[d]);
     return 1;
   }
   kpcn_patchstore_settings ss;
@@ -187,14 +219,14 @@ int ds_cmd_patches(int argc, char **argv) {
   if (kpcn_patchstore_create(&w, out, &ss) != KPCN_OK) {
     ds_err("patches: %s", kpcn_last_error());
     free(pairs);
-    ds_manifest_free(&m);
+    for (int d = 0; d < ndirs; d++) ds_manifest_free(&m[d]);
     return 1;
   }
-  int rc = 0;
   kpcn_patch_stats tot = {0, 0, 0};
   double t0 = ds_now();
   for (int p = 0; p < np && rc == 0; p++) {
-    const ds_job *j = &m.jobs[pairs[2 * p]], *r = &m.jobs[pairs[2 * p + 1]];
+    const char *dir = dirs[pairs[p].dir];
+    const ds_job *j = &m[pairs[p].dir].jobs[pairs[p].job], *r = &m[pairs[p].dir].jobs[pairs[p].ref];
     char a[DS_PATH], b[DS_PATH];
     ds_join(a, sizeof a, dir, j->out);
     ds_join(b, sizeof b, dir, r->out);
@@ -219,8 +251,8 @@ int ds_cmd_patches(int argc, char **argv) {
       src.variant = j->variant;
       src.spp = j->spp;
       src.ref_spp = r->spp;
-      snprintf(src.noisy, sizeof src.noisy, "%.255s", j->out);
-      snprintf(src.reference, sizeof src.reference, "%.255s", r->out);
+      snprintf(src.noisy, sizeof src.noisy, "%.255s", ndirs > 1 ? a : j->out);
+      snprintf(src.reference, sizeof src.reference, "%.255s", ndirs > 1 ? b : r->out);
       kpcn_patchstore_add_source(w, &src, &sid);
       for (int k = 0; k < n && rc == 0; k++) {
         kpcn_patch_record rec = {sid, o[k].x, o[k].y, 0, o[k].flat_frac, o[k].weight, 0};
@@ -261,6 +293,6 @@ int ds_cmd_patches(int argc, char **argv) {
            ds_now() - t0);
   }
   free(pairs);
-  ds_manifest_free(&m);
+  for (int d = 0; d < ndirs; d++) ds_manifest_free(&m[d]);
   return rc;
 }
