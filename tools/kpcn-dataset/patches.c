@@ -192,8 +192,9 @@ int ds_cmd_patches(int argc, char **argv) {
     collect_pairs(dirs[d], d, &m[d], split, spps, nspp, allow_partial, pairs, &np, &missing, &nrej);
   }
   if (rc == 0 && ((missing && !allow_partial) || np == 0)) {
-    if (np == 0) ds_err("patches: no finished %s image pairs in '%s'%s", split, dirs[0],
-                        ndirs > 1 ? " and the other directories" : "");
+    if (np == 0)
+      ds_err("patches: no finished %s image pairs in '%s'%s", split, dirs[0],
+             ndirs > 1 ? " and the other directories" : "");
     if (missing && !allow_partial)
       ds_err("patches: %d image pairs missing: finish `kpcn-dataset run` or pass --allow-partial",
              missing);
@@ -201,7 +202,8 @@ int ds_cmd_patches(int argc, char **argv) {
   }
   if (rc != 0) {
     free(pairs);
-    for (int d = 0; d < ndirs; d++) ds_manifest_free(&m[d]);
+    for (int d = 0; d < ndirs; d++)
+      ds_manifest_free(&m[d]);
     return 1;
   }
   kpcn_patchstore_settings ss;
@@ -219,7 +221,8 @@ int ds_cmd_patches(int argc, char **argv) {
   if (kpcn_patchstore_create(&w, out, &ss) != KPCN_OK) {
     ds_err("patches: %s", kpcn_last_error());
     free(pairs);
-    for (int d = 0; d < ndirs; d++) ds_manifest_free(&m[d]);
+    for (int d = 0; d < ndirs; d++)
+      ds_manifest_free(&m[d]);
     return 1;
   }
   kpcn_patch_stats tot = {0, 0, 0};
@@ -293,6 +296,7 @@ int ds_cmd_patches(int argc, char **argv) {
            ds_now() - t0);
   }
   free(pairs);
-  for (int d = 0; d < ndirs; d++) ds_manifest_free(&m[d]);
+  for (int d = 0; d < ndirs; d++)
+    ds_manifest_free(&m[d]);
   return rc;
 }
