@@ -2,7 +2,7 @@
  * weights), checkpoint/resume equal to an uninterrupted run bit for bit (weights AND Adam
  * moments), both stages, full-image validation, CSV/plot outputs, and clear errors for a
  * store with the wrong channel list, a garbage store, a model with other inputs and a
- * checkpoint of another run. */
+ * checkpoint of another run; weight averaging (SWA) of checkpoints and model files. */
 #include "kpcn/exr.h"
 #include "train/train_internal.h"
 #include "kpcn/train.h"
@@ -44,8 +44,7 @@ static void settings(kpcn_train_settings *s, const char *out) {
 }
 
 /* All parameters of both branches, concatenated (malloc'ed). */
-static float *weights(kpcn_trainer *t, size_t *n) {
-  kpcn_model *m = kpcn_trainer_model(t);
+static float *model_weights(kpcn_model *m, size_t *n) {
   const kpcn_arch *a = kpcn_model_arch(m);
   size_t tot = 2 * kpcn_arch_param_count(a), k = 0;
   float *w = malloc(tot * sizeof(float));
@@ -59,6 +58,10 @@ static float *weights(kpcn_trainer *t, size_t *n) {
     }
   *n = k;
   return w;
+}
+
+static float *weights(kpcn_trainer *t, size_t *n) {
+  return model_weights(kpcn_trainer_model(t), n);
 }
 
 static int stop_at;
@@ -263,6 +266,63 @@ static void test_best_and_stage2_lr(void) {
   CHECK(strstr(kpcn_last_error(), "validation") != NULL);
 }
 
+/* Weight averaging of two checkpoints and a model file against the mean computed here; a
+ * file of another architecture and a non-model are errors naming the file. */
+static void test_average(void) {
+  kpcn_train_settings s;
+  settings(&s, tf_tmp("avg.safetensors"));
+  kpcn_trainer *t = NULL;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (!t) return;
+  float *w[3];
+  size_t n[3];
+  const char *in[3] = {tf_tmp("avg1.ckpt"), tf_tmp("avg2.ckpt"), tf_tmp("avg3.safetensors")};
+  for (int k = 0; k < 2; k++) {
+    CHECK(kpcn_trainer_step(t, NULL) == KPCN_OK);
+    CHECK(kpcn_trainer_save_checkpoint(t, in[k]) == KPCN_OK);
+    w[k] = weights(t, &n[k]);
+  }
+  kpcn_model *m3 = NULL, *avg = NULL;
+  CHECK(kpcn_model_create(kpcn_model_arch(kpcn_trainer_model(t)), 77, &m3) == KPCN_OK);
+  CHECK(kpcn_model_save(m3, in[2]) == KPCN_OK);
+  w[2] = model_weights(m3, &n[2]);
+  CHECK(kpcn_model_average(in, 3, &avg) == KPCN_OK);
+  if (avg) {
+    size_t na;
+    float *wa = model_weights(avg, &na);
+    double worst = 0;
+    CHECK(na == n[0] && n[0] == n[1] && n[1] == n[2]);
+    for (size_t i = 0; i < na && na == n[0]; i++) {
+      double want = ((double)w[0][i] + w[1][i] + w[2][i]) / 3;
+      worst = fmax(worst, fabs(wa[i] - want) / fmax(fabs(want), 1e-6));
+    }
+    CHECK(worst < 1e-6);
+    CHECK(memcmp(w[0], w[1], n[0] * sizeof(float)) != 0); /* the snapshots differ */
+    CHECK(kpcn_model_get_meta(avg, "train.averaged_snapshots") &&
+          !strcmp(kpcn_model_get_meta(avg, "train.averaged_snapshots"), "3"));
+    free(wa);
+  }
+  kpcn_model_destroy(avg);
+  /* another architecture */
+  kpcn_arch other = *kpcn_model_arch(m3);
+  other.channels = 32;
+  kpcn_model *mo = NULL;
+  const char *bad[2] = {in[0], tf_tmp("avg_other.safetensors")};
+  CHECK(kpcn_model_create(&other, 1, &mo) == KPCN_OK && kpcn_model_save(mo, bad[1]) == KPCN_OK);
+  avg = NULL;
+  CHECK(kpcn_model_average(bad, 2, &avg) == KPCN_ERR_FORMAT && avg == NULL);
+  CHECK(strstr(kpcn_last_error(), "avg_other") && strstr(kpcn_last_error(), "architecture"));
+  /* not a model at all */
+  const char *junk[1] = {g_store};
+  CHECK(kpcn_model_average(junk, 1, &avg) == KPCN_ERR_FORMAT && avg == NULL);
+  CHECK(strstr(kpcn_last_error(), "neither a model") != NULL);
+  kpcn_model_destroy(mo);
+  kpcn_model_destroy(m3);
+  for (int k = 0; k < 3; k++)
+    free(w[k]);
+  kpcn_trainer_destroy(t);
+}
+
 static void test_bad_stores(void) {
   kpcn_train_settings s;
   kpcn_trainer *t = NULL;
@@ -353,6 +413,7 @@ int main(void) {
   test_determinism_and_resume();
   test_validation();
   test_best_and_stage2_lr();
+  test_average();
   test_bad_stores();
   return kt_summary("train_pipeline");
 }

@@ -45,7 +45,11 @@ static void usage(FILE *f) {
         "usage: kpcn-train --compare OUT.png [--x iter|elapsed_s] [--y COLUMN] [--title T]\n"
         "                  [--linear] LABEL=RUN.csv ...\n"
         "  draws one CSV column (default loss; val_relmse, val_ssim, val_psnr ...) of up to 8\n"
-        "  runs against the iteration or the elapsed seconds (default elapsed_s)\n",
+        "  runs against the iteration or the elapsed seconds (default elapsed_s)\n"
+        "\n"
+        "usage: kpcn-train --average OUT.safetensors MODEL_OR_CHECKPOINT...\n"
+        "  weight averaging (SWA): the mean of the weights of snapshots of one run (model\n"
+        "  files and/or checkpoints of one architecture)\n",
         f);
 }
 
@@ -192,8 +196,26 @@ static int compare_main(int argc, char **argv) {
   return 0;
 }
 
+static int average_main(int argc, char **argv) {
+  if (argc < 4) {
+    fprintf(stderr, "kpcn-train --average: expected OUT.safetensors and at least one input\n");
+    return 2;
+  }
+  kpcn_model *m = NULL;
+  kpcn_status st = kpcn_model_average((const char *const *)argv + 3, argc - 3, &m);
+  if (st == KPCN_OK) st = kpcn_model_save(m, argv[2]);
+  kpcn_model_destroy(m);
+  if (st != KPCN_OK) {
+    fprintf(stderr, "kpcn-train --average: %s\n", kpcn_last_error());
+    return 1;
+  }
+  if (!g_quiet) printf("kpcn-train: %s = mean of %d snapshots\n", argv[2], argc - 3);
+  return 0;
+}
+
 int main(int argc, char **argv) {
   if (argc >= 3 && !strcmp(argv[1], "--compare")) return compare_main(argc, argv);
+  if (argc >= 2 && !strcmp(argv[1], "--average")) return average_main(argc, argv);
   kpcn_train_settings s;
   kpcn_train_settings_defaults(&s);
   const char *preset = "cpu", *dil = NULL, *loss2 = NULL;

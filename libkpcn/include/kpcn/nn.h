@@ -126,6 +126,8 @@ kpcn_status kpcn_model_layer(kpcn_model *m, kpcn_branch b, int layer, kpcn_layer
  * tensor, KPCN_ERR_IO for open/read failures. */
 kpcn_status kpcn_model_save(const kpcn_model *m, const char *path);
 kpcn_status kpcn_model_load(const char *path, kpcn_model **out);
+/* The file's name of one layer's weight or bias tensor ("diffuse.conv3.bias"). */
+void kpcn_model_tensor_name(char *buf, size_t n, kpcn_branch b, int layer, int is_bias);
 
 /* Free-form user metadata stored in __metadata__ (e.g. training iteration, dataset).
  * Keys must not start with "kpcn." (reserved). get returns NULL when absent. */

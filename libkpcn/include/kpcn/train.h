@@ -273,6 +273,15 @@ typedef struct kpcn_train_timing {
 } kpcn_train_timing;
 void kpcn_trainer_get_timing(const kpcn_trainer *t, kpcn_train_timing *out);
 
+/* The weights a training checkpoint holds, as a model of its architecture (metadata: none
+ * beyond the architecture). Errors name the file and the missing or malformed part. */
+kpcn_status kpcn_checkpoint_load_model(const char *path, kpcn_model **out);
+/* Weight averaging (SWA): the element-wise mean (accumulated in double) of the weights of n
+ * model files and/or training checkpoints of one architecture — snapshots of one run. The
+ * result carries the first file's metadata plus "train.averaged_snapshots" = n. A file of
+ * another architecture is an error naming it. */
+kpcn_status kpcn_model_average(const char *const *paths, int n, kpcn_model **out);
+
 /* Writes the training-curve plot from a CSV written by the trainer (any columns named
  * loss, val_relmse, val_ssim of the header are drawn against iter). */
 kpcn_status kpcn_train_plot_csv(const char *csv_path, const char *png_path, const char *title);

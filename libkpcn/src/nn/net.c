@@ -705,8 +705,7 @@ kpcn_status kpcn_net_params(kpcn_net *n, kpcn_param *out, int max) {
     layer *y = &n->L[l];
     for (int isb = 0; isb < 2; isb++) {
       kpcn_param *p = &out[2 * l + isb];
-      snprintf(p->name, sizeof p->name, "%s.conv%d.%s", kpcn_nn_branch_names[n->branch], l,
-               isb ? "bias" : "weight");
+      kpcn_model_tensor_name(p->name, sizeof p->name, n->branch, l, isb);
       p->value = isb ? n->model->b[n->branch][l] : n->model->w[n->branch][l];
       p->grad = n->o.training ? (isb ? y->gb : y->gw) : NULL;
       p->count = isb ? (size_t)y->cout : (size_t)y->cout * y->cin * y->k * y->k;

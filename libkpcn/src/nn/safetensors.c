@@ -22,8 +22,8 @@
 #define KPCN_MODEL_FORMAT "kpcn-model-1"
 #define MAX_HEADER ((uint64_t)64 << 20)
 
-static void tensor_name(char *buf, size_t n, int b, int l, int is_bias) {
-  snprintf(buf, n, "%s.conv%d.%s", kpcn_nn_branch_names[b], l, is_bias ? "bias" : "weight");
+void kpcn_model_tensor_name(char *buf, size_t n, kpcn_branch b, int layer, int is_bias) {
+  snprintf(buf, n, "%s.conv%d.%s", kpcn_nn_branch_names[b], layer, is_bias ? "bias" : "weight");
 }
 
 static kpcn_status build_header(const kpcn_model *m, char **out_json) {
@@ -56,7 +56,7 @@ static kpcn_status build_header(const kpcn_model *m, char **out_json) {
   for (int b = 0; b < KPCN_N_BRANCHES; b++)
     for (int l = 0; l <= a->n_hidden; l++)
       for (int isb = 0; isb < 2; isb++) {
-        tensor_name(name, sizeof name, b, l, isb);
+        kpcn_model_tensor_name(name, sizeof name, (kpcn_branch)b, l, isb);
         int k = a->conv_size[l];
         int shape[4] = {kpcn_arch_layer_out(a, l), kpcn_arch_layer_in(a, l), k, k};
         size_t n = isb ? (size_t)shape[0] : kpcn_model_weight_count(a, l);
@@ -254,7 +254,7 @@ static kpcn_status load_tensors(const cJSON *h, kpcn_model *m, FILE *f, uint64_t
   for (int b = 0; s == KPCN_OK && b < KPCN_N_BRANCHES; b++)
     for (int l = 0; s == KPCN_OK && l < nl; l++)
       for (int isb = 0; s == KPCN_OK && isb < 2; isb++, i++) {
-        tensor_name(name, sizeof name, b, l, isb);
+        kpcn_model_tensor_name(name, sizeof name, (kpcn_branch)b, l, isb);
         int k = a->conv_size[l];
         int shape[4] = {kpcn_arch_layer_out(a, l), kpcn_arch_layer_in(a, l), k, k};
         es[i].dst = isb ? m->b[b][l] : m->w[b][l];

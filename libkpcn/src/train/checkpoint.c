@@ -152,43 +152,98 @@ static kpcn_status meta_expect(cJSON *meta, const char *key, long long want, con
   return KPCN_OK;
 }
 
-kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return kpcn_fail(KPCN_ERR_IO, "cannot open checkpoint '%s': %s", path, strerror(errno));
-  kpcn_status st = KPCN_OK;
-  char *hdr = NULL;
-  cJSON *root = NULL;
-  ck_tensor *ts = NULL;
-  unsigned char len8[8];
-  uint64_t hl = 0, fsize;
-  fseek(f, 0, SEEK_END);
-  fsize = (uint64_t)ftell(f);
-  fseek(f, 0, SEEK_SET);
+/* An open checkpoint: its parsed header and where the tensor data starts. */
+typedef struct ck_file {
+  FILE *f;
+  char *hdr;
+  cJSON *root, *meta;
+  uint64_t fsize, data0;
+} ck_file;
+
+static void ck_close(ck_file *c) {
+  if (c->f) fclose(c->f);
+  cJSON_Delete(c->root);
+  free(c->hdr);
+  memset(c, 0, sizeof *c);
+}
+
+/* Fails with KPCN_ERR_FORMAT and jumps to the function's cleanup label `done`. */
 #define BAD(...)                                                                                   \
   do {                                                                                             \
     st = kpcn_fail(KPCN_ERR_FORMAT, __VA_ARGS__);                                                  \
     goto done;                                                                                     \
   } while (0)
-  if (fread(len8, 1, 8, f) != 8) BAD("checkpoint '%s' is truncated (no header length)", path);
+
+/* Opens path, reads and parses the header and checks kpcn.format; on failure everything is
+ * closed again. */
+static kpcn_status ck_open(const char *path, ck_file *c) {
+  memset(c, 0, sizeof *c);
+  c->f = fopen(path, "rb");
+  if (!c->f)
+    return kpcn_fail(KPCN_ERR_IO, "cannot open checkpoint '%s': %s", path, strerror(errno));
+  kpcn_status st = KPCN_OK;
+  unsigned char len8[8];
+  uint64_t hl = 0;
+  fseek(c->f, 0, SEEK_END);
+  c->fsize = (uint64_t)ftell(c->f);
+  fseek(c->f, 0, SEEK_SET);
+  if (fread(len8, 1, 8, c->f) != 8) BAD("checkpoint '%s' is truncated (no header length)", path);
   for (int i = 0; i < 8; i++)
     hl |= (uint64_t)len8[i] << (8 * i);
-  if (hl == 0 || hl > fsize - 8 || hl > (64u << 20))
+  if (hl == 0 || hl > c->fsize - 8 || hl > (64u << 20))
     BAD("checkpoint '%s': header length %" PRIu64 " does not fit the %" PRIu64 "-byte file", path,
-        hl, fsize);
-  hdr = kpcn_alloc(hl + 1, "checkpoint header");
-  if (!hdr) {
+        hl, c->fsize);
+  c->hdr = kpcn_alloc(hl + 1, "checkpoint header");
+  if (!c->hdr) {
     st = kpcn_last_status();
     goto done;
   }
-  if (fread(hdr, 1, hl, f) != hl) BAD("checkpoint '%s' is truncated (header)", path);
-  hdr[hl] = 0;
-  root = cJSON_Parse(hdr);
-  if (!root) BAD("checkpoint '%s': header is not JSON", path);
-  cJSON *meta = cJSON_GetObjectItemCaseSensitive(root, "__metadata__");
-  const char *fmt = meta_str(meta, "kpcn.format");
+  if (fread(c->hdr, 1, hl, c->f) != hl) BAD("checkpoint '%s' is truncated (header)", path);
+  c->hdr[hl] = 0;
+  c->data0 = 8 + hl;
+  c->root = cJSON_Parse(c->hdr);
+  if (!c->root) BAD("checkpoint '%s': header is not JSON", path);
+  c->meta = cJSON_GetObjectItemCaseSensitive(c->root, "__metadata__");
+  const char *fmt = meta_str(c->meta, "kpcn.format");
   if (!fmt || strcmp(fmt, CKPT_FORMAT) != 0)
     BAD("checkpoint '%s': kpcn.format is '%s', expected '" CKPT_FORMAT "'", path,
         fmt ? fmt : "(missing)");
+done:
+  if (st != KPCN_OK) ck_close(c);
+  return st;
+}
+
+/* Reads the n listed tensors (F32, exact sizes, offsets inside the file). */
+static kpcn_status ck_read(ck_file *c, const char *path, const ck_tensor *ts, int n) {
+  kpcn_status st = KPCN_OK;
+  for (int i = 0; i < n; i++) {
+    cJSON *e = cJSON_GetObjectItemCaseSensitive(c->root, ts[i].name);
+    if (!e) BAD("checkpoint '%s' lacks tensor '%s'", path, ts[i].name);
+    cJSON *dt = cJSON_GetObjectItemCaseSensitive(e, "dtype");
+    cJSON *of = cJSON_GetObjectItemCaseSensitive(e, "data_offsets");
+    if (!cJSON_IsString(dt) || strcmp(dt->valuestring, "F32") != 0)
+      BAD("checkpoint '%s': tensor '%s' is not F32", path, ts[i].name);
+    if (!cJSON_IsArray(of) || cJSON_GetArraySize(of) != 2)
+      BAD("checkpoint '%s': tensor '%s' has no data_offsets", path, ts[i].name);
+    double b0 = cJSON_GetArrayItem(of, 0)->valuedouble, b1 = cJSON_GetArrayItem(of, 1)->valuedouble;
+    if (b0 < 0 || b1 - b0 != (double)ts[i].count * 4 || c->data0 + b1 > (double)c->fsize)
+      BAD("checkpoint '%s': tensor '%s' offsets [%.0f, %.0f) do not match %zu floats in the "
+          "file",
+          path, ts[i].name, b0, b1, ts[i].count);
+    if (fseek(c->f, (long)(c->data0 + (uint64_t)b0), SEEK_SET) != 0 ||
+        fread(ts[i].data, 4, ts[i].count, c->f) != ts[i].count)
+      BAD("checkpoint '%s' is truncated (tensor '%s')", path, ts[i].name);
+  }
+done:
+  return st;
+}
+
+kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
+  ck_file c;
+  KPCN_TRY(ck_open(path, &c));
+  kpcn_status st = KPCN_OK;
+  ck_tensor *ts = NULL;
+  cJSON *meta = c.meta;
   const char *arch = meta_str(meta, "kpcn.architecture");
   char *mine = kpcn_arch_to_json(&t->arch);
   int same = arch && mine && strcmp(arch, mine) == 0;
@@ -203,7 +258,7 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
       (st = meta_expect(meta, "train.patch", t->P, path, NULL)) ||
       (st = meta_expect(meta, "train.stage1_iters", t->s.stage1_iters, path, NULL)))
     goto done;
-  long long iter, steps[2];
+  long long iter = 0, steps[2] = {0, 0};
   if ((st = meta_expect(meta, "train.iteration", 0, path, &iter)) ||
       (st = meta_expect(meta, "train.adam_steps.diffuse", 0, path, &steps[0])) ||
       (st = meta_expect(meta, "train.adam_steps.specular", 0, path, &steps[1])))
@@ -217,36 +272,49 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
     goto done;
   }
   ck_list(t, ts);
-  uint64_t data0 = 8 + hl;
-  for (int i = 0; i < n; i++) {
-    cJSON *e = cJSON_GetObjectItemCaseSensitive(root, ts[i].name);
-    if (!e) BAD("checkpoint '%s' lacks tensor '%s'", path, ts[i].name);
-    cJSON *dt = cJSON_GetObjectItemCaseSensitive(e, "dtype");
-    cJSON *of = cJSON_GetObjectItemCaseSensitive(e, "data_offsets");
-    if (!cJSON_IsString(dt) || strcmp(dt->valuestring, "F32") != 0)
-      BAD("checkpoint '%s': tensor '%s' is not F32", path, ts[i].name);
-    if (!cJSON_IsArray(of) || cJSON_GetArraySize(of) != 2)
-      BAD("checkpoint '%s': tensor '%s' has no data_offsets", path, ts[i].name);
-    double b0 = cJSON_GetArrayItem(of, 0)->valuedouble, b1 = cJSON_GetArrayItem(of, 1)->valuedouble;
-    if (b0 < 0 || b1 - b0 != (double)ts[i].count * 4 || data0 + b1 > (double)fsize)
-      BAD("checkpoint '%s': tensor '%s' offsets [%.0f, %.0f) do not match %zu floats in the "
-          "file",
-          path, ts[i].name, b0, b1, ts[i].count);
-    if (fseek(f, (long)(data0 + (uint64_t)b0), SEEK_SET) != 0 ||
-        fread(ts[i].data, 4, ts[i].count, f) != ts[i].count)
-      BAD("checkpoint '%s' is truncated (tensor '%s')", path, ts[i].name);
-  }
+  if ((st = ck_read(&c, path, ts, n)) != KPCN_OK) goto done;
   t->iter = iter;
   kpcn_adam_set_steps(t->adam[0], steps[0]);
   kpcn_adam_set_steps(t->adam[1], steps[1]);
   t->rng.state = strtoull(rng, NULL, 16);
   t->elapsed_prev = strtod(el, NULL);
 done:
-#undef BAD
-  fclose(f);
-  cJSON_Delete(root);
-  free(hdr);
+  ck_close(&c);
   free(ts);
+  return st;
+}
+
+kpcn_status kpcn_checkpoint_load_model(const char *path, kpcn_model **out) {
+  if (!path || !out)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_checkpoint_load_model: NULL");
+  *out = NULL;
+  ck_file c;
+  KPCN_TRY(ck_open(path, &c));
+  kpcn_status st = KPCN_OK;
+  kpcn_model *m = NULL;
+  kpcn_arch a;
+  const char *arch = meta_str(c.meta, "kpcn.architecture");
+  if (!arch) BAD("checkpoint '%s': kpcn.architecture missing", path);
+  if (kpcn_arch_from_json(arch, &a) != KPCN_OK)
+    BAD("checkpoint '%s': kpcn.architecture: %s", path, kpcn_last_error());
+  if ((st = kpcn_model_create(&a, 0, &m)) != KPCN_OK) goto done;
+  for (int b = 0; b < KPCN_N_BRANCHES && st == KPCN_OK; b++)
+    for (int l = 0; l <= a.n_hidden && st == KPCN_OK; l++) {
+      kpcn_layer_view v;
+      if ((st = kpcn_model_layer(m, (kpcn_branch)b, l, &v)) != KPCN_OK) break;
+      ck_tensor ts[2] = {{"", v.weight, (size_t)v.out_ch * v.in_ch * v.size * v.size},
+                         {"", v.bias, (size_t)v.out_ch}};
+      for (int k = 0; k < 2; k++)
+        kpcn_model_tensor_name(ts[k].name, sizeof ts[k].name, (kpcn_branch)b, l, k);
+      st = ck_read(&c, path, ts, 2);
+    }
+#undef BAD
+done:
+  ck_close(&c);
+  if (st != KPCN_OK)
+    kpcn_model_destroy(m);
+  else
+    *out = m;
   return st;
 }
 
