@@ -2,7 +2,8 @@
  * weights), checkpoint/resume equal to an uninterrupted run bit for bit (weights AND Adam
  * moments), both stages, full-image validation, CSV/plot outputs, and clear errors for a
  * store with the wrong channel list, a garbage store, a model with other inputs and a
- * checkpoint of another run; weight averaging (SWA) of checkpoints and model files. */
+ * checkpoint of another run; weight averaging (SWA) of checkpoints and model files, and the
+ * snapshots kept for it. */
 #include "kpcn/exr.h"
 #include "train/train_internal.h"
 #include "kpcn/train.h"
@@ -266,6 +267,39 @@ static void test_best_and_stage2_lr(void) {
   CHECK(strstr(kpcn_last_error(), "validation") != NULL);
 }
 
+/* --snapshots: every checkpoint (periodic and final) is kept, and snapshot 4 holds exactly the
+ * weights of 4 iterations (a second trainer stepped by hand). */
+static void test_snapshots(void) {
+  kpcn_train_settings s;
+  settings(&s, tf_tmp("snap.safetensors"));
+  s.ckpt_every = 2;
+  s.snapshot_dir = tf_tmp("snaps");
+  kpcn_trainer *t = NULL;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  CHECK(t && kpcn_trainer_run(t, NULL) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+  char p2[600], p4[600], p6[600];
+  snprintf(p2, sizeof p2, "%s/ckpt_000002.safetensors", s.snapshot_dir);
+  snprintf(p4, sizeof p4, "%s/ckpt_000004.safetensors", s.snapshot_dir);
+  snprintf(p6, sizeof p6, "%s/ckpt_000006.safetensors", s.snapshot_dir);
+  CHECK(access(p2, F_OK) == 0 && access(p4, F_OK) == 0 && access(p6, F_OK) == 0); /* + final */
+  s.snapshot_dir = NULL;
+  t = NULL;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  for (int i = 0; t && i < 4; i++)
+    CHECK(kpcn_trainer_step(t, NULL) == KPCN_OK);
+  kpcn_model *m = NULL;
+  CHECK(kpcn_checkpoint_load_model(p4, &m) == KPCN_OK);
+  if (t && m) {
+    size_t n1, n2;
+    float *w1 = weights(t, &n1), *w2 = model_weights(m, &n2);
+    CHECK(n1 == n2 && memcmp(w1, w2, n1 * sizeof(float)) == 0);
+    free(w1), free(w2);
+  }
+  kpcn_model_destroy(m);
+  kpcn_trainer_destroy(t);
+}
+
 /* Weight averaging of two checkpoints and a model file against the mean computed here; a
  * file of another architecture and a non-model are errors naming the file. */
 static void test_average(void) {
@@ -414,6 +448,7 @@ int main(void) {
   test_validation();
   test_best_and_stage2_lr();
   test_average();
+  test_snapshots();
   test_bad_stores();
   return kt_summary("train_pipeline");
 }

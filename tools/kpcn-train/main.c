@@ -37,6 +37,7 @@ static void usage(FILE *f) {
         "  --val-every N --ckpt-every N --log-every N (10)\n"
         "  --ckpt PATH --csv PATH --plot PATH   (default MODEL.ckpt/.csv/.png; '' = none)\n"
         "  --best PATH               also write the model with the lowest validation relMSE\n"
+        "  --snapshots DIR           keep every checkpoint in DIR (for --average)\n"
         "  --time-limit MINUTES      stop cleanly and checkpoint\n"
         "  --resume                  continue bit-exactly from the checkpoint\n"
         "  --no-colorswap --no-mirror --no-rotate --no-shift   disable augmentations\n"
@@ -263,6 +264,7 @@ int main(int argc, char **argv) {
     STR("--csv", s.csv_path)
     STR("--plot", s.plot_path)
     STR("--best", s.best_path)
+    STR("--snapshots", s.snapshot_dir)
     STR("--loss2", loss2)
     INT("--layers", 1, KPCN_NN_MAX_LAYERS - 1, layers)
     INT("--channels", 1, 1024, channels)

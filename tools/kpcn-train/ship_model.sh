@@ -15,13 +15,19 @@
 #   model only if this run's shipped validation relMSE is lower, e.g. the current model's),
 #   INIT_NOTE (README text on where INIT came from; default: the previously shipped model),
 #   README_ONLY (1: train nothing, copy nothing; rewrite README.md from the finished run in
-#   WORK, e.g. after editing INIT_NOTE; same environment as the run).
+#   WORK, e.g. after editing INIT_NOTE; same environment as the run), NO_TRAIN (1: the run in
+#   WORK is finished: select, copy and write the README without training), SWA_FROM (a fraction,
+#   e.g. 0.5: keep every checkpoint (--snapshots WORK/snapshots, or SNAPSHOT_DIR), average the
+#   weights of those from that fraction of the run on (kpcn-train --average), score the
+#   average and the KEEP_BEST/last candidate on the validation pairs with kpcntool (mean
+#   relMSE, R,G,B: the trainer's own validation figure) and ship the lower; needs pairs;
+#   SNAPSHOT_NOTE: README text on how the snapshots were kept, if not by --snapshots).
 # With a time budget the iteration count is unknown in advance, so the script first measures
 # the speed (20 iterations) and sets --iters to fit MINUTES, --stage1-iters to STAGE1_FRACTION.
 # Resumable: if the run is interrupted, re-running continues from its checkpoint.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/../.." && pwd)
-[ $# -ge 1 ] || { sed -n 2,21p "$0"; exit 2; }
+[ $# -ge 1 ] || { sed -n 2,28p "$0"; exit 2; }
 store=$1
 shift
 bin=${KPCN_TRAIN:-$here/build/tools/kpcn-train/kpcn-train}
@@ -57,6 +63,8 @@ args=(--store "$store" -o "$work/model.safetensors" --preset "$PRESET" --iters "
 [ -n "${LR2:-}" ] && args+=(--lr2 "$LR2")
 [ -n "${INIT:-}" ] && args+=(--init "$INIT")
 [ -n "${TIME_LIMIT:-}" ] && args+=(--time-limit "$TIME_LIMIT")
+snapdir=${SNAPSHOT_DIR:-$work/snapshots}
+[ -n "${SWA_FROM:-}" ] && [ -z "${SNAPSHOT_DIR:-}" ] && args+=(--snapshots "$snapdir")
 shipped=$work/model.safetensors
 if [ "${KEEP_BEST:-0}" = 1 ]; then
   args+=(--best "$work/best.safetensors")
@@ -64,21 +72,54 @@ if [ "${KEEP_BEST:-0}" = 1 ]; then
 fi
 resume=()
 [ -f "$work/model.safetensors.ckpt" ] && resume=(--resume)
-if [ "${README_ONLY:-0}" != 1 ]; then
-echo "ship_model.sh: $bin ${args[*]} ${resume[*]}"
-"$bin" "${args[@]}" "${resume[@]}"
-
-if [ -n "${SHIP_IF_BELOW:-}" ]; then
-  col=$([ "${KEEP_BEST:-0}" = 1 ] && echo best || echo last)
-  got=$(awk -F, -v w="$col" 'NR > 1 && $7 != "" { if (w == "last" || b == "" || $7 < b) b = $7 } END { print b }' "$work/model.safetensors.csv")
-  if ! awk -v g="$got" -v t="$SHIP_IF_BELOW" 'BEGIN { exit !(g != "" && g + 0 < t + 0) }'; then
-    echo "ship_model.sh: validation relMSE ${got:-none} is not below $SHIP_IF_BELOW: the shipped model stays; this run is in $work"
-    exit 0
+if [ "${README_ONLY:-0}" != 1 ] && [ "${NO_TRAIN:-0}" != 1 ]; then
+  echo "ship_model.sh: $bin ${args[*]} ${resume[*]}"
+  "$bin" "${args[@]}" "${resume[@]}"
+fi
+col=$([ "${KEEP_BEST:-0}" = 1 ] && echo best || echo last)
+got=$(awk -F, -v w="$col" 'NR > 1 && $7 != "" { if (w == "last" || b == "" || $7 < b) b = $7 } END { print b }' "$work/model.safetensors.csv")
+if [ -n "${SWA_FROM:-}" ]; then
+  [ $# -gt 0 ] || { echo "ship_model.sh: SWA_FROM needs validation pairs" >&2; exit 2; }
+  tool=${KPCNTOOL:-$here/build/tools/kpcntool/kpcntool}
+  last_it=$(awk -F, 'NR > 1 { it = $1 } END { print it }' "$work/model.safetensors.csv")
+  from=$(awk -v n="$last_it" -v f="$SWA_FROM" 'BEGIN { print int(n * f) }')
+  snaps=()
+  for f in "$snapdir"/ckpt_*.safetensors; do
+    it=$(basename "$f" | tr -dc 0-9)
+    [ -n "$it" ] && [ $((10#$it)) -ge "$from" ] && snaps+=("$f")
+  done
+  [ ${#snaps[@]} -gt 0 ] || { echo "ship_model.sh: no snapshots from iteration $from in $snapdir" >&2; exit 1; }
+  if [ "${README_ONLY:-0}" != 1 ] || [ ! -f "$work/swa.score" ]; then
+    "$bin" --average "$work/swa.safetensors" "${snaps[@]}"
+    score() { # mean relMSE (R,G,B) of a model over the validation pairs
+      local t; t=$(mktemp -d)
+      for p in "${pairs[@]}"; do
+        "$tool" "${p%%,*}" --denoise:model="$1" -o "$t/d.exr" >/dev/null
+        "$tool" "$t/d.exr" "${p#*,}" --ch R,G,B --relmse --json
+      done | sed -n 's/.*"relmse": *\([0-9.eE+-]*\).*/\1/p' | awk '{ s += $1; n++ } END { printf "%.9g\n", s / n }'
+      rm -rf "$t"
+    }
+    pairs=("$@")
+    swa_score=$(score "$work/swa.safetensors")
+    echo "ship_model.sh: SWA of ${#snaps[@]} snapshots (iterations >= $from): validation relMSE $swa_score; $col model: $got"
+    echo "${#snaps[@]} $from $swa_score" > "$work/swa.score"
+  fi
+  read -r swa_n swa_from swa_score < "$work/swa.score"
+  if awk -v a="$swa_score" -v b="$got" 'BEGIN { exit !(a + 0 < b + 0) }'; then
+    shipped=$work/swa.safetensors
+    got=$swa_score
   fi
 fi
-cp "$shipped" "$outdir/$NAME.safetensors"
-cp "$work/model.safetensors.png" "$outdir/$NAME-curves.png"
-cp "$work/model.safetensors.csv" "$outdir/$NAME-log.csv"
+if [ "${README_ONLY:-0}" != 1 ]; then
+  if [ -n "${SHIP_IF_BELOW:-}" ]; then
+    if ! awk -v g="$got" -v t="$SHIP_IF_BELOW" 'BEGIN { exit !(g != "" && g + 0 < t + 0) }'; then
+      echo "ship_model.sh: validation relMSE ${got:-none} is not below $SHIP_IF_BELOW: the shipped model stays; this run is in $work"
+      exit 0
+    fi
+  fi
+  cp "$shipped" "$outdir/$NAME.safetensors"
+  cp "$work/model.safetensors.png" "$outdir/$NAME-curves.png"
+  cp "$work/model.safetensors.csv" "$outdir/$NAME-log.csv"
 fi
 last=$(awk -F, 'NR > 1 && $7 != "" { r = $7; s = $8; p = $9; it = $1 } END { print it "," r "," s "," p }' "$work/model.safetensors.csv")
 best=$(awk -F, 'NR > 1 && $7 != "" && (b == "" || $7 < b) { b = $7; s = $8; p = $9; it = $1 } END { print it "," b "," s "," p }' "$work/model.safetensors.csv")
@@ -102,13 +143,25 @@ cpu=$(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -1)
   echo "| training time | ${secs} s |"
   echo "| hardware | ${cpu:-unknown CPU}, $(nproc) cores, threads=$THREADS |"
   echo "| last validation (iter, relMSE, SSIM, PSNR dB) | $last |"
-  [ "${KEEP_BEST:-0}" = 1 ] && echo "| shipped: best validation (iter, relMSE, SSIM, PSNR dB) | $best |"
+  if [ -n "${SWA_FROM:-}" ]; then
+    [ "${KEEP_BEST:-0}" = 1 ] && echo "| best validation (iter, relMSE, SSIM, PSNR dB) | $best |"
+    echo "| weight average (SWA) | mean of $swa_n checkpoints, iterations $swa_from to $done_iters ($(basename "$snapdir")/, ${SNAPSHOT_NOTE:-kept by \`--snapshots\`}): validation relMSE $swa_score |"
+    echo "| shipped | $([ "$shipped" = "$work/swa.safetensors" ] && echo "the weight average (lower validation relMSE)" || echo "the $col model (lower validation relMSE than the average)") |"
+  elif [ "${KEEP_BEST:-0}" = 1 ]; then
+    echo "| shipped: best validation (iter, relMSE, SSIM, PSNR dB) | $best |"
+  fi
   echo
   echo "Exact command:"
   echo
   echo '```sh'
   echo "kpcn-train ${args[*]}"
   echo '```'
+  if [ -n "${SWA_FROM:-}" ]; then
+    echo
+    echo "then \`kpcn-train --average swa.safetensors <the $swa_n checkpoints>\` and the validation"
+    echo "score of both candidates with \`kpcntool NOISY --denoise:model=M -o d.exr\` +"
+    echo "\`kpcntool d.exr REF --ch R,G,B --relmse\` over the same pairs (\`SWA_FROM=$SWA_FROM\`)."
+  fi
   echo
   echo "(\`-o\` pointed at a work folder; the script copied the model, its CSV log and the curves"
   echo "plot \`$NAME-curves.png\` here.) Validation images are full held-out renders (see"

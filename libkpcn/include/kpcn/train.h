@@ -217,10 +217,13 @@ typedef struct kpcn_train_settings {
   const char *ckpt_path;              /* NULL = "<out_path>.ckpt" */
   const char *csv_path;               /* NULL = "<out_path>.csv"; "" = none */
   const char *plot_path;              /* NULL = "<out_path>.png"; "" = none */
-  const char *best_path;        /* NULL/"" = none: after every validation that improves the mean
-                                   val relMSE, the model is also written here (atomically) */
-  int resume;                   /* 1: continue from ckpt_path (must exist) */
-  int nval;                     /* validation image pairs (full images) */
+  const char *best_path;    /* NULL/"" = none: after every validation that improves the mean
+                               val relMSE, the model is also written here (atomically) */
+  const char *snapshot_dir; /* NULL/"" = none: every checkpoint (periodic, final) is also kept here
+                               as ckpt_<iteration, 6 digits>.safetensors, for weight
+                               averaging (kpcn_model_average); created if missing */
+  int resume;               /* 1: continue from ckpt_path (must exist) */
+  int nval;                 /* validation image pairs (full images) */
   const char *const *val_noisy; /* noisy AOV EXRs */
   const char *const *val_ref;   /* reference EXRs (color R G B used) */
   kpcn_log_fn log;

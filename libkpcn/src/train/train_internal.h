@@ -13,6 +13,7 @@
 struct kpcn_trainer {
   kpcn_train_settings s; /* copy; the string members below own their text */
   char *store_path, *out_path, *ckpt_path, *csv_path, *plot_path, *init_model, *best_path;
+  char *snapshot_dir;
   int nt; /* resolved thread count */
 
   /* patch store */

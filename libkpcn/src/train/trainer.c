@@ -6,10 +6,12 @@
 #include "kpcn/metrics.h"
 #include "train/train_internal.h"
 
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 
 double kt_now(void) {
@@ -76,7 +78,7 @@ void kpcn_trainer_destroy(kpcn_trainer *t) {
   }
   free(t->val_aov), free(t->val_ref);
   free(t->store_path), free(t->out_path), free(t->ckpt_path), free(t->csv_path);
-  free(t->plot_path), free(t->init_model), free(t->best_path);
+  free(t->plot_path), free(t->init_model), free(t->best_path), free(t->snapshot_dir);
   free(t);
 }
 
@@ -194,6 +196,8 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   t->init_model = dup_or_null(s->init_model);
   t->best_path = s->best_path && *s->best_path ? dup_or_null(s->best_path) : NULL;
   t->s.best_path = t->best_path;
+  t->snapshot_dir = s->snapshot_dir && *s->snapshot_dir ? dup_or_null(s->snapshot_dir) : NULL;
+  t->s.snapshot_dir = t->snapshot_dir;
   t->best_val = INFINITY;
   t->s.store_path = t->store_path, t->s.out_path = t->out_path, t->s.ckpt_path = t->ckpt_path;
   t->s.csv_path = t->csv_path, t->s.plot_path = t->plot_path, t->s.init_model = t->init_model;
@@ -207,6 +211,9 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   } while (0)
   if (!t->store_path || !t->out_path || !t->ckpt_path || !t->csv_path || !t->plot_path)
     GO(KPCN_ERR_OUT_OF_MEMORY);
+  if (t->snapshot_dir && mkdir(t->snapshot_dir, 0777) != 0 && errno != EEXIST)
+    GO(kpcn_fail(KPCN_ERR_IO, "cannot create snapshot directory '%s': %s", t->snapshot_dir,
+                 strerror(errno)));
   /* architecture with the feature builder's inputs */
   t->arch = s->arch;
   {
