@@ -11,6 +11,7 @@
 #include "train_fixture.h"
 
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -346,6 +347,34 @@ static void test_average(void) {
   avg = NULL;
   CHECK(kpcn_model_average(bad, 2, &avg) == KPCN_ERR_FORMAT && avg == NULL);
   CHECK(strstr(kpcn_last_error(), "avg_other") && strstr(kpcn_last_error(), "architecture"));
+  /* a checkpoint with a NaN weight (the first float of the first tensor) */
+  {
+    FILE *src = fopen(in[0], "rb"), *dst = fopen(tf_tmp("avg_nan.ckpt"), "wb");
+    CHECK(src && dst);
+    if (src && dst) {
+      unsigned char buf[1 << 16];
+      size_t r;
+      while ((r = fread(buf, 1, sizeof buf, src)) > 0)
+        fwrite(buf, 1, r, dst);
+    }
+    if (src) fclose(src);
+    if (dst) fclose(dst);
+    FILE *f = fopen(tf_tmp("avg_nan.ckpt"), "r+b");
+    unsigned char len8[8];
+    uint64_t hl = 0;
+    CHECK(f && fread(len8, 1, 8, f) == 8);
+    for (int i = 0; i < 8; i++)
+      hl |= (uint64_t)len8[i] << (8 * i);
+    float nan = NAN;
+    if (f) {
+      fseek(f, (long)(8 + hl), SEEK_SET);
+      fwrite(&nan, 4, 1, f);
+      fclose(f);
+    }
+    const char *nanin[1] = {tf_tmp("avg_nan.ckpt")};
+    CHECK(kpcn_model_average(nanin, 1, &avg) == KPCN_ERR_FORMAT && avg == NULL);
+    CHECK(strstr(kpcn_last_error(), "not finite") != NULL);
+  }
   /* not a model at all */
   const char *junk[1] = {g_store};
   CHECK(kpcn_model_average(junk, 1, &avg) == KPCN_ERR_FORMAT && avg == NULL);

@@ -16,6 +16,7 @@
 #include <cjson/cJSON.h>
 #include <errno.h>
 #include <inttypes.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -307,6 +308,10 @@ kpcn_status kpcn_checkpoint_load_model(const char *path, kpcn_model **out) {
       for (int k = 0; k < 2; k++)
         kpcn_model_tensor_name(ts[k].name, sizeof ts[k].name, (kpcn_branch)b, l, k);
       st = ck_read(&c, path, ts, 2);
+      for (int k = 0; k < 2 && st == KPCN_OK; k++)
+        for (size_t i = 0; i < ts[k].count; i++)
+          if (!isfinite(ts[k].data[i]))
+            BAD("checkpoint '%s': tensor '%s' is not finite", path, ts[k].name);
     }
 #undef BAD
 done:
