@@ -126,12 +126,12 @@ static void bench_kpcn(kpcn_aov_set *a, const char *preset, int bf16, int tile, 
     snprintf(grid, sizeof grid, "%dx%d", st.tile_w, st.tile_h);
     printf("kpcn %-6s %-4s %-4s tile %-9s %9.1f ms/Mpx  conv %6.1f GFLOP/s  e2e %6.1f GFLOP/s  "
            "outside convs %4.1f%% (features %.1f%%, kpa %.1f%%, net non-conv %.1f%%, other "
-           "%.1f%%)  tiles %d  peak RSS %.0f MiB\n",
+           "%.1f%%)  tiles %d  nets built %d  peak RSS %.0f MiB\n",
            preset, bf16 ? "bf16" : "fp32", run ? "warm" : "cold", grid, st.total_s * 1e3 / mpx,
            st.conv_s > 0 ? st.conv_flops / st.conv_s * 1e-9 : 0.0, useful / st.total_s * 1e-9,
            100.0 * (1.0 - st.conv_s / st.total_s), 100.0 * st.features_s / st.total_s,
            100.0 * st.kpa_s / st.total_s, 100.0 * (st.net_s - st.conv_s) / st.total_s,
-           100.0 * st.other_s / st.total_s, st.tiles, peak_rss_mib());
+           100.0 * st.other_s / st.total_s, st.tiles, st.nets_created, peak_rss_mib());
     fflush(stdout);
   }
   kpcn_denoiser_destroy(d);

@@ -294,9 +294,85 @@ static void test_api(void) {
   kpcn_model_destroy(m);
 }
 
+/* A denoiser keeps its network and tile buffers between executes: a warm execute, one
+ * after another frame size, and one after the weights changed must all equal a fresh
+ * denoiser's result, and a warm execute of an unchanged size builds no network. */
+static void test_reuse_between_executes(void) {
+  kpcn_model *m = make_model(11);
+  if (!m) return;
+  kpcn_aov_set *a = synth_aov(150, 110, 9), *b = synth_aov(37, 51, 4);
+  const size_t Pa = kpcn_aov_plane_size(a), Pb = kpcn_aov_plane_size(b);
+  float *fresh = malloc(sizeof(float) * 3 * Pa), *warm = malloc(sizeof(float) * 3 * Pa),
+        *fb = malloc(sizeof(float) * 3 * Pb), *wb = malloc(sizeof(float) * 3 * Pb);
+  kpcn_denoiser_options o;
+  kpcn_denoiser_options_defaults(&o);
+  o.tile = 64; /* 3x2 grid, padded tiles of several sizes */
+  o.nthreads = 2;
+  kpcn_denoiser *d = NULL;
+  CHECK(kpcn_denoiser_create_with_model(&d, m, &o) == KPCN_OK);
+  kpcn_denoise_stats cold, st;
+  CHECK(kpcn_denoiser_execute_aov(d, a, warm) == KPCN_OK);
+  kpcn_denoiser_get_stats(d, &cold);
+  CHECK(run(m, a, 64, 0, fresh) == KPCN_OK);
+  CHECK(max_rel(warm, fresh, 3 * Pa) == 0.0);
+  CHECK(kpcn_denoiser_execute_aov(d, a, warm) == KPCN_OK);
+  kpcn_denoiser_get_stats(d, &st);
+  printf("150x110 tile 64: nets built cold %d, warm %d; warm == fresh: %s\n", cold.nets_created,
+         st.nets_created, max_rel(warm, fresh, 3 * Pa) == 0.0 ? "yes" : "no");
+  CHECK(max_rel(warm, fresh, 3 * Pa) == 0.0);
+  CHECK(st.nets_created < cold.nets_created);
+  CHECK(st.conv_s > 0.0 && st.conv_s <= st.net_s);
+  /* another frame size in between (one tile), then the first again */
+  CHECK(kpcn_denoiser_execute_aov(d, b, wb) == KPCN_OK);
+  CHECK(run(m, b, 64, 0, fb) == KPCN_OK);
+  CHECK(max_rel(wb, fb, 3 * Pb) == 0.0);
+  CHECK(kpcn_denoiser_execute_aov(d, b, wb) == KPCN_OK);
+  kpcn_denoiser_get_stats(d, &st);
+  CHECK(st.nets_created == 0); /* one tile size: both branches share the cached net */
+  CHECK(max_rel(wb, fb, 3 * Pb) == 0.0);
+  CHECK(kpcn_denoiser_execute_aov(d, a, warm) == KPCN_OK);
+  CHECK(max_rel(warm, fresh, 3 * Pa) == 0.0);
+  /* weights edited in place (as a trainer does) are what the next execute uses */
+  kpcn_layer_view v;
+  kpcn_model_layer(m, KPCN_BRANCH_SPECULAR, 0, &v);
+  v.bias[0] += 0.5f;
+  CHECK(kpcn_denoiser_execute_aov(d, a, warm) == KPCN_OK);
+  CHECK(run(m, a, 64, 0, fresh) == KPCN_OK);
+  CHECK(max_rel(warm, fresh, 3 * Pa) == 0.0);
+  kpcn_denoiser_destroy(d);
+  /* 100x100 in 50x50 tiles: the even pad gives all four padded tiles one size, so a single
+   * network serves both branches and every tile, and nothing is rebuilt when warm */
+  kpcn_aov_set *c = synth_aov(100, 100, 6);
+  const size_t Pc = kpcn_aov_plane_size(c);
+  float *tc = malloc(sizeof(float) * 3 * Pc), *uc = malloc(sizeof(float) * 3 * Pc);
+  o.tile = 50;
+  CHECK(kpcn_denoiser_create_with_model(&d, m, &o) == KPCN_OK);
+  CHECK(kpcn_denoiser_execute_aov(d, c, tc) == KPCN_OK);
+  kpcn_denoiser_get_stats(d, &cold);
+  CHECK(kpcn_denoiser_execute_aov(d, c, tc) == KPCN_OK);
+  kpcn_denoiser_get_stats(d, &st);
+  printf("100x100 tile 50: %d tiles, nets built cold %d, warm %d\n", st.tiles, cold.nets_created,
+         st.nets_created);
+  CHECK(st.tiles == 4 && cold.nets_created == 1 && st.nets_created == 0);
+  CHECK(run(m, c, 4096, 0, uc) == KPCN_OK);
+  CHECK(max_rel(tc, uc, 3 * Pc) < 2e-6);
+  kpcn_denoiser_destroy(d);
+  kpcn_aov_destroy(c);
+  free(tc);
+  free(uc);
+  free(fresh);
+  free(warm);
+  free(fb);
+  free(wb);
+  kpcn_aov_destroy(a);
+  kpcn_aov_destroy(b);
+  kpcn_model_destroy(m);
+}
+
 int main(void) {
   test_reference_and_tiling();
   test_bf16_and_larger_tiling();
+  test_reuse_between_executes();
   test_api();
   return kt_summary("test_denoise_kpcn");
 }

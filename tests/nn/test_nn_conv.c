@@ -146,6 +146,22 @@ static void check_vs_ref(const cfg *c, int seed) {
                      p * (size_t)lay.pixel_stride + (size_t)(t % lay.block)] ==
                   lg2[((size_t)b * K2 + t) * c->H * c->W + p];
     CHECK(same);
+    /* rebound to the other branch, the net computes what a net created for it computes */
+    const kpcn_branch other =
+        br == KPCN_BRANCH_DIFFUSE ? KPCN_BRANCH_SPECULAR : KPCN_BRANCH_DIFFUSE;
+    kpcn_net *n2 = NULL;
+    float *la = malloc(nout * 4), *lb = malloc(nout * 4);
+    CHECK(kpcn_net_create(m, other, &o, &n2) == KPCN_OK);
+    CHECK(kpcn_net_set_branch(net, other) == KPCN_OK);
+    CHECK(kpcn_net_forward(net, in, la) == KPCN_OK);
+    CHECK(n2 && kpcn_net_forward(n2, in, lb) == KPCN_OK);
+    CHECK(memcmp(la, lb, nout * 4) == 0);
+    CHECK(memcmp(la, lg2, nout * 4) != 0); /* the two branches' weights differ */
+    CHECK(kpcn_net_set_branch(net, (kpcn_branch)2) == KPCN_ERR_INVALID_ARGUMENT);
+    CHECK(kpcn_net_set_branch(NULL, other) == KPCN_ERR_INVALID_ARGUMENT);
+    kpcn_net_destroy(n2);
+    free(la);
+    free(lb);
     kpcn_net_destroy(net);
   }
   /* input planes at a padded stride (what the denoiser passes) give the same logits; a

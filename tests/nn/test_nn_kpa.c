@@ -172,6 +172,8 @@ int main(void) {
   forward_vs_naive(5, 2, 3, 9, 13, 4.f);
   forward_vs_naive(11, 1, 3, 16, 7, 3.f);   /* K larger than the image height: clamping */
   forward_vs_naive(21, 1, 1, 30, 33, 50.f); /* large logits: the stable softmax path */
+  forward_vs_naive(5, 1, 3, 6, 150, 4.f);   /* rows of several 64-pixel chunks, a partial last */
+  forward_vs_naive(11, 1, 4, 3, 70, 3.f);   /* RGB + one more channel, chunk edge at 64 */
   backward_fd(3, 2, 3, 6, 5);
   backward_fd(5, 1, 3, 7, 9);
   backward_fd(7, 1, 2, 4, 11);

@@ -107,7 +107,7 @@ static int parse_d(const char *s, double lo, double hi, double *out, const char 
   return 1;
 }
 
-#define MAX_VAL 64
+#define MAX_VAL 512 /* full images kept in memory: 160x160 AOVs are ~4 MB each */
 static char *g_valn[MAX_VAL], *g_valr[MAX_VAL];
 static int g_nval = 0;
 

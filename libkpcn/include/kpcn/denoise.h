@@ -234,6 +234,7 @@ typedef struct kpcn_denoise_stats {
   int tiles;          /* tiles processed (per branch) */
   int tiles_total;    /* tiles of the grid (per branch) */
   int tile_w, tile_h; /* output size of a full tile of that grid */
+  int nets_created;   /* oneDNN networks built (0 on a warm execute of an unchanged size) */
 } kpcn_denoise_stats;
 void kpcn_denoiser_get_stats(const kpcn_denoiser *d, kpcn_denoise_stats *s);
 

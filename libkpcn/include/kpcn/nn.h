@@ -179,6 +179,11 @@ kpcn_status kpcn_net_create(kpcn_model *m, kpcn_branch b, const kpcn_net_options
                             kpcn_net **out);
 void kpcn_net_destroy(kpcn_net *net);
 
+/* Rebinds the net to the other branch of its model. Both branches share the arch, so the
+ * primitives and buffers stay; only the weights it reads change (the next forward reorders
+ * them, as every forward does). Lets one net's memory serve both branches of a denoiser. */
+kpcn_status kpcn_net_set_branch(kpcn_net *net, kpcn_branch b);
+
 /* Forward: input [N][n_inputs][H][W] fp32 (planes input_plane_stride apart) -> logits
  * [N][K²][H][W] fp32. Re-reads the model's weights each call. */
 kpcn_status kpcn_net_forward(kpcn_net *net, const float *input, float *logits);

@@ -20,6 +20,7 @@ struct kpcn_denoiser {
   slot var[KPCN_BUF_COUNT];
   kpcn_progress prog;
   kpcn_denoise_stats stats;
+  kpcn_pipeline_cache cache;
 };
 
 void kpcn_denoiser_options_defaults(kpcn_denoiser_options *o) {
@@ -108,6 +109,7 @@ kpcn_status kpcn_denoiser_create_with_model(kpcn_denoiser **out, kpcn_model *mod
 
 void kpcn_denoiser_destroy(kpcn_denoiser *d) {
   if (!d) return;
+  kpcn_pipeline_cache_release(&d->cache);
   if (d->model_path) kpcn_model_destroy(d->model);
   free(d->model_path);
   free(d);
@@ -240,7 +242,7 @@ static kpcn_status run_method(kpcn_denoiser *d, const kpcn_aov_set *aov, float *
   case KPCN_DENOISE_NLMEANS:
     s = kpcn_baseline_nlmeans(aov, &d->opt.nlmeans, out, d->opt.nthreads, &d->prog);
     break;
-  default: s = kpcn_pipeline_run(d->model, aov, &d->opt, &d->prog, out, &d->stats);
+  default: s = kpcn_pipeline_run(d->model, aov, &d->opt, &d->prog, out, &d->stats, &d->cache);
   }
   kpcn_fast_fp_end(csr, d->opt.nthreads);
   return s;

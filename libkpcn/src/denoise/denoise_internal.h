@@ -29,10 +29,26 @@ kpcn_status kpcn_baseline_nlmeans(const kpcn_aov_set *aov, const kpcn_baseline_p
  * kpcn_pipeline.c chooses the grid with the least overlap that fits it). */
 #define KPCN_TILE_BUDGET_BYTES ((size_t)1 << 30)
 
+/* What the KPCN pipeline keeps from one execute to the next (the denoiser owns one, as an
+ * OIDN filter keeps its buffers): one network, rebound to either branch, and the tile
+ * buffers. A warm execute of the same size then creates no oneDNN primitive and touches no
+ * fresh page (net creation and page zeroing were ~7 % of a 1 Mpx execute). */
+typedef struct kpcn_pipeline_cache {
+  kpcn_net *net;
+  int net_w, net_h, bf16, direct_conv, nthreads; /* what `net` was created for */
+  double conv_base;                              /* net's convolution seconds already counted */
+  float *feat, *noisy, *filt;
+  size_t capacity; /* padded-tile pixels the buffers hold */
+} kpcn_pipeline_cache;
+
+/* Frees what the cache holds and zeroes it (safe on a zeroed cache). */
+void kpcn_pipeline_cache_release(kpcn_pipeline_cache *c);
+
 /* Runs the two-branch KPCN on `aov` into out (planar RGB [3][H][W]) with o's tile, bf16,
- * nthreads and direct_conv; accumulates timings into *st. */
+ * nthreads and direct_conv; accumulates timings into *st. cache: kept between calls, or
+ * NULL for a run that frees everything it allocates. */
 kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
                               const kpcn_denoiser_options *o, kpcn_progress *prog, float *out,
-                              kpcn_denoise_stats *st);
+                              kpcn_denoise_stats *st, kpcn_pipeline_cache *cache);
 
 #endif

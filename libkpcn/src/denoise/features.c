@@ -4,6 +4,9 @@
 #include "kpcn/denoise.h"
 
 #include <math.h>
+#include <omp.h>
+#include <stdint.h>
+#include <stdlib.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -75,26 +78,23 @@ static kpcn_status require_inputs(const kpcn_aov_set *aov, int branch) {
   return KPCN_OK;
 }
 
-/* Value of gradient source channel g (0..9) at full-image pixel index i. Sources are the
- * preprocessed color (computed on the fly, so neighbours outside a region are exact),
- * normal, albedo, normalised depth. */
-typedef struct src_ctx {
-  const float *col[3], *alb[3], *nrm[3], *z;
-  int branch;
-  float eps, zoff, zscale;
-} src_ctx;
-
-static inline float pre_color(const src_ctx *s, int c, size_t i) {
-  if (s->branch == KPCN_BRANCH_DIFFUSE) return s->col[c][i] / (s->alb[c][i] + s->eps);
-  float v = s->col[c][i];
-  return log1pf(v > 0.0f ? v : 0.0f);
+/* Preprocessed color of one channel: diffuse / (albedo + eps), or log(1 + specular). */
+static inline float pre_color(int branch, float col, float alb, float eps) {
+  if (branch == KPCN_BRANCH_DIFFUSE) return col / (alb + eps);
+  return log1pf(col > 0.0f ? col : 0.0f);
 }
 
-static inline float grad_src(const src_ctx *s, int g, size_t i) {
-  if (g < 3) return pre_color(s, g, i);
-  if (g < 6) return s->nrm[g - 3][i];
-  if (g < 9) return s->alb[g - 6][i];
-  return (s->z[i] - s->zoff) * s->zscale;
+/* Central differences of one source row over the region's columns, edges clamped:
+ * dx = ((r[x+1] - off) * sc - (r[x-1] - off) * sc) / 2, dy likewise from rows d and u.
+ * The rows are indexed from column `org` (r[x - org] is column x). */
+static void grad_row(const float *restrict r, const float *restrict u, const float *restrict d,
+                     int org, int x0, int w, int W, float off, float sc, float *restrict dx,
+                     float *restrict dy) {
+  for (int xx = 0; xx < w; xx++) {
+    const int x = x0 + xx, xm = x > 0 ? x - 1 : 0, xp = x < W - 1 ? x + 1 : W - 1;
+    dx[xx] = 0.5f * ((r[xp - org] - off) * sc - (r[xm - org] - off) * sc);
+    dy[xx] = 0.5f * ((d[x - org] - off) * sc - (u[x - org] - off) * sc);
+  }
 }
 
 kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, float eps,
@@ -120,21 +120,13 @@ kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, floa
 
   const size_t P = kpcn_aov_plane_size(aov);
   const int W = aov->width, H = aov->height;
-  src_ctx s;
-  kpcn_buffer cb = branch == KPCN_BRANCH_DIFFUSE ? KPCN_BUF_DIFFUSE : KPCN_BUF_SPECULAR;
-  for (int c = 0; c < 3; c++) {
-    s.col[c] = aov->buf[cb] + c * P;
-    s.alb[c] = aov->buf[KPCN_BUF_ALBEDO] + c * P;
-    s.nrm[c] = aov->buf[KPCN_BUF_NORMAL] + c * P;
-  }
-  s.z = aov->buf[KPCN_BUF_DEPTH];
-  s.branch = branch;
-  s.eps = eps;
-  s.zoff = nm.depth_offset;
-  s.zscale = nm.depth_scale;
+  const kpcn_buffer cb = branch == KPCN_BRANCH_DIFFUSE ? KPCN_BUF_DIFFUSE : KPCN_BUF_SPECULAR;
+  const float *col = aov->buf[cb], *alb = aov->buf[KPCN_BUF_ALBEDO],
+              *nrm = aov->buf[KPCN_BUF_NORMAL], *z = aov->buf[KPCN_BUF_DEPTH];
   const float *cvar = aov->var[cb], *nvar = aov->var[KPCN_BUF_NORMAL],
               *avar = aov->var[KPCN_BUF_ALBEDO], *zvar = aov->var[KPCN_BUF_DEPTH],
               *vis = aov->buf[KPCN_BUF_VISIBILITY], *visvar = aov->var[KPCN_BUF_VISIBILITY];
+  const float zoff = nm.depth_offset, zs = nm.depth_scale;
   const size_t Q = (size_t)w * h;
   if (out_stride && out_stride < Q)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
@@ -142,49 +134,81 @@ kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, floa
                      out_stride, w, h);
   const size_t S = out_stride ? out_stride : Q; /* feature plane stride */
   const int nt = kpcn_resolve_threads(nthreads);
+  /* The preprocessed color (a log1p per value for specular) is needed at each pixel and its
+   * four neighbours. Each thread takes a contiguous band of rows and keeps the preprocessed
+   * rows y-1, y, y+1 of columns [xa, xb] in a three-row ring, so every value is computed
+   * once; everything else is row loops the compiler vectorizes. */
+  const int xa = x0 > 0 ? x0 - 1 : 0, xb = x0 + w < W ? x0 + w : W - 1, rw = xb - xa + 1;
+  float *ring = kpcn_alloc(sizeof(float) * 9 * (size_t)rw * (size_t)nt, "feature rows");
+  if (!ring) return KPCN_ERR_OUT_OF_MEMORY;
 
-#pragma omp parallel for num_threads(nt) schedule(static)
-  for (int yy = 0; yy < h; yy++) {
-    const int y = y0 + yy;
-    const int ym = y > 0 ? y - 1 : 0, yp = y < H - 1 ? y + 1 : H - 1;
-    for (int xx = 0; xx < w; xx++) {
-      const int x = x0 + xx;
-      const int xm = x > 0 ? x - 1 : 0, xp = x < W - 1 ? x + 1 : W - 1;
-      const size_t i = (size_t)y * W + x, o = (size_t)yy * w + xx;
-      float pc[3], vscale = 0.0f;
-      for (int c = 0; c < 3; c++) {
-        pc[c] = pre_color(&s, c, i);
-        float d;
-        if (branch == KPCN_BRANCH_DIFFUSE)
-          d = s.alb[c][i] + eps;
-        else
-          d = 1.0f + (s.col[c][i] > 0.0f ? s.col[c][i] : 0.0f);
-        vscale += 1.0f / (d * d);
+#pragma omp parallel num_threads(nt)
+  {
+    const int t = omp_get_thread_num(), T = omp_get_num_threads();
+    const int ya = (int)((int64_t)h * t / T), yb = (int)((int64_t)h * (t + 1) / T);
+    float *rows = ring + (size_t)9 * rw * t; /* [slot 3][channel 3][rw] */
+    int held[3] = {-1, -1, -1};
+    for (int yy = ya; yy < yb; yy++) {
+      const int y = y0 + yy, ym = y > 0 ? y - 1 : 0, yp = y < H - 1 ? y + 1 : H - 1;
+      const int need[3] = {ym, y, yp};
+      for (int k = 0; k < 3; k++) {
+        const int r = need[k], slot = r % 3;
+        if (held[slot] == r) continue;
+        for (int c = 0; c < 3; c++) {
+          const size_t base = (size_t)c * P + (size_t)r * W + xa;
+          float *dst = rows + (size_t)(slot * 3 + c) * rw;
+          for (int x = 0; x < rw; x++)
+            dst[x] = pre_color(branch, col[base + x], alb[base + x], eps);
+        }
+        held[slot] = r;
       }
-      if (noisy_pre)
-        for (int c = 0; c < 3; c++)
-          noisy_pre[c * Q + o] = pc[c];
+      const size_t o = (size_t)yy * w, i = (size_t)y * W + x0;
+      for (int c = 0; c < 3; c++) {
+        const float *cur = rows + (size_t)((y % 3) * 3 + c) * rw;
+        const float *up = rows + (size_t)((ym % 3) * 3 + c) * rw;
+        const float *dn = rows + (size_t)((yp % 3) * 3 + c) * rw;
+        if (noisy_pre) memcpy(noisy_pre + c * Q + o, cur + (x0 - xa), sizeof(float) * w);
+        if (!out) continue;
+        memcpy(out + (F_COLOR + c) * S + o, cur + (x0 - xa), sizeof(float) * w);
+        memcpy(out + (F_N + c) * S + o, nrm + c * P + i, sizeof(float) * w);
+        memcpy(out + (F_ALB + c) * S + o, alb + c * P + i, sizeof(float) * w);
+        grad_row(cur, up, dn, xa, x0, w, W, 0.0f, 1.0f, out + (F_DX + c) * S + o,
+                 out + (F_DY + c) * S + o);
+        const size_t rc = c * P + (size_t)y * W, ru = c * P + (size_t)ym * W,
+                     rd = c * P + (size_t)yp * W;
+        grad_row(nrm + rc, nrm + ru, nrm + rd, 0, x0, w, W, 0.0f, 1.0f,
+                 out + (F_DX + 3 + c) * S + o, out + (F_DY + 3 + c) * S + o);
+        grad_row(alb + rc, alb + ru, alb + rd, 0, x0, w, W, 0.0f, 1.0f,
+                 out + (F_DX + 6 + c) * S + o, out + (F_DY + 6 + c) * S + o);
+      }
       if (!out) continue;
-      for (int c = 0; c < 3; c++) {
-        out[(F_COLOR + c) * S + o] = pc[c];
-        out[(F_N + c) * S + o] = s.nrm[c][i];
-        out[(F_ALB + c) * S + o] = s.alb[c][i];
+      /* color variance in the preprocessed space: var / d² averaged over the channels, with
+       * d the derivative's inverse (albedo + eps, or 1 + specular) */
+      float *cv = out + F_COLOR_VAR * S + o;
+      for (int xx = 0; xx < w; xx++) {
+        float vscale = 0.0f;
+        for (int c = 0; c < 3; c++) {
+          const size_t k = c * P + i + xx;
+          const float d =
+              branch == KPCN_BRANCH_DIFFUSE ? alb[k] + eps : 1.0f + (col[k] > 0.0f ? col[k] : 0.0f);
+          vscale += 1.0f / (d * d);
+        }
+        cv[xx] = cvar[i + xx] * (vscale / 3.0f);
       }
-      out[F_COLOR_VAR * S + o] = cvar[i] * (vscale / 3.0f);
-      out[F_N_VAR * S + o] = nvar[i];
-      out[F_ALB_VAR * S + o] = avar[i];
-      out[F_Z * S + o] = (s.z[i] - s.zoff) * s.zscale;
-      out[F_Z_VAR * S + o] = zvar[i] * s.zscale * s.zscale;
-      out[F_VIS * S + o] = vis[i];
-      out[F_VIS_VAR * S + o] = visvar[i];
-      const size_t il = (size_t)y * W + xm, ir = (size_t)y * W + xp;
-      const size_t iu = (size_t)ym * W + x, id = (size_t)yp * W + x;
-      for (int g = 0; g < N_GRAD; g++) {
-        out[(F_DX + g) * S + o] = 0.5f * (grad_src(&s, g, ir) - grad_src(&s, g, il));
-        out[(F_DY + g) * S + o] = 0.5f * (grad_src(&s, g, id) - grad_src(&s, g, iu));
+      float *fz = out + F_Z * S + o, *fzv = out + F_Z_VAR * S + o;
+      for (int xx = 0; xx < w; xx++) {
+        fz[xx] = (z[i + xx] - zoff) * zs;
+        fzv[xx] = zvar[i + xx] * zs * zs;
       }
+      memcpy(out + F_N_VAR * S + o, nvar + i, sizeof(float) * w);
+      memcpy(out + F_ALB_VAR * S + o, avar + i, sizeof(float) * w);
+      memcpy(out + F_VIS * S + o, vis + i, sizeof(float) * w);
+      memcpy(out + F_VIS_VAR * S + o, visvar + i, sizeof(float) * w);
+      grad_row(z + (size_t)y * W, z + (size_t)ym * W, z + (size_t)yp * W, 0, x0, w, W, zoff, zs,
+               out + (F_DX + 9) * S + o, out + (F_DY + 9) * S + o);
     }
   }
+  free(ring);
   return KPCN_OK;
 }
 

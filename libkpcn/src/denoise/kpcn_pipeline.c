@@ -50,17 +50,16 @@ static size_t floats_per_pixel(const kpcn_arch *a) {
          (size_t)a->kernel_size * a->kernel_size;
 }
 
-/* Tile grid. An explicit tile size gives square tiles of that size. Otherwise (tile = 0)
- * the grid is the one with the least padded area (overlap is recomputed work) whose
- * largest padded tile fits KPCN_TILE_BUDGET_BYTES: a 1024x1024 frame with the cpu preset
- * runs as two 1024x512 tiles (4.3 % overlap) instead of four 512x512 ones (8.8 %), a 4K
- * frame with the paper preset still stays far below 4 GiB. Ties go to fewer tiles. */
-/* Pixels a tile is grown by on each side: one more than the overlap, and the padded origin
- * is then rounded down to even (so up to pad + 1 on the left/top). The Winograd logits
+/* Pixels a tile is grown by on each side: at least one more than the overlap, and the padded
+ * origin is then rounded down to even (so up to pad + 1 on the left/top). The Winograd logits
  * layer (net.c) computes 2x2 output blocks anchored at the tile's origin and its rounding
  * depends on each block's whole 4x4 input window; aligned blocks with correct inputs keep
- * the result independent of the tile size bit for bit. */
-static int tile_pad(const kpcn_arch *a) { return kpcn_denoise_tile_overlap(a) + 1; }
+ * the result independent of the tile size bit for bit. The pad is rounded up to even: with
+ * even core edges the padded origins then need no rounding, so the first and last tile of a row or
+ * column (each padded on one side only) get the same size and one network serves both (the cpu
+ * preset's 1024² frame then runs two 1024x536 tiles, not a 535-row and a 536-row one needing a
+ * second network). */
+static int tile_pad(const kpcn_arch *a) { return (kpcn_denoise_tile_overlap(a) + 2) & ~1; }
 
 /* Padded extent [*p0, *p1) of the core [c0, c1) in an image of size n. */
 static void pad_range(int c0, int c1, int n, int pad, int *p0, int *p1) {
@@ -68,6 +67,14 @@ static void pad_range(int c0, int c1, int n, int pad, int *p0, int *p1) {
   *p1 = c1 + pad < n ? c1 + pad : n;
 }
 
+/* Automatic core sizes are even (see tile_pad). */
+static int even_up(int n) { return (n + 1) & ~1; }
+
+/* Tile grid. An explicit tile size gives square tiles of that size. Otherwise (tile = 0)
+ * the grid is the one with the least padded area (overlap is recomputed work) whose
+ * largest padded tile fits KPCN_TILE_BUDGET_BYTES: a 1024x1024 frame with the cpu preset
+ * runs as two 1024x512 tiles (4.3 % overlap) instead of four 512x512 ones (8.8 %), a 4K
+ * frame with the paper preset still stays far below 4 GiB. Ties go to fewer tiles. */
 static void tile_grid(const kpcn_arch *a, int W, int H, int pad, int tile, int *tw, int *th) {
   if (tile > 0) {
     *tw = *th = tile;
@@ -78,9 +85,9 @@ static void tile_grid(const kpcn_arch *a, int W, int H, int pad, int tile, int *
   int best_n = 0;
   *tw = *th = 64;
   for (int nx = 1; nx <= (W + 63) / 64; nx++) {
-    const int Tx = (W + nx - 1) / nx, pw = Tx + 2 * pad + 1 < W ? Tx + 2 * pad + 1 : W;
+    const int Tx = even_up((W + nx - 1) / nx), pw = Tx + 2 * pad + 1 < W ? Tx + 2 * pad + 1 : W;
     for (int ny = 1; ny <= (H + 63) / 64; ny++) {
-      const int Ty = (H + ny - 1) / ny, ph = Ty + 2 * pad + 1 < H ? Ty + 2 * pad + 1 : H;
+      const int Ty = even_up((H + ny - 1) / ny), ph = Ty + 2 * pad + 1 < H ? Ty + 2 * pad + 1 : H;
       const int fits = (double)pw * ph <= budget;
       if (!fits && !(Tx <= 64 && Ty <= 64)) continue;
       const double area = (double)(W + 2 * pad * (nx - 1)) * (double)(H + 2 * pad * (ny - 1));
@@ -103,17 +110,85 @@ static kpcn_status require_all(const kpcn_aov_set *aov) {
   return KPCN_OK;
 }
 
-static void add_net_stats(kpcn_net *net, kpcn_denoise_stats *st) {
-  if (!net) return;
+static double net_conv_s(const kpcn_net *net) {
   kpcn_net_stats ns;
   kpcn_net_get_stats(net, &ns);
-  st->conv_s += ns.fwd_conv_s;
+  return ns.fwd_conv_s;
+}
+
+/* Counts the cached net's convolution time since it was last counted. */
+static void take_conv_time(kpcn_pipeline_cache *c, kpcn_denoise_stats *st) {
+  if (!c->net) return;
+  const double t = net_conv_s(c->net);
+  st->conv_s += t - c->conv_base;
+  c->conv_base = t;
+}
+
+void kpcn_pipeline_cache_release(kpcn_pipeline_cache *c) {
+  if (!c) return;
+  kpcn_net_destroy(c->net);
+  kpcn_aligned_free(c->feat);
+  kpcn_aligned_free(c->noisy);
+  kpcn_aligned_free(c->filt);
+  memset(c, 0, sizeof *c);
+}
+
+/* Tile buffers for padded tiles of up to mp pixels, kept if big enough. */
+static kpcn_status cache_buffers(kpcn_pipeline_cache *c, size_t mp) {
+  if (c->feat && c->capacity >= mp) return KPCN_OK;
+  kpcn_aligned_free(c->feat);
+  kpcn_aligned_free(c->noisy);
+  kpcn_aligned_free(c->filt);
+  c->capacity = 0;
+  /* feature planes at a padded stride: 36 planes of exactly 2^k floats (a 1024x1024 tile)
+   * would all map to the same cache sets, which made feature building 3x and the net's input
+   * reorder 2x slower (bench_denoise --size 1024x1024 --tile 1024) */
+  c->feat = kpcn_aligned_alloc(sizeof(float) * kpcn_plane_stride(mp) * KPCN_FEATURES_COUNT,
+                               "denoiser features");
+  c->noisy = kpcn_aligned_alloc(sizeof(float) * mp * 3, "denoiser noisy tile");
+  c->filt = kpcn_aligned_alloc(sizeof(float) * mp * 3, "denoiser filtered tile");
+  if (!c->feat || !c->noisy || !c->filt) return KPCN_ERR_OUT_OF_MEMORY;
+  c->capacity = mp;
+  return KPCN_OK;
+}
+
+/* The cached net, bound to branch b and a pw x ph tile: rebound when only the branch
+ * differs, recreated when the size or the options do. */
+static kpcn_status cache_net(kpcn_pipeline_cache *c, kpcn_model *model, kpcn_branch b, int pw,
+                             int ph, const kpcn_denoiser_options *o, kpcn_denoise_stats *st) {
+  if (c->net && c->net_w == pw && c->net_h == ph && c->bf16 == o->bf16 &&
+      c->direct_conv == o->direct_conv && c->nthreads == o->nthreads)
+    return kpcn_net_set_branch(c->net, b);
+  take_conv_time(c, st);
+  kpcn_net_destroy(c->net);
+  c->net = NULL;
+  kpcn_net_options no;
+  kpcn_net_options_defaults(&no);
+  no.batch = 1;
+  no.width = pw;
+  no.height = ph;
+  no.precision = o->bf16 ? KPCN_PREC_BF16 : KPCN_PREC_F32;
+  no.nthreads = o->nthreads;
+  no.direct_conv = o->direct_conv;
+  no.input_plane_stride = kpcn_plane_stride((size_t)pw * ph);
+  kpcn_status s = kpcn_net_create(model, b, &no, &c->net);
+  if (s != KPCN_OK)
+    return kpcn_fail_context("KPCN denoiser: creating the %dx%d %s network", pw, ph,
+                             kpcn_branch_name(b));
+  c->net_w = pw;
+  c->net_h = ph;
+  c->bf16 = o->bf16;
+  c->direct_conv = o->direct_conv;
+  c->nthreads = o->nthreads;
+  c->conv_base = net_conv_s(c->net);
+  st->nets_created++;
+  return KPCN_OK;
 }
 
 kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
                               const kpcn_denoiser_options *o, kpcn_progress *prog, float *out,
-                              kpcn_denoise_stats *st) {
-  const int tile = o->tile, bf16 = o->bf16, nthreads = o->nthreads;
+                              kpcn_denoise_stats *st, kpcn_pipeline_cache *cache) {
+  const int tile = o->tile, nthreads = o->nthreads;
   const kpcn_arch *arch = kpcn_model_arch(model);
   KPCN_TRY(kpcn_features_check_arch(arch));
   KPCN_TRY(require_all(aov));
@@ -149,58 +224,33 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
     }
   qsort(tiles, (size_t)nt, sizeof(tile_t), tile_cmp);
 
-  const size_t mp = (size_t)maxp;
-  /* feature planes at a padded stride: 36 planes of exactly 2^k floats (a 1024x1024 tile)
-   * would all map to the same cache sets, which made feature building 3x and the net's input
-   * reorder 2x slower (bench_denoise --size 1024x1024 --tile 1024) */
-  float *feat = kpcn_aligned_alloc(sizeof(float) * kpcn_plane_stride(mp) * KPCN_FEATURES_COUNT,
-                                   "denoiser features");
-  float *noisy = kpcn_aligned_alloc(sizeof(float) * mp * 3, "denoiser noisy tile");
-  float *filt = kpcn_aligned_alloc(sizeof(float) * mp * 3, "denoiser filtered tile");
-  kpcn_net *net = NULL;
-  int net_w = 0, net_h = 0;
-  kpcn_status s = KPCN_OK;
-  if (!feat || !noisy || !filt) {
-    s = KPCN_ERR_OUT_OF_MEMORY;
-    goto done;
-  }
+  kpcn_pipeline_cache local = {0};
+  kpcn_pipeline_cache *pc = cache ? cache : &local;
+  kpcn_status s = cache_buffers(pc, (size_t)maxp);
+  if (s != KPCN_OK) goto done;
+  float *feat = pc->feat, *noisy = pc->noisy, *filt = pc->filt;
   const int nthr = kpcn_resolve_threads(nthreads);
   const float *alb = aov->buf[KPCN_BUF_ALBEDO];
   /* Branch-major order: only one network (activations of one padded tile) is alive at a
-   * time; the diffuse pass stores its remodulated result in `out`, the specular pass adds
-   * exp(s) - 1. This is what keeps a 4K frame with the paper preset under 4 GiB. */
+   * time, rebound from branch to branch; the diffuse pass stores its remodulated result in
+   * `out`, the specular pass adds exp(s) - 1. This keeps a 4K frame with the paper preset
+   * under 4 GiB. */
   for (int b = 0; b < 2; b++) {
-    net_w = net_h = 0;
-    for (int ti = 0; ti < nt; ti++) {
+    for (int i = 0; i < nt; i++) {
+      /* the specular pass walks the tiles backwards, so it starts with the size the diffuse
+       * pass ended with and ends with the size the next execute starts with: with the cache,
+       * one net serves every tile of one size in both passes */
+      const int ti = b == 0 ? i : nt - 1 - i;
       const tile_t *t = &tiles[ti];
-      if (kpcn_progress_report(prog, (double)(b * nt + ti) / (2.0 * nt))) {
+      if (kpcn_progress_report(prog, (double)(b * nt + i) / (2.0 * nt))) {
         s = kpcn_fail(KPCN_ERR_CANCELLED, "KPCN denoiser: cancelled by the progress callback");
         goto done;
       }
-      if (t->pw != net_w || t->ph != net_h) {
-        double tc = now_s();
-        add_net_stats(net, st);
-        kpcn_net_destroy(net);
-        net = NULL;
-        kpcn_net_options no;
-        kpcn_net_options_defaults(&no);
-        no.batch = 1;
-        no.width = t->pw;
-        no.height = t->ph;
-        no.precision = bf16 ? KPCN_PREC_BF16 : KPCN_PREC_F32;
-        no.nthreads = nthreads;
-        no.direct_conv = o->direct_conv;
-        no.input_plane_stride = kpcn_plane_stride((size_t)t->pw * t->ph);
-        s = kpcn_net_create(model, (kpcn_branch)b, &no, &net);
-        if (s != KPCN_OK) {
-          kpcn_fail_context("KPCN denoiser: creating the %dx%d %s network", t->pw, t->ph,
-                            kpcn_branch_name(b));
-          goto done;
-        }
-        net_w = t->pw;
-        net_h = t->ph;
-        st->other_s += now_s() - tc;
-      }
+      double tn = now_s();
+      s = cache_net(pc, model, (kpcn_branch)b, t->pw, t->ph, o, st);
+      if (s != KPCN_OK) goto done;
+      kpcn_net *net = pc->net;
+      st->other_s += now_s() - tn;
       const size_t Q = (size_t)t->pw * t->ph;
       double ta = now_s();
       s = kpcn_features_build_region(aov, b, eps, &norm, t->px0, t->py0, t->pw, t->ph, feat,
@@ -240,11 +290,8 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
   }
   kpcn_progress_report(prog, 1.0);
 done:
-  add_net_stats(net, st);
-  kpcn_net_destroy(net);
-  kpcn_aligned_free(feat);
-  kpcn_aligned_free(noisy);
-  kpcn_aligned_free(filt);
+  take_conv_time(pc, st);
+  if (!cache || s != KPCN_OK) kpcn_pipeline_cache_release(pc); /* no half-built state kept */
   free(tiles);
   return s;
 }

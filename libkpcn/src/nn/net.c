@@ -576,6 +576,14 @@ void kpcn_net_destroy(kpcn_net *n) {
   free(n);
 }
 
+kpcn_status kpcn_net_set_branch(kpcn_net *n, kpcn_branch b) {
+  if (!n) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_set_branch: net is NULL");
+  if ((int)b < 0 || (int)b >= KPCN_N_BRANCHES)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_set_branch: branch %d invalid", (int)b);
+  n->branch = b;
+  return KPCN_OK;
+}
+
 static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
   const kpcn_model *m = n->model;
   KPCN_TRY(run_reorder(n, &n->in, input, n->xbuf));
