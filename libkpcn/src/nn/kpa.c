@@ -150,29 +150,31 @@ static void transpose(const float *restrict src, int ps, int w, int nb, float *r
       dst[(size_t)j * ds + x] = src[(size_t)x * ps + j];
 }
 
-#define XC 64 /* pixels per column chunk: its K² weight rows stay in L1/L2 */
+#define XC 64 /* pixels per column chunk of gathered logits: its K² weight rows stay in L1/L2 */
 
 /* One output row y of one image. A separate function (all sizes by value) so the compiler
  * sees loop bounds and pointers that the stores cannot alias; inside the OpenMP region it
  * reloaded them from the shared-variable block and did not vectorize. logits points at the
  * image's first logit; planar logits are read in place, any other layout is first gathered
  * into the chunk's softmax buffer wt ([K2][ws]), where the exponentials then overwrite it.
- * The row is processed in chunks of XC pixels (gather, max, exp, apply): with the whole
- * row's K² x w weights (~0.5 MB at w = 1024, K = 11) every pass streamed them through L2. */
-static void fwd_row(int K, int nc, int h, int w, size_t ws, int y, const float *logits,
+ * Gathered layouts are processed in chunks of xc_n = XC pixels (gather, max, exp, apply):
+ * with the whole row's K² x w weights (~0.5 MB at w = 1024, K = 11) every pass streamed
+ * them through L2. Planar logits are read in place and run whole rows (xc_n = w): 64-float
+ * pieces of K² rows a plane apart defeated the prefetcher (1.4x slower). */
+static void fwd_row(int K, int nc, int h, int w, int xc_n, size_t ws, int y, const float *logits,
                     const kpcn_logits_layout *lay, const float *noisy, float *out, float *weights,
                     float *restrict wt) {
   const int r = K / 2, K2 = K * K, pw = w + 2 * r;
   const size_t plane = (size_t)h * w;
-  float *restrict mx = wt + (size_t)K2 * ws, *restrict sum = mx + XC, *restrict pr = sum + XC;
+  float *restrict mx = wt + (size_t)K2 * ws, *restrict sum = mx + xc_n, *restrict pr = sum + xc_n;
   /* the K clamped source rows of every channel, padded once for the whole row */
   for (int c = 0; c < nc; c++)
     for (int dy = 0; dy < K; dy++)
       padded_row(pr + (size_t)(c * K + dy) * pw,
                  noisy + (size_t)c * plane + (size_t)clampi(y + dy - r, 0, h - 1) * w, w, r);
   const int planar = lay->block == 1 && lay->pixel_stride == 1;
-  for (int xc = 0; xc < w; xc += XC) {
-    const int n = w - xc < XC ? w - xc : XC;
+  for (int xc = 0; xc < w; xc += xc_n) {
+    const int n = w - xc < xc_n ? w - xc : xc_n;
     const float *L; /* logit 0 of pixel xc; logit t's row starts at L + t * lstride */
     size_t lstride;
     if (planar) {
@@ -269,14 +271,16 @@ kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const fl
   /* per thread: softmax rows [K2][ws] of one chunk, its max and sum, nc x K padded rows. The
    * row stride ws is padded (kpcn_plane_stride) so the K2 rows the apply loop reads together
    * do not all fall on one cache set. */
-  const size_t ws = kpcn_plane_stride(XC);
-  const size_t scratch = (size_t)K2 * ws + 2 * XC + (size_t)nc * K * (w + 2 * r) + 64;
+  const int planar = lay.block == 1 && lay.pixel_stride == 1;
+  const int xc_n = planar || w < XC ? w : XC;
+  const size_t ws = kpcn_plane_stride((size_t)xc_n);
+  const size_t scratch = (size_t)K2 * ws + 2 * (size_t)xc_n + (size_t)nc * K * (w + 2 * r) + 64;
   float *buf = kpcn_aligned_alloc((size_t)nt * scratch * sizeof(float), "kpa scratch");
   if (!buf) return KPCN_ERR_OUT_OF_MEMORY;
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++) {
     const int b = (int)(row / h), y = (int)(row % h);
-    fwd_row(K, nc, h, w, ws, y, logits + (size_t)b * lay.image_stride, &lay,
+    fwd_row(K, nc, h, w, xc_n, ws, y, logits + (size_t)b * lay.image_stride, &lay,
             noisy + (size_t)b * nc * plane, out + (size_t)b * nc * plane,
             weights ? weights + (size_t)b * K2 * plane : NULL, thread_scratch(buf, scratch));
   }
