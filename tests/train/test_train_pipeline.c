@@ -84,7 +84,7 @@ static float *run_full(const char *out, size_t *n) {
   int stopped = -1;
   CHECK(kpcn_trainer_run(t, &stopped) == KPCN_OK);
   CHECK(stopped == 0 && kpcn_trainer_iteration(t) == 6);
-  CHECK(kpcn_trainer_validate(t, NULL, NULL, NULL) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_trainer_validate(t, NULL) == KPCN_ERR_INVALID_ARGUMENT);
   float *w = weights(t, n);
   kpcn_trainer_destroy(t);
   return w;
@@ -185,6 +185,65 @@ static void with_val_pair(kpcn_train_settings *s, const char *prefix, const char
   s->nthreads = 1;
 }
 
+/* Two pairs: the trainer's mean and geometric mean equal those of the two single-pair
+ * figures (same seed, so the same initial model); --best-by geomean picks by the latter. */
+static void test_validation_geomean(void) {
+  const char *vn[2], *vr[2];
+  double one[2];
+  kpcn_train_settings s;
+  for (int k = 0; k < 2; k++) {
+    kpcn_aov_set *n, *r;
+    CHECK(tf_make_pair(&n, &r, 40, 32, 20 + 7 * k, 0) == 0);
+    vn[k] = tf_tmp(k ? "g1_noisy.exr" : "g0_noisy.exr");
+    vr[k] = tf_tmp(k ? "g1_ref.exr" : "g0_ref.exr");
+    CHECK(kpcn_exr_write_aov(vn[k], n, NULL) == KPCN_OK);
+    CHECK(kpcn_exr_write_aov(vr[k], r, NULL) == KPCN_OK);
+    kpcn_aov_destroy(n), kpcn_aov_destroy(r);
+  }
+  for (int k = 0; k < 3; k++) { /* pair 0, pair 1, both */
+    settings(&s, tf_tmp("g.safetensors"));
+    s.nthreads = 1;
+    s.nval = k < 2 ? 1 : 2, s.val_noisy = vn + (k < 2 ? k : 0), s.val_ref = vr + (k < 2 ? k : 0);
+    kpcn_trainer *t = NULL;
+    CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+    if (!t) return;
+    kpcn_val_result v;
+    CHECK(kpcn_trainer_validate(t, &v) == KPCN_OK);
+    kpcn_trainer_destroy(t);
+    if (k < 2) {
+      one[k] = v.relmse;
+      continue;
+    }
+    const double mean = 0.5 * (one[0] + one[1]), geo = sqrt(one[0] * one[1]);
+    printf("validation relMSE of two pairs %.6g, %.6g: mean %.6g (expect %.6g), geometric mean "
+           "%.6g (expect %.6g)\n",
+           one[0], one[1], v.relmse, mean, v.relmse_geo, geo);
+    CHECK(fabs(one[0] - one[1]) > 0.05 * one[0]); /* the pairs differ, so the means do */
+    CHECK(fabs(v.relmse - mean) <= 1e-9 * mean);
+    CHECK(fabs(v.relmse_geo - geo) <= 1e-9 * geo);
+  }
+  /* a run choosing by the geometric mean writes it to the CSV and a best model */
+  settings(&s, tf_tmp("g.safetensors"));
+  s.nthreads = 1, s.nval = 2, s.val_noisy = vn, s.val_ref = vr, s.val_every = 3;
+  s.best_by = KPCN_VAL_GEOMEAN;
+  s.best_path = tf_tmp("g_best.safetensors");
+  remove(s.best_path);
+  kpcn_trainer *t = NULL;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  CHECK(t && kpcn_trainer_run(t, NULL) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+  FILE *f = fopen(tf_tmp("g.safetensors.csv"), "r");
+  char line[512] = "";
+  CHECK(f && fgets(line, sizeof line, f));
+  CHECK(strstr(line, ",val_psnr,val_relmse_geo\n") != NULL);
+  if (f) fclose(f);
+  kpcn_model *bm = NULL;
+  CHECK(kpcn_model_load(s.best_path, &bm) == KPCN_OK);
+  kpcn_model_destroy(bm);
+  s.best_by = (kpcn_val_select)7;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT);
+}
+
 static void test_validation(void) {
   kpcn_train_settings s;
   settings(&s, tf_tmp("v.safetensors"));
@@ -197,9 +256,10 @@ static void test_validation(void) {
     fprintf(stderr, "%s\n", kpcn_last_error());
     return;
   }
-  double rel, ssim, psnr;
-  CHECK(kpcn_trainer_validate(t, &rel, &ssim, &psnr) == KPCN_OK);
-  CHECK(rel > 0 && rel < 10 && ssim > -1 && ssim < 1 && psnr > 0);
+  kpcn_val_result vr0;
+  CHECK(kpcn_trainer_validate(t, &vr0) == KPCN_OK);
+  CHECK(vr0.relmse > 0 && vr0.relmse < 10 && vr0.ssim > -1 && vr0.ssim < 1 && vr0.psnr > 0);
+  CHECK(fabs(vr0.relmse_geo - vr0.relmse) <= 1e-12 * vr0.relmse); /* one pair: equal */
   CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
   kpcn_trainer_destroy(t);
   FILE *f = fopen(tf_tmp("v.safetensors.csv"), "r");
@@ -475,6 +535,7 @@ int main(void) {
   test_batch_wiring();
   test_determinism_and_resume();
   test_validation();
+  test_validation_geomean();
   test_best_and_stage2_lr();
   test_average();
   test_snapshots();

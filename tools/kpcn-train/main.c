@@ -37,6 +37,7 @@ static void usage(FILE *f) {
         "  --val-every N --ckpt-every N --log-every N (10)\n"
         "  --ckpt PATH --csv PATH --plot PATH   (default MODEL.ckpt/.csv/.png; '' = none)\n"
         "  --best PATH               also write the model with the lowest validation relMSE\n"
+        "  --best-by mean|geomean    which: mean (default) or geometric mean over the pairs\n"
         "  --snapshots DIR           keep every checkpoint in DIR (for --average)\n"
         "  --time-limit MINUTES      stop cleanly and checkpoint\n"
         "  --resume                  continue bit-exactly from the checkpoint\n"
@@ -69,8 +70,9 @@ static void fmt_time(char *b, size_t n, double s) {
 static int progress_cb(void *u, const kpcn_train_progress *p) {
   int tty = *(int *)u;
   if (p->has_val && !g_quiet)
-    fprintf(stderr, "%sval @%lld: relMSE %.4g  SSIM %.4f  PSNR %.2f dB\n", tty ? "\r\033[K" : "",
-            (long long)p->iter, p->val_relmse, p->val_ssim, p->val_psnr);
+    fprintf(stderr, "%sval @%lld: relMSE %.4g (geometric mean %.4g)  SSIM %.4f  PSNR %.2f dB\n",
+            tty ? "\r\033[K" : "", (long long)p->iter, p->val_relmse, p->val_relmse_geo,
+            p->val_ssim, p->val_psnr);
   if (tty) {
     char el[32], eta[32];
     fmt_time(el, sizeof el, p->elapsed_s);
@@ -219,7 +221,7 @@ int main(int argc, char **argv) {
   if (argc >= 2 && !strcmp(argv[1], "--average")) return average_main(argc, argv);
   kpcn_train_settings s;
   kpcn_train_settings_defaults(&s);
-  const char *preset = "cpu", *dil = NULL, *loss2 = NULL;
+  const char *preset = "cpu", *dil = NULL, *loss2 = NULL, *best_by = NULL;
   long long layers = -1, channels = -1, conv = -1, kernel = -1, ssim_win = -1, v;
   int from_store = 0;
   double d;
@@ -266,6 +268,7 @@ int main(int argc, char **argv) {
     STR("--best", s.best_path)
     STR("--snapshots", s.snapshot_dir)
     STR("--loss2", loss2)
+    STR("--best-by", best_by)
     INT("--layers", 1, KPCN_NN_MAX_LAYERS - 1, layers)
     INT("--channels", 1, 1024, channels)
     INT("--conv", 1, 11, conv)
@@ -322,6 +325,11 @@ int main(int argc, char **argv) {
     return 2;
   }
   s.time_limit_s *= 60.0;
+  if (best_by && strcmp(best_by, "mean") && strcmp(best_by, "geomean")) {
+    fprintf(stderr, "kpcn-train: --best-by: '%s' is not mean or geomean\n", best_by);
+    return 2;
+  }
+  if (best_by) s.best_by = strcmp(best_by, "geomean") == 0 ? KPCN_VAL_GEOMEAN : KPCN_VAL_MEAN;
   s.loss2 = s.loss1;
   if (loss2 && kpcn_loss_parse(loss2, &s.loss2) != KPCN_OK) {
     fprintf(stderr, "kpcn-train: --loss2: %s\n", kpcn_last_error());

@@ -21,7 +21,9 @@
 #   weights of those from that fraction of the run on (kpcn-train --average), score the
 #   average and the KEEP_BEST/last candidate on the validation pairs with kpcntool (mean
 #   relMSE, R,G,B: the trainer's own validation figure) and ship the lower; needs pairs;
-#   SNAPSHOT_NOTE: README text on how the snapshots were kept, if not by --snapshots).
+#   SNAPSHOT_NOTE: README text on how the snapshots were kept, if not by --snapshots),
+#   BEST_BY (mean: default; geomean: the best model, the SWA comparison and SHIP_IF_BELOW use
+#   the geometric mean of the per-pair relMSE instead, kpcn-train --best-by).
 # With a time budget the iteration count is unknown in advance, so the script first measures
 # the speed (20 iterations) and sets --iters to fit MINUTES, --stage1-iters to STAGE1_FRACTION.
 # Resumable: if the run is interrupted, re-running continues from its checkpoint.
@@ -60,6 +62,9 @@ args=(--store "$store" -o "$work/model.safetensors" --preset "$PRESET" --iters "
   --stage1-iters "$stage1" --loss l1 --loss2 "$LOSS2" --lr "$LR" --decay-every "$DECAY_EVERY"
   --threads "$THREADS" --seed "$SEED" --val-every $((iters / 28 > 0 ? iters / 28 : 1))
   --ckpt-every 100 "${val[@]}")
+BEST_BY=${BEST_BY:-mean}
+case $BEST_BY in mean) vcol=7 ;; geomean) vcol=10 ;; *) echo "ship_model.sh: BEST_BY=$BEST_BY is not mean or geomean" >&2; exit 2 ;; esac
+[ "$BEST_BY" = geomean ] && args+=(--best-by geomean)
 [ -n "${LR2:-}" ] && args+=(--lr2 "$LR2")
 [ -n "${INIT:-}" ] && args+=(--init "$INIT")
 [ -n "${TIME_LIMIT:-}" ] && args+=(--time-limit "$TIME_LIMIT")
@@ -77,7 +82,7 @@ if [ "${README_ONLY:-0}" != 1 ] && [ "${NO_TRAIN:-0}" != 1 ]; then
   "$bin" "${args[@]}" "${resume[@]}"
 fi
 col=$([ "${KEEP_BEST:-0}" = 1 ] && echo best || echo last)
-got=$(awk -F, -v w="$col" 'NR > 1 && $7 != "" { if (w == "last" || b == "" || $7 < b) b = $7 } END { print b }' "$work/model.safetensors.csv")
+got=$(awk -F, -v w="$col" -v c="$vcol" 'NR > 1 && $c != "" { if (w == "last" || b == "" || $c + 0 < b + 0) b = $c } END { print b }' "$work/model.safetensors.csv")
 if [ -n "${SWA_FROM:-}" ]; then
   [ $# -gt 0 ] || { echo "ship_model.sh: SWA_FROM needs validation pairs" >&2; exit 2; }
   tool=${KPCNTOOL:-$here/build/tools/kpcntool/kpcntool}
@@ -91,12 +96,14 @@ if [ -n "${SWA_FROM:-}" ]; then
   [ ${#snaps[@]} -gt 0 ] || { echo "ship_model.sh: no snapshots from iteration $from in $snapdir" >&2; exit 1; }
   if [ "${README_ONLY:-0}" != 1 ] || [ ! -f "$work/swa.score" ]; then
     "$bin" --average "$work/swa.safetensors" "${snaps[@]}"
-    score() { # mean relMSE (R,G,B) of a model over the validation pairs
+    score() { # mean (or geometric mean) relMSE (R,G,B) of a model over the validation pairs
       local t; t=$(mktemp -d)
       for p in "${pairs[@]}"; do
         "$tool" "${p%%,*}" --denoise:model="$1" -o "$t/d.exr" >/dev/null
         "$tool" "$t/d.exr" "${p#*,}" --ch R,G,B --relmse --json
-      done | sed -n 's/.*"relmse": *\([0-9.eE+-]*\).*/\1/p' | awk '{ s += $1; n++ } END { printf "%.9g\n", s / n }'
+      done | sed -n 's/.*"relmse": *\([0-9.eE+-]*\).*/\1/p' |
+        awk -v g="$BEST_BY" '{ s += (g == "geomean" ? log($1 > 1e-30 ? $1 : 1e-30) : $1); n++ }
+          END { printf "%.9g\n", g == "geomean" ? exp(s / n) : s / n }'
       rm -rf "$t"
     }
     pairs=("$@")
@@ -122,7 +129,7 @@ if [ "${README_ONLY:-0}" != 1 ]; then
   cp "$work/model.safetensors.csv" "$outdir/$NAME-log.csv"
 fi
 last=$(awk -F, 'NR > 1 && $7 != "" { r = $7; s = $8; p = $9; it = $1 } END { print it "," r "," s "," p }' "$work/model.safetensors.csv")
-best=$(awk -F, 'NR > 1 && $7 != "" && (b == "" || $7 < b) { b = $7; s = $8; p = $9; it = $1 } END { print it "," b "," s "," p }' "$work/model.safetensors.csv")
+best=$(awk -F, -v c="$vcol" 'NR > 1 && $c != "" && (v == "" || $c + 0 < v + 0) { v = $c; b = $7; s = $8; p = $9; it = $1 } END { print it "," b "," s "," p }' "$work/model.safetensors.csv")
 done_iters=$(awk -F, 'NR > 1 { it = $1 } END { print it }' "$work/model.safetensors.csv")
 secs=$(awk -F, 'NR > 1 { s = $6 } END { print s }' "$work/model.safetensors.csv")
 cpu=$(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -1)
@@ -142,6 +149,7 @@ cpu=$(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -1)
   echo "| iterations | $done_iters of $iters planned (stage 1: $stage1, stage-2 loss $LOSS2) |"
   echo "| training time | ${secs} s |"
   echo "| hardware | ${cpu:-unknown CPU}, $(nproc) cores, threads=$THREADS |"
+  [ "$BEST_BY" = geomean ] && echo "| selection | by the geometric mean of the per-pair validation relMSE (\`--best-by geomean\`; the relMSE columns below are means) |"
   echo "| last validation (iter, relMSE, SSIM, PSNR dB) | $last |"
   if [ -n "${SWA_FROM:-}" ]; then
     [ "${KEEP_BEST:-0}" = 1 ] && echo "| best validation (iter, relMSE, SSIM, PSNR dB) | $best |"

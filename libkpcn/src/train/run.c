@@ -1,7 +1,8 @@
 /* The training loop: iterations, CSV log, validation, periodic atomic checkpoints, the time
  * limit and stop requests, then the final model, checkpoint and plot.
  *
- * CSV columns: iter,stage,lr,loss,its_per_s,elapsed_s,val_relmse,val_ssim,val_psnr
+ * CSV columns: iter,stage,lr,loss,its_per_s,elapsed_s,val_relmse,val_ssim,val_psnr,
+ * val_relmse_geo
  * (loss = mean training loss since the previous row; validation columns empty when no
  * validation ran at that iteration). On resume the log is cut back to the rows at or before
  * the checkpoint's iteration, so it reads as one uninterrupted run. */
@@ -14,13 +15,15 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define CSV_HEADER "iter,stage,lr,loss,its_per_s,elapsed_s,val_relmse,val_ssim,val_psnr\n"
+#define CSV_HEADER                                                                                 \
+  "iter,stage,lr,loss,its_per_s,elapsed_s,val_relmse,val_ssim,val_psnr,val_relmse_geo\n"
 
 /* Opens the CSV for appending: fresh (header only) or cut back to rows <= keep_iter.
- * best_val receives the lowest val_relmse among the kept rows (+inf if none), so a resumed
- * run keeps the best-model record of the interrupted one. */
-static kpcn_status csv_open(const char *path, int resume, int64_t keep_iter, FILE **out,
-                            double *best_val) {
+ * best_val receives the lowest value of column best_col (1-based: 7 val_relmse, 10
+ * val_relmse_geo) among the kept rows (+inf if none), so a resumed run keeps the best-model
+ * record of the interrupted one. */
+static kpcn_status csv_open(const char *path, int resume, int64_t keep_iter, int best_col,
+                            FILE **out, double *best_val) {
   *out = NULL;
   *best_val = INFINITY;
   if (!path || !*path) return KPCN_OK;
@@ -40,8 +43,8 @@ static kpcn_status csv_open(const char *path, int resume, int64_t keep_iter, FIL
         if (strncmp(line, "iter,", 5) == 0) continue;
         long long it = strtoll(line, NULL, 10);
         if (it > keep_iter) continue;
-        const char *c = line; /* column 7 (val_relmse) follows the sixth comma */
-        for (int k = 0; k < 6 && c; k++)
+        const char *c = line; /* column best_col follows comma best_col - 1 */
+        for (int k = 0; k < best_col - 1 && c; k++)
           c = strchr(c, ','), c = c ? c + 1 : NULL;
         if (c && *c && *c != ',') {
           double v = strtod(c, NULL);
@@ -118,12 +121,18 @@ static kpcn_status checkpoint(kpcn_trainer *t, double elapsed) {
   return st;
 }
 
+/* The validation figure that picks the best model. */
+static double best_figure(const kpcn_trainer *t, const kpcn_val_result *v) {
+  return t->s.best_by == KPCN_VAL_GEOMEAN ? v->relmse_geo : v->relmse;
+}
+
 kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
   if (!t) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_trainer_run: NULL trainer");
   if (stopped) *stopped = 0;
   FILE *csv = NULL;
   double best_csv;
-  KPCN_TRY(csv_open(t->csv_path, t->s.resume, t->iter, &csv, &best_csv));
+  KPCN_TRY(csv_open(t->csv_path, t->s.resume, t->iter, t->s.best_by == KPCN_VAL_GEOMEAN ? 10 : 7,
+                    &csv, &best_csv));
   if (t->s.resume) t->best_val = best_csv;
   const double t0 = kt_now();
   double last_t = t0, acc = 0;
@@ -147,20 +156,23 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
     int do_log = it % t->s.log_every == 0 || it == t->s.iters || do_val;
     kpcn_train_progress p;
     memset(&p, 0, sizeof p);
+    kpcn_val_result v;
     if (do_val) {
-      if ((st = kpcn_trainer_validate(t, &p.val_relmse, &p.val_ssim, &p.val_psnr)) != KPCN_OK)
-        break;
+      if ((st = kpcn_trainer_validate(t, &v)) != KPCN_OK) break;
+      p.val_relmse = v.relmse, p.val_ssim = v.ssim, p.val_psnr = v.psnr;
+      p.val_relmse_geo = v.relmse_geo;
       p.has_val = 1;
       last_val_it = it;
     }
     double now = kt_now();
     elapsed = t->elapsed_prev + (now - t0);
-    if (p.has_val && t->best_path && p.val_relmse < t->best_val) {
+    if (p.has_val && t->best_path && best_figure(t, &v) < t->best_val) {
       if ((st = save_model(t, elapsed, t->best_path)) != KPCN_OK) break;
-      t->best_val = p.val_relmse;
+      t->best_val = best_figure(t, &v);
       kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_INFO,
-               "best model so far (val relMSE %.4g) written to '%s' at iteration %lld",
-               p.val_relmse, t->best_path, (long long)it);
+               "best model so far (val relMSE %s %.4g) written to '%s' at iteration %lld",
+               t->s.best_by == KPCN_VAL_GEOMEAN ? "geometric mean" : "mean", t->best_val,
+               t->best_path, (long long)it);
     }
     p.iter = it;
     p.total = t->s.iters;
@@ -175,9 +187,10 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
         fprintf(csv, "%lld,%d,%.6g,%.9g,%.4g,%.2f", (long long)it, stage, lr, p.loss, p.its_per_s,
                 elapsed);
         if (p.has_val)
-          fprintf(csv, ",%.9g,%.9g,%.6g\n", p.val_relmse, p.val_ssim, p.val_psnr);
+          fprintf(csv, ",%.9g,%.9g,%.6g,%.9g\n", p.val_relmse, p.val_ssim, p.val_psnr,
+                  p.val_relmse_geo);
         else
-          fputs(",,,\n", csv);
+          fputs(",,,,\n", csv);
         fflush(csv);
       }
       acc = 0, nacc = 0, last_it = it, last_t = now;
@@ -192,20 +205,20 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
   /* a run that stopped early (time limit, request) still ends with a validation row, so
    * equal-time comparisons have a final figure */
   if (st == KPCN_OK && t->nval && last_val_it != t->iter && t->iter > start_it) {
-    double v[3];
-    st = kpcn_trainer_validate(t, &v[0], &v[1], &v[2]);
-    if (st == KPCN_OK && t->best_path && v[0] < t->best_val) {
+    kpcn_val_result v;
+    st = kpcn_trainer_validate(t, &v);
+    if (st == KPCN_OK && t->best_path && best_figure(t, &v) < t->best_val) {
       st = save_model(t, t->elapsed_prev + (kt_now() - t0), t->best_path);
-      if (st == KPCN_OK) t->best_val = v[0];
+      if (st == KPCN_OK) t->best_val = best_figure(t, &v);
     }
     if (st == KPCN_OK && csv) {
       double now = kt_now();
       fprintf(csv, "%lld,%d,%.6g,", (long long)t->iter, t->iter - 1 < t->s.stage1_iters ? 1 : 2,
               kt_lr_at(t, t->iter - 1));
       if (nacc) fprintf(csv, "%.9g", acc / (double)nacc);
-      fprintf(csv, ",%.4g,%.2f,%.9g,%.9g,%.6g\n",
+      fprintf(csv, ",%.4g,%.2f,%.9g,%.9g,%.6g,%.9g\n",
               (double)(t->iter - last_it) / fmax(now - last_t, 1e-9), t->elapsed_prev + (now - t0),
-              v[0], v[1], v[2]);
+              v.relmse, v.ssim, v.psnr, v.relmse_geo);
     }
   }
   if (csv) fclose(csv);

@@ -55,9 +55,9 @@ struct kpcn_trainer {
   kpcn_aov_set **val_aov;
   float **val_ref; /* 3 planes each (reference color) */
   kpcn_train_timing timing;
-  double last_val[3];
+  kpcn_val_result last_val;
   int have_val;
-  double best_val; /* lowest mean val relMSE written to best_path (run.c), +inf if none */
+  double best_val; /* lowest best_by figure written to best_path (run.c), +inf if none */
 };
 
 /* batch.c */

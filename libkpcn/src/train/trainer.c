@@ -168,6 +168,8 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   if (!s->out_path) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "no output model path given");
   if (s->batch < 1 || s->batch > 256)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "batch %d out of range 1..256", s->batch);
+  if (s->best_by != KPCN_VAL_MEAN && s->best_by != KPCN_VAL_GEOMEAN)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "unknown best_by %d", (int)s->best_by);
   if (s->patch < 8 || s->patch > 1024)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch %d out of range 8..1024", s->patch);
   if (s->iters < 0)
@@ -374,7 +376,7 @@ static kpcn_status trainer_step(kpcn_trainer *t, double *loss) {
   return KPCN_OK;
 }
 
-kpcn_status kpcn_trainer_validate(kpcn_trainer *t, double *relmse, double *ssim, double *psnr) {
+kpcn_status kpcn_trainer_validate(kpcn_trainer *t, kpcn_val_result *out) {
   if (!t->nval) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "no validation images given");
   kpcn_denoiser_options o;
   kpcn_denoiser_options_defaults(&o);
@@ -385,7 +387,7 @@ kpcn_status kpcn_trainer_validate(kpcn_trainer *t, double *relmse, double *ssim,
   kpcn_metric_options mo;
   kpcn_metric_options_defaults(&mo);
   mo.nthreads = t->nt;
-  double acc[3] = {0, 0, 0};
+  double acc[3] = {0, 0, 0}, acc_log = 0;
   kpcn_status st = KPCN_OK;
   for (int i = 0; i < t->nval && st == KPCN_OK; i++) {
     const kpcn_aov_set *a = t->val_aov[i];
@@ -400,17 +402,20 @@ kpcn_status kpcn_trainer_validate(kpcn_trainer *t, double *relmse, double *ssim,
       kpcn_metric_result r;
       st = kpcn_metric_planar(ms[m], den, t->val_ref[i], a->width, a->height, 3, &mo, &r, NULL);
       acc[m] += r.value;
+      /* a denoised image equal to its reference would give log 0: 1e-30 keeps it finite
+       * (and far below any real figure) */
+      if (m == 0) acc_log += log(fmax(r.value, 1e-30));
     }
     free(den);
     if (st != KPCN_OK) kpcn_fail_context("validating on '%s'", t->s.val_noisy[i]);
   }
   kpcn_denoiser_destroy(d);
   KPCN_TRY(st);
-  for (int m = 0; m < 3; m++)
-    t->last_val[m] = acc[m] / t->nval;
+  t->last_val.relmse = acc[0] / t->nval;
+  t->last_val.ssim = acc[1] / t->nval;
+  t->last_val.psnr = acc[2] / t->nval;
+  t->last_val.relmse_geo = exp(acc_log / t->nval);
   t->have_val = 1;
-  if (relmse) *relmse = t->last_val[0];
-  if (ssim) *ssim = t->last_val[1];
-  if (psnr) *psnr = t->last_val[2];
+  if (out) *out = t->last_val;
   return KPCN_OK;
 }
