@@ -190,7 +190,10 @@ void kpcn_denoiser_options_defaults(kpcn_denoiser_options *o);
 
 typedef struct kpcn_denoiser kpcn_denoiser;
 
-/* Creates a denoiser (loads the model for method KPCN). *out owned by caller. */
+/* Creates a denoiser (loads the model for method KPCN). *out owned by caller. A KPCN
+ * denoiser keeps its network and tile buffers from one execute to the next (the memory of
+ * one padded tile, freed by destroy), so later frames of the same size skip the setup; one
+ * denoiser serves one execute at a time (use one per thread). */
 kpcn_status kpcn_denoiser_create(kpcn_denoiser **out, const kpcn_denoiser_options *opts);
 /* Creates a KPCN denoiser around an in-memory model (borrowed: it must outlive the
  * denoiser; used by training/evaluation and tests with randomly initialised models). */
