@@ -22,6 +22,8 @@ echo "== render: $(basename "$(dirname "$scene")") at $spp spp, $res (held out f
 "$bin/kpcn-render/kpcn-render" "$scene" --spp "$spp" --seed 1 --resolution "$res" -o "$out/noisy.exr"
 echo "== denoise: KPCN ($(basename "$model")) and non-local means"
 "$tool" "$out/noisy.exr" --denoise:model="$model" -o "$out/kpcn.exr"
+# the same model averaged over the 8 mirrored / rotated copies of the input (8x the time)
+"$tool" "$out/noisy.exr" --denoise:model="$model":ensemble=8 -o "$out/kpcn-x8.exr"
 "$tool" "$out/noisy.exr" --denoise:method=nlmeans -o "$out/nlmeans.exr"
 echo "== mosaic and error map"
 # four images through the OCIO Filmic view, then kpcn's per-pixel relMSE in false colour
@@ -33,10 +35,10 @@ view=--ociodisplay:view=Filmic
   -o "$out/mosaic.png"
 "$tool" "$out/kpcn.exr" "$ref" --ch R,G,B --errormap:metric=relmse -o "$out/kpcn_relmse.exr"
 echo "== metrics against the reference ($(basename "$ref"))"
-for name in noisy nlmeans kpcn; do
+for name in noisy nlmeans kpcn kpcn-x8; do
   img="$out/$name.exr"
   printf '%-8s ' "$name"
   "$tool" "$img" --ch R,G,B "$ref" --ch R,G,B --relmse --ssim:display=srgb --psnr:display=srgb --json \
     | tee "$out/metrics_$name.json"
 done
-echo "outputs in $out: noisy.exr kpcn.exr nlmeans.exr mosaic.png kpcn_relmse.exr metrics_*.json"
+echo "outputs in $out: noisy.exr kpcn.exr kpcn-x8.exr nlmeans.exr mosaic.png kpcn_relmse.exr metrics_*.json"

@@ -8,7 +8,9 @@
 # model's README.md, e.g. testdata/models/README.md: also write the held-out figures there),
 # REF2_SPP (e.g. 4096: where renders/<scene>/v000_ref<REF2_SPP>spp.exr exist, also measure
 # against that less noisy reference and add its target table: a 1024-spp reference's own
-# noise is part of every relMSE measured against it).
+# noise is part of every relMSE measured against it), ENSEMBLE (default 8: also measure kpcn
+# with --denoise:ensemble=N, the average over N mirrored/rotated copies, as method kpcn-xN;
+# 1 = not).
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 ds=$1
@@ -17,6 +19,7 @@ shift 2
 bin=${KPCN_BIN:-$here/build/tools}
 tool="$bin/kpcntool/kpcntool"
 spps=${SPPS:-"4 16 64"}
+ens=${ENSEMBLE:-8}
 scenes=("$@")
 if [ ${#scenes[@]} -eq 0 ]; then
   mapfile -t scenes < <(grep '"split":"test"' "$ds/manifest.jsonl" | sed 's/.*"scene":"\([^"]*\)".*/\1/' | sort -u)
@@ -32,6 +35,10 @@ md="$here/docs/results.md.tmp"
   echo "Scenes never seen in training (test split of \`$ds\`), variant 0, 160x160; reference:"
   echo "the dataset's 1024-spp render of the same scene (independent seed). relMSE on linear"
   echo "RGB (eps 0.01); SSIM and PSNR on sRGB-encoded [0,1]-clamped RGB (docs/metrics.md)."
+  if [ "$ens" != 1 ]; then
+    echo "kpcn-x$ens: the same model with \`--denoise:ensemble=$ens\` (the mean of its results on $ens"
+    echo "mirrored / rotated copies of the input, mapped back; $ens times the cost; docs/denoiser.md)."
+  fi
   echo
   echo "| scene | spp | method | relMSE | SSIM | PSNR (dB) |"
   echo "|---|---|---|---|---|---|"
@@ -44,7 +51,12 @@ for s in "${scenes[@]}"; do
     "$tool" "$noisy" --denoise:method=nlmeans -o "$work/nlmeans.exr"
     "$tool" "$noisy" --denoise:model="$model" -o "$work/kpcn.exr"
     "$tool" "$noisy" --ch R,G,B -o "$work/noisy.exr"
-    for m in noisy bilateral nlmeans kpcn; do
+    methods=(noisy bilateral nlmeans kpcn)
+    if [ "$ens" != 1 ]; then
+      "$tool" "$noisy" --denoise:model="$model":ensemble="$ens" -o "$work/kpcn-x$ens.exr"
+      methods+=("kpcn-x$ens")
+    fi
+    for m in "${methods[@]}"; do
       j=$("$tool" "$work/$m.exr" "$ref" --ch R,G,B --relmse --ssim:display=srgb --psnr:display=srgb --json)
       /usr/bin/python3 -c "import json,sys; d=json.loads(sys.argv[1]); print('| $s | $spp | $m | %.3e | %.4f | %.2f |' % (d['relmse'], d['ssim'], d['psnr']))" "$j" >> "$md"
       /usr/bin/python3 -c "import json,sys; d=json.loads(sys.argv[1]); print('$s\t$spp\t$m\t%.9g\t%.9g' % (d['relmse'], d['ssim']))" "$j" >> "$work/rows.tsv"
@@ -73,23 +85,27 @@ for scene, spp, method, rel, ssim in rows:
     at.setdefault((scene, spp), {})[method] = (float(rel), float(ssim))
 spp = '16' if any(k[1] == '16' for k in at) else sorted({k[1] for k in at})[0]
 print('\n## Against the targets (%s spp, held-out scenes%s)\n' % (spp, sys.argv[2]))
-print('| scene | kpcn vs noisy (target >= 20x lower relMSE) | kpcn vs better baseline (target >= 2x) | kpcn SSIM |')
-print('|---|---|---|---|')
-ssims, ok_noisy, ok_base = [], True, True
-for (scene, s), m in sorted(at.items()):
-    if s != spp or 'kpcn' not in m:
-        continue
-    k = m['kpcn'][0]
-    base = min(('bilateral', 'nlmeans'), key=lambda b: m[b][0])
-    r1, r2 = m['noisy'][0] / k, m[base][0] / k
-    ok_noisy &= r1 >= 20
-    ok_base &= r2 >= 2
-    ssims.append(m['kpcn'][1])
-    print('| %s | %.1fx lower | %.2fx %s (%s) | %.3f |' % (scene, r1, r2 if r2 >= 1 else 1 / r2, 'lower' if r2 >= 1 else 'HIGHER', base, m['kpcn'][1]))
-avg = sum(ssims) / len(ssims)
-print('\nAverage kpcn SSIM %.3f: %s the >= 0.98 target. 20x below noisy: %s. 2x below the better '
-      'baseline: %s.' % (avg, 'meets' if avg >= 0.98 else 'misses', 'met' if ok_noisy else 'NOT met',
-                         'met' if ok_base else 'NOT met'))
+print('| scene | method | vs noisy (target >= 20x lower relMSE) | vs better baseline (target >= 2x) | SSIM |')
+print('|---|---|---|---|---|')
+kpcns = sorted({meth for m in at.values() for meth in m if meth.startswith('kpcn')}, key=len)
+summary = []
+for km in kpcns:
+    ssims, ok_noisy, ok_base = [], True, True
+    for (scene, s), m in sorted(at.items()):
+        if s != spp or km not in m:
+            continue
+        k = m[km][0]
+        base = min(('bilateral', 'nlmeans'), key=lambda b: m[b][0])
+        r1, r2 = m['noisy'][0] / k, m[base][0] / k
+        ok_noisy &= r1 >= 20
+        ok_base &= r2 >= 2
+        ssims.append(m[km][1])
+        print('| %s | %s | %.1fx lower | %.2fx %s (%s) | %.3f |' % (scene, km, r1, r2 if r2 >= 1 else 1 / r2, 'lower' if r2 >= 1 else 'HIGHER', base, m[km][1]))
+    avg = sum(ssims) / len(ssims)
+    summary.append('%s: average SSIM %.3f %s the >= 0.98 target; 20x below noisy: %s; 2x below the '
+                   'better baseline: %s.' % (km, avg, 'meets' if avg >= 0.98 else 'misses',
+                                             'met' if ok_noisy else 'NOT met', 'met' if ok_base else 'NOT met'))
+print('\n' + '\n'.join(summary))
 PY
 }
 targets "$work/rows.tsv" "" >> "$md"
@@ -128,7 +144,7 @@ if [ -n "${MODEL_README:-}" ]; then
     echo
     echo "| scene | spp | method | relMSE | SSIM | PSNR (dB) |"
     echo "|---|---|---|---|---|---|"
-    sed -n '1,/^## Against the targets/p' "$here/docs/results.md" | grep -E '^\| [^|]+ \| [0-9]+ \| (noisy|kpcn) \|'
+    sed -n '1,/^## Against the targets/p' "$here/docs/results.md" | grep -E '^\| [^|]+ \| [0-9]+ \| (noisy|kpcn|kpcn-x[0-9]+) \|'
     echo
     sed -n '/^## Against the targets/,/^## Mosaics/p' "$here/docs/results.md" | sed '$d' | sed 's/^## /### /'
   } > "$work/readme.md"

@@ -17,6 +17,7 @@ kpcn_denoiser_options DenoiseOptions::c_options() const {
   o.model_path = model.empty() ? nullptr : model.c_str();
   o.bf16 = bf16 ? 1 : 0;
   o.tile = tile;
+  o.ensemble = ensemble;
   return o;
 }
 

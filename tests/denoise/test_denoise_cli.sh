@@ -14,6 +14,20 @@ fail() { echo "FAIL: $*"; exit 1; }
 "$T" --json "$D/out_t.exr" "$D/out.exr" --l1 >"$D/l1.json" || fail "l1"
 grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/l1.json" || fail "tile=16 differs from untiled: $(cat "$D/l1.json")"
 "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":bf16=1 -o "$D/out_b.exr" || fail "bf16"
+# self-ensemble: differs from the plain output, equals a mirrored input's result mirrored
+"$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":ensemble=8 -o "$D/out_e.exr" || fail "ensemble"
+"$T" "$D/aov.exr" --mirror --denoise:model="$D/model.safetensors":ensemble=8 --mirror \
+  -o "$D/out_em.exr" || fail "ensemble of the mirrored input"
+"$T" --json "$D/out_em.exr" "$D/out_e.exr" --relmse >"$D/em.json" || fail "relmse"
+grep -Eq '"relmse": *([0-9.]+e-(1[0-9]|[2-9][0-9])|0)([,} ]|$)' "$D/em.json" ||
+  fail "ensemble not equivariant to a mirror: $(cat "$D/em.json")"
+"$T" --json "$D/out_e.exr" "$D/out.exr" --relmse >"$D/ep.json" || fail "relmse"
+grep -Eq '"relmse": *0(\.0*)?([,} ]|$)' "$D/ep.json" && fail "ensemble equals the plain output"
+if "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":ensemble=3 -o "$D/bad.exr" 2>"$D/err"; then
+  fail "ensemble=3 accepted"
+fi
+grep -q ensemble "$D/err" || fail "error does not name ensemble: $(cat "$D/err")"
+[ ! -e "$D/bad.exr" ] || fail "partial output written"
 for m in bilateral nlmeans; do
   "$T" "$D/aov.exr" --denoise:method=$m -o "$D/$m.exr" || fail "$m"
 done

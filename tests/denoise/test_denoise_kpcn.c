@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "kpcn/augment.h"
 #include "kpcn/denoise.h"
 #include "synth.h"
 #include "testutil.h"
@@ -369,10 +370,124 @@ static void test_reuse_between_executes(void) {
   kpcn_model_destroy(m);
 }
 
+/* ensemble = n with the given options (and progress callback): out is [3][H][W]. */
+static kpcn_status run_ensemble(kpcn_model *m, const kpcn_aov_set *a, int n, int tile,
+                                kpcn_progress_fn fn, float *out) {
+  kpcn_denoiser_options o;
+  kpcn_denoiser_options_defaults(&o);
+  o.tile = tile;
+  o.nthreads = 2;
+  o.ensemble = n;
+  kpcn_denoiser *d = NULL;
+  kpcn_status s = kpcn_denoiser_create_with_model(&d, m, &o);
+  if (s == KPCN_OK && fn) kpcn_denoiser_set_progress(d, fn, NULL);
+  if (s == KPCN_OK) s = kpcn_denoiser_execute_aov(d, a, out);
+  kpcn_denoiser_destroy(d);
+  return s;
+}
+
+/* Applies transform i of the ensemble to the RGB planes of a W x H image (out: its size). */
+static void xform_rgb(const float *in, int W, int H, int i, int inverse, float *out) {
+  kpcn_augment_xform x, inv;
+  kpcn_denoise_ensemble_xform(i, &x);
+  int tw, th;
+  kpcn_augment_output_size(&x, W, H, &tw, &th);
+  kpcn_augment_inverse(&inv, &x, tw, th);
+  kpcn_augment_planes(out, in, 3, NULL, W, H, inverse ? &inv : &x, 1);
+}
+
+static double g_last_progress;
+static int g_progress_ok;
+static int watch_progress(void *u, double f) {
+  (void)u;
+  if (f < g_last_progress - 1e-12 || f > 1.0 + 1e-12) g_progress_ok = 0;
+  g_last_progress = f;
+  return 0;
+}
+
+/* Self-ensemble: the average of the members computed by hand (bit-exact), equivariance of
+ * the 8-member result under the transforms (an independent property: the plain network has
+ * none), progress and cancellation across members, bad sizes rejected. */
+static void test_ensemble(void) {
+  kpcn_model *m = make_model(23);
+  if (!m) return;
+  const int W = 45, H = 37; /* not square: rotated members have another shape */
+  kpcn_aov_set *a = synth_aov(W, H, 3);
+  const size_t N = 3 * kpcn_aov_plane_size(a);
+  float *plain = malloc(sizeof(float) * N), *member = malloc(sizeof(float) * N),
+        *back = malloc(sizeof(float) * N), *ens = malloc(sizeof(float) * N),
+        *want = malloc(sizeof(float) * N), *ens_t = malloc(sizeof(float) * N);
+  /* the transforms: 0 is the identity, 2/4/8 members form groups, each has an inverse */
+  kpcn_augment_xform x;
+  CHECK(kpcn_denoise_ensemble_xform(0, &x) == KPCN_OK && !x.mirror_h && !x.rot90);
+  CHECK(kpcn_denoise_ensemble_xform(8, &x) != KPCN_OK);
+  /* by hand: mean over members of inverse(denoise(transform(a))), in member order */
+  for (int n = 2; n <= 8; n *= 2) {
+    memset(want, 0, sizeof(float) * N);
+    for (int i = 0; i < n; i++) {
+      kpcn_augment_xform xi;
+      kpcn_denoise_ensemble_xform(i, &xi);
+      kpcn_aov_set *t = NULL;
+      CHECK(kpcn_augment_aov(&t, a, &xi, 1) == KPCN_OK);
+      CHECK(run(m, t, 0, 0, member) == KPCN_OK);
+      xform_rgb(member, t->width, t->height, i, 1, back);
+      for (size_t k = 0; k < N; k++)
+        want[k] += back[k];
+      kpcn_aov_destroy(t);
+    }
+    for (size_t k = 0; k < N; k++)
+      want[k] *= 1.0f / (float)n;
+    CHECK(run_ensemble(m, a, n, 0, NULL, ens) == KPCN_OK);
+    printf("ensemble %d: max rel. difference to the members averaged by hand %.3g\n", n,
+           max_rel(ens, want, N));
+    CHECK(max_rel(ens, want, N) == 0.0);
+  }
+  /* ens ends as the 8-member result; plain output differs from it (members disagree) */
+  CHECK(run(m, a, 0, 0, plain) == KPCN_OK);
+  CHECK(max_rel(plain, ens, N) > 1e-4);
+  /* equivariance: E(T a) = T E(a) for every transform T of the group; tiled too */
+  double worst = 0;
+  for (int i = 1; i < 8; i++) {
+    kpcn_augment_xform xi;
+    kpcn_denoise_ensemble_xform(i, &xi);
+    kpcn_aov_set *t = NULL;
+    CHECK(kpcn_augment_aov(&t, a, &xi, 1) == KPCN_OK);
+    CHECK(run_ensemble(m, t, 8, i == 5 ? 16 : 0, NULL, ens_t) == KPCN_OK);
+    xform_rgb(ens, W, H, i, 0, want);
+    worst = fmax(worst, max_rel(ens_t, want, N));
+    kpcn_aov_destroy(t);
+  }
+  printf("ensemble 8 equivariance: max rel. difference %.3g\n", worst);
+  CHECK(worst < 1e-5);
+  /* progress runs once from 0 to 1 over all members; a cancel stops the execute */
+  g_last_progress = 0;
+  g_progress_ok = 1;
+  CHECK(run_ensemble(m, a, 4, 16, watch_progress, ens) == KPCN_OK);
+  CHECK(g_progress_ok && g_last_progress > 0.99);
+  g_calls = 0;
+  CHECK(run_ensemble(m, a, 8, 16, cancel_third, ens) == KPCN_ERR_CANCELLED);
+  /* sizes other than 0, 1, 2, 4, 8 are rejected, naming the option */
+  const int bad[] = {3, 6, -1, 16};
+  for (int i = 0; i < 4; i++) {
+    CHECK(run_ensemble(m, a, bad[i], 0, NULL, ens) == KPCN_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(kpcn_last_error(), "ensemble") != NULL);
+  }
+  CHECK(run_ensemble(m, a, 1, 0, NULL, ens) == KPCN_OK && max_rel(ens, plain, N) == 0.0);
+  free(plain);
+  free(member);
+  free(back);
+  free(ens);
+  free(want);
+  free(ens_t);
+  kpcn_aov_destroy(a);
+  kpcn_model_destroy(m);
+}
+
 int main(void) {
   test_reference_and_tiling();
   test_bf16_and_larger_tiling();
   test_reuse_between_executes();
   test_api();
+  test_ensemble();
   return kt_summary("test_denoise_kpcn");
 }

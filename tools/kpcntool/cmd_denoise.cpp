@@ -1,5 +1,5 @@
 // kpcntool --denoise: pops an AOV image, pushes the denoised RGB image.
-//   --denoise:model=m.safetensors[:bf16=1][:tile=N]
+//   --denoise:model=m.safetensors[:bf16=1][:tile=N][:ensemble=N]
 //   --denoise:method=bilateral|nlmeans
 #include "kpcn/ops_denoise.h"
 #include "kpcntool.h"
@@ -26,6 +26,12 @@ bool run_denoise(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
     return false;
   }
   opt.tile = (int)tile;
+  long ensemble = m.integer("ensemble", 1);
+  if (ensemble != 1 && ensemble != 2 && ensemble != 4 && ensemble != 8) {
+    err = "ensemble must be 1, 2, 4 or 8 (got " + std::to_string(ensemble) + ")";
+    return false;
+  }
+  opt.ensemble = (int)ensemble;
   OIIO::ImageBuf src = ctx.pop();
   OIIO::ImageBuf dst;
   if (!kpcn::ops::denoise(dst, src, opt, {}, ctx.nthreads)) {
@@ -40,8 +46,9 @@ bool run_denoise(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
 bool reg = kpcntool::register_command(
     {"denoise",
      0,
-     {"model", "method", "bf16", "tile"},
-     "denoise the top AOV image (model=m.safetensors | method=bilateral|nlmeans, bf16=1, tile=N)",
+     {"model", "method", "bf16", "tile", "ensemble"},
+     "denoise the top AOV image (model=m.safetensors | method=bilateral|nlmeans, bf16=1, tile=N, "
+     "ensemble=2|4|8: average over mirrored/rotated copies)",
      run_denoise});
 
 } // namespace

@@ -52,6 +52,7 @@
 #define KPCN_DENOISE_H
 
 #include "kpcn/common.h"
+#include "kpcn/augment.h" /* kpcn_augment_xform */
 #include "kpcn/image.h"
 #include "kpcn/nn.h" /* kpcn_branch, kpcn_model */
 
@@ -182,6 +183,11 @@ typedef struct kpcn_denoiser_options {
                              depend on the tile size. */
   int nthreads;           /* 0 = all cores */
   int direct_conv;        /* 1: no Winograd convolutions (kpcn_net_options.direct_conv) */
+  int ensemble;           /* self-ensemble: 0 or 1 = off; 2, 4 or 8 = denoise that many
+                             mirrored / rotated copies of the input and average the results
+                             mapped back (kpcn_denoise_ensemble_xform), at that many times the
+                             cost. The transforms form a group, so the result is exactly
+                             equivariant to them (up to float summation order). */
   kpcn_baseline_params bilateral;
   kpcn_baseline_params nlmeans;
 } kpcn_denoiser_options;
@@ -240,6 +246,13 @@ typedef struct kpcn_denoise_stats {
   int nets_created;   /* oneDNN networks built (0 on a warm execute of an unchanged size) */
 } kpcn_denoise_stats;
 void kpcn_denoiser_get_stats(const kpcn_denoiser *d, kpcn_denoise_stats *s);
+
+/* Largest ensemble size (the eight symmetries of the square). */
+#define KPCN_DENOISE_MAX_ENSEMBLE 8
+/* Transform i (0..7) of the self-ensemble: 0 identity, 1 mirror_h, 2 rot180, 3 mirror_h +
+ * rot180 (= mirror_v), 4 rot90, 5 mirror_h + rot90, 6 rot270, 7 mirror_h + rot270; the first
+ * 2, 4 and 8 each form a group. Returns KPCN_ERR_INVALID_ARGUMENT for other i. */
+kpcn_status kpcn_denoise_ensemble_xform(int i, kpcn_augment_xform *x);
 
 /* Overlap (pixels per side) a tile needs so tiled == untiled: max(conv radius, K/2) —
  * logits of an output pixel depend on inputs within the conv radius, the kernel reads

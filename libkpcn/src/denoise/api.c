@@ -49,6 +49,17 @@ static double now_s(void) {
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
+/* Checks what both create calls accept alike. */
+static kpcn_status check_options(const kpcn_denoiser_options *o) {
+  if (o->tile < 0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: tile %d must be >= 0", o->tile);
+  if (o->ensemble < 0 || o->ensemble > KPCN_DENOISE_MAX_ENSEMBLE ||
+      (o->ensemble > 1 && (o->ensemble & (o->ensemble - 1)) != 0))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "denoiser_create: ensemble %d must be 0, 1, 2, 4 or 8", o->ensemble);
+  return KPCN_OK;
+}
+
 kpcn_status kpcn_denoiser_create(kpcn_denoiser **out, const kpcn_denoiser_options *opts) {
   if (!out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: out is NULL");
   *out = NULL;
@@ -59,8 +70,7 @@ kpcn_status kpcn_denoiser_create(kpcn_denoiser **out, const kpcn_denoiser_option
     kpcn_denoiser_options_defaults(&o);
   if (o.method < KPCN_DENOISE_KPCN || o.method > KPCN_DENOISE_NLMEANS)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: unknown method %d", o.method);
-  if (o.tile < 0)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: tile %d must be >= 0", o.tile);
+  KPCN_TRY(check_options(&o));
   if (o.method == KPCN_DENOISE_KPCN && (!o.model_path || !*o.model_path))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: method kpcn needs model_path");
   kpcn_denoiser *d = kpcn_calloc(1, sizeof *d, "denoiser");
@@ -95,8 +105,7 @@ kpcn_status kpcn_denoiser_create_with_model(kpcn_denoiser **out, kpcn_model *mod
     o = *opts;
   else
     kpcn_denoiser_options_defaults(&o);
-  if (o.tile < 0)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: tile %d must be >= 0", o.tile);
+  KPCN_TRY(check_options(&o));
   kpcn_denoiser *d = kpcn_calloc(1, sizeof *d, "denoiser");
   if (!d) return KPCN_ERR_OUT_OF_MEMORY;
   d->opt = o;
@@ -248,6 +257,76 @@ static kpcn_status run_method(kpcn_denoiser *d, const kpcn_aov_set *aov, float *
   return s;
 }
 
+kpcn_status kpcn_denoise_ensemble_xform(int i, kpcn_augment_xform *x) {
+  if (!x || i < 0 || i >= KPCN_DENOISE_MAX_ENSEMBLE)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoise_ensemble_xform: index %d not in 0..7", i);
+  kpcn_augment_identity(x);
+  static const int rot[4] = {0, 2, 1, 3}; /* pairs of i: rot180 before the quarter turns, so
+                                             the first 4 are a group (Klein four) */
+  x->mirror_h = i & 1;
+  x->rot90 = rot[i >> 1];
+  return KPCN_OK;
+}
+
+/* Scales the progress of ensemble member `k` of `n` into the caller's [0,1]. */
+typedef struct ensemble_progress {
+  kpcn_progress *outer;
+  int k, n;
+} ensemble_progress;
+
+static int ensemble_progress_fn(void *user, double f) {
+  ensemble_progress *e = user;
+  return kpcn_progress_report(e->outer, (e->k + f) / e->n);
+}
+
+/* run_method on each transform of the ensemble, mapped back and averaged into out. The
+ * members are summed in a fixed order, so the result does not depend on threads. */
+static kpcn_status run_ensemble(kpcn_denoiser *d, const kpcn_aov_set *aov, float *out) {
+  const int n = d->opt.ensemble > 1 ? d->opt.ensemble : 1;
+  if (n == 1) return run_method(d, aov, out);
+  const int W = aov->width, H = aov->height, nt = d->opt.nthreads;
+  const size_t N = 3 * kpcn_aov_plane_size(aov);
+  float *member = kpcn_aligned_alloc(sizeof(float) * N, "ensemble member output");
+  float *back = kpcn_aligned_alloc(sizeof(float) * N, "ensemble member output");
+  if (!member || !back) {
+    kpcn_aligned_free(member);
+    kpcn_aligned_free(back);
+    return KPCN_ERR_OUT_OF_MEMORY;
+  }
+  kpcn_progress outer = d->prog;
+  ensemble_progress ep = {&outer, 0, n};
+  d->prog.fn = outer.fn ? ensemble_progress_fn : NULL;
+  d->prog.user = &ep;
+  memset(out, 0, sizeof(float) * N);
+  kpcn_status s = KPCN_OK;
+  for (int k = 0; k < n && s == KPCN_OK; k++) {
+    kpcn_augment_xform x, inv;
+    kpcn_denoise_ensemble_xform(k, &x);
+    int tw, th;
+    kpcn_augment_output_size(&x, W, H, &tw, &th);
+    ep.k = k;
+    if (k == 0) {
+      s = run_method(d, aov, back);
+    } else {
+      kpcn_aov_set *t = NULL;
+      s = kpcn_augment_aov(&t, aov, &x, nt);
+      if (s == KPCN_OK) s = run_method(d, t, member);
+      kpcn_aov_destroy(t);
+      kpcn_augment_inverse(&inv, &x, tw, th);
+      if (s == KPCN_OK) s = kpcn_augment_planes(back, member, 3, NULL, tw, th, &inv, nt);
+    }
+    for (size_t i = 0; s == KPCN_OK && i < N; i++)
+      out[i] += back[i];
+  }
+  const float scale = 1.0f / (float)n; /* a power of two: exact */
+  for (size_t i = 0; s == KPCN_OK && i < N; i++)
+    out[i] *= scale;
+  d->prog = outer; /* outer.cancelled was set by ensemble_progress_fn on a cancel */
+  kpcn_aligned_free(member);
+  kpcn_aligned_free(back);
+  return s;
+}
+
 kpcn_status kpcn_denoiser_execute(kpcn_denoiser *d, float *out, int width, int height,
                                   size_t pixel_stride, size_t row_stride) {
   if (!d || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_execute: NULL argument");
@@ -261,7 +340,7 @@ kpcn_status kpcn_denoiser_execute(kpcn_denoiser *d, float *out, int width, int h
   kpcn_status s = assemble(d, width, height, &aov);
   if (s == KPCN_OK) {
     rgb = kpcn_aligned_alloc(sizeof(float) * 3 * kpcn_aov_plane_size(aov), "denoiser output");
-    s = rgb ? run_method(d, aov, rgb) : KPCN_ERR_OUT_OF_MEMORY;
+    s = rgb ? run_ensemble(d, aov, rgb) : KPCN_ERR_OUT_OF_MEMORY;
   }
   if (s == KPCN_OK) {
     const size_t P = kpcn_aov_plane_size(aov);
@@ -286,7 +365,7 @@ kpcn_status kpcn_denoiser_execute_aov(kpcn_denoiser *d, const kpcn_aov_set *aov,
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_execute_aov: NULL argument");
   double t0 = now_s();
   memset(&d->stats, 0, sizeof d->stats);
-  kpcn_status s = run_method(d, aov, out_planar);
+  kpcn_status s = run_ensemble(d, aov, out_planar);
   d->stats.total_s = now_s() - t0;
   return s;
 }

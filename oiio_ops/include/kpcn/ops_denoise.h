@@ -18,6 +18,7 @@ struct DenoiseOptions {
   std::string model; // safetensors model file (method "kpcn")
   bool bf16 = false; // bf16 convolutions
   int tile = 0;      // KPCN tile size in output pixels per side, 0 = automatic/untiled
+  int ensemble = 1;  // self-ensemble size 1, 2, 4 or 8 (kpcn_denoiser_options.ensemble)
   // Baseline parameters; defaults of kpcn_denoiser_options_defaults when left alone.
   kpcn_denoiser_options c_options() const;
 };
