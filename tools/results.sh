@@ -66,6 +66,8 @@ for s in "${scenes[@]}"; do
         /usr/bin/python3 -c "import json,sys; d=json.loads(sys.argv[1]); print('$s\t$spp\t$m\t%.9g\t%.9g' % (d['relmse'], d['ssim']))" "$j" >> "$work/rows2.tsv"
       fi
     done
+    /usr/bin/python3 "$here/tools/oracle_floor.py" "$noisy" "$ref" |
+      /usr/bin/python3 -c "import json,sys; d=json.load(sys.stdin); print('$s\t$spp\t%.9g\t%.9g\t%.9g' % (d['noisy'], d['irradiance_oracle'], d['diffuse_exact']))" >> "$work/oracle.tsv"
     v=--ociodisplay:view=Filmic
     "$tool" "$work/noisy.exr" $v "$work/bilateral.exr" $v "$work/nlmeans.exr" $v "$work/kpcn.exr" $v \
       "$ref" --ch R,G,B $v "$work/kpcn.exr" "$ref" --ch R,G,B --errormap:metric=relmse \
@@ -109,6 +111,32 @@ print('\n' + '\n'.join(summary))
 PY
 }
 targets "$work/rows.tsv" "" >> "$md"
+# What "20x below noisy" leaves to the network: tools/oracle_floor.py's perfect-irradiance
+# output (remodulated by the noisy albedo, as the pipeline must) next to kpcn.
+/usr/bin/python3 - "$work/rows.tsv" "$work/oracle.tsv" >> "$md" <<'PY'
+import sys
+rows = {}
+for l in open(sys.argv[1]):
+    scene, spp, method, rel, ssim = l.rstrip('\n').split('\t')
+    rows[(scene, spp, method)] = float(rel)
+print('\n### What the 20x target leaves to the network\n')
+print('From `tools/oracle_floor.py NOISY REF` (16 spp, against the 1024-spp reference): relMSE of a network that')
+print('returned the reference\'s own irradiance and specular exactly, remodulated by the noisy albedo as')
+print('the pipeline does (the albedo\'s sub-pixel coverage noise at edges and texture detail stays), and')
+print('of the noisy specular alone (diffuse exact). The oracle is built from the reference, so it')
+print('carries none of the reference\'s own noise (about noisy x 16/1024), which every kpcn figure does.\n')
+print('| scene | spp | noisy | 20x target | irradiance oracle | noisy specular alone | kpcn | kpcn-x8 |')
+print('|---|---|---|---|---|---|---|---|')
+for l in open(sys.argv[2]):
+    scene, spp, noisy, orc, spec = l.rstrip('\n').split('\t')
+    if spp != '16':
+        continue
+    k = rows.get((scene, spp, 'kpcn'))
+    kx = [v for (s2, p2, m), v in rows.items() if s2 == scene and p2 == spp and m.startswith('kpcn-x')]
+    print('| %s | %s | %.3e | %.3e | %.3e | %.3e | %s | %s |' % (
+        scene, spp, float(noisy), float(noisy) / 20, float(orc), float(spec),
+        '%.3e' % k if k is not None else '-', '%.3e' % kx[0] if kx else '-'))
+PY
 if [ -s "$work/rows2.tsv" ]; then
   targets "$work/rows2.tsv" ", against ${REF2_SPP}-spp references" >> "$md"
   {
