@@ -66,8 +66,10 @@ for s in "${scenes[@]}"; do
         /usr/bin/python3 -c "import json,sys; d=json.loads(sys.argv[1]); print('$s\t$spp\t$m\t%.9g\t%.9g' % (d['relmse'], d['ssim']))" "$j" >> "$work/rows2.tsv"
       fi
     done
-    /usr/bin/python3 "$here/tools/oracle_floor.py" "$noisy" "$ref" |
-      /usr/bin/python3 -c "import json,sys; d=json.load(sys.stdin); print('$s\t$spp\t%.9g\t%.9g\t%.9g' % (d['noisy'], d['irradiance_oracle'], d['diffuse_exact']))" >> "$work/oracle.tsv"
+    if [ "$spp" = 16 ]; then
+      /usr/bin/python3 "$here/tools/error_budget.py" "$noisy" "$ref" --model "$model" --kpcntool "$tool" |
+        sed "s/^/$s\t/" >> "$work/budget.tsv"
+    fi
     v=--ociodisplay:view=Filmic
     "$tool" "$work/noisy.exr" $v "$work/bilateral.exr" $v "$work/nlmeans.exr" $v "$work/kpcn.exr" $v \
       "$ref" --ch R,G,B $v "$work/kpcn.exr" "$ref" --ch R,G,B --errormap:metric=relmse \
@@ -111,31 +113,31 @@ print('\n' + '\n'.join(summary))
 PY
 }
 targets "$work/rows.tsv" "" >> "$md"
-# What "20x below noisy" leaves to the network: tools/oracle_floor.py's perfect-irradiance
-# output (remodulated by the noisy albedo, as the pipeline must) next to kpcn.
-/usr/bin/python3 - "$work/rows.tsv" "$work/oracle.tsv" >> "$md" <<'PY'
-import sys
+# What "20x below noisy" leaves to the network and where kpcn's error is (tools/error_budget.py).
+[ -s "$work/budget.tsv" ] && /usr/bin/python3 - "$work/rows.tsv" "$work/budget.tsv" >> "$md" <<'PY'
+import json, sys
 rows = {}
 for l in open(sys.argv[1]):
     scene, spp, method, rel, ssim = l.rstrip('\n').split('\t')
     rows[(scene, spp, method)] = float(rel)
-print('\n### What the 20x target leaves to the network\n')
-print('From `tools/oracle_floor.py NOISY REF` (16 spp, against the 1024-spp reference): relMSE of a network that')
-print('returned the reference\'s own irradiance and specular exactly, remodulated by the noisy albedo as')
-print('the pipeline does (the albedo\'s sub-pixel coverage noise at edges and texture detail stays), and')
-print('of the noisy specular alone (diffuse exact). The oracle is built from the reference, so it')
-print('carries none of the reference\'s own noise (about noisy x 16/1024), which every kpcn figure does.\n')
-print('| scene | spp | noisy | 20x target | irradiance oracle | noisy specular alone | kpcn | kpcn-x8 |')
-print('|---|---|---|---|---|---|---|---|')
+print('\n### Where the error is, and what the 20x target leaves to the network (16 spp)\n')
+print('From `tools/error_budget.py NOISY REF --model MODEL`, against the 1024-spp reference: the')
+print('*irradiance oracle* is a network that returned the reference\'s own irradiance and specular')
+print('exactly, remodulated by the noisy albedo as the pipeline does (the albedo\'s sub-pixel coverage')
+print('error at edges and texture detail stays); *noisy specular* is the diffuse part exact and the')
+print('specular left noisy. kpcn\'s error split by branch (the other part taken from the reference; exact,')
+print('see the script) and the share of it in the worst 1 % of pixels. The oracle is built from the')
+print('reference, so it carries none of the reference\'s own noise (about noisy x 16/1024), which')
+print('every kpcn figure does.\n')
+print('| scene | noisy | 20x target | irradiance oracle | noisy specular | kpcn | kpcn diffuse branch | kpcn specular branch | worst 1 % px | kpcn-x8 |')
+print('|---|---|---|---|---|---|---|---|---|---|')
 for l in open(sys.argv[2]):
-    scene, spp, noisy, orc, spec = l.rstrip('\n').split('\t')
-    if spp != '16':
-        continue
-    k = rows.get((scene, spp, 'kpcn'))
-    kx = [v for (s2, p2, m), v in rows.items() if s2 == scene and p2 == spp and m.startswith('kpcn-x')]
-    print('| %s | %s | %.3e | %.3e | %.3e | %.3e | %s | %s |' % (
-        scene, spp, float(noisy), float(noisy) / 20, float(orc), float(spec),
-        '%.3e' % k if k is not None else '-', '%.3e' % kx[0] if kx else '-'))
+    scene, js = l.rstrip('\n').split('\t', 1)
+    d = json.loads(js)
+    kx = [v for (s2, p2, m), v in rows.items() if s2 == scene and p2 == '16' and m.startswith('kpcn-x')]
+    print('| %s | %.3e | %.3e | %.3e | %.3e | %.3e | %.3e | %.3e | %.0f %% | %s |' % (
+        scene, d['noisy'], d['noisy'] / 20, d['irradiance_oracle'], d['diffuse_exact'], d['kpcn'],
+        d['kpcn_diffuse'], d['kpcn_specular'], 100 * d['kpcn_top1pct'], '%.3e' % kx[0] if kx else '-'))
 PY
 if [ -s "$work/rows2.tsv" ]; then
   targets "$work/rows2.tsv" ", against ${REF2_SPP}-spp references" >> "$md"

@@ -1,0 +1,124 @@
+#!/usr/bin/python3
+"""Where KPCN's error comes from, and what a perfect demodulated-domain denoiser would leave.
+
+usage: tools/error_budget.py NOISY.exr REF.exr [--model M.safetensors] [--kpcntool PATH] [--eps E]
+
+Both files are kpcn AOV EXRs (REF with its diffuse / specular / albedo buffers, as the
+dataset's references are). Prints one JSON object of relMSE values (R, G, B; eps 0.01, as
+kpcntool --relmse) against REF's colour:
+
+  noisy              the noisy colour
+  irradiance_oracle  (A_noisy + eps) * D_ref / (A_ref + eps) + S_ref: a network whose diffuse
+                     branch returned the reference's own irradiance exactly and whose specular
+                     branch returned the reference's specular. The pipeline remodulates with
+                     the NOISY albedo (DESIGN.md section 5), so the albedo's sub-pixel coverage
+                     error at edges and texture detail stays. (A kernel could in principle do
+                     better by weighting neighbours across an edge, producing a non-smooth
+                     ratio.)
+  diffuse_exact      D_ref + S_noisy (what the noisy specular alone costs)
+  specular_exact     D_noisy + S_ref
+
+With --model, also the model's own output split by branch (kpcntool --denoise):
+  kpcn               the denoised image
+  kpcn_diffuse       its diffuse branch with the reference specular (D_kpcn + S_ref)
+  kpcn_specular      its specular branch with the reference diffuse (D_ref + S_kpcn)
+  kpcn_top1pct       share of kpcn's error in its worst 1 % of pixels
+The diffuse branch's part D_kpcn is the denoised result of the same input with the specular
+buffers zeroed: that branch never reads them, and the specular branch then filters zeros
+(exp(0) - 1 = 0), so the split is exact."""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+import OpenImageIO as oiio
+
+
+def fail(msg):
+    sys.exit("error_budget: " + msg)
+
+
+def load(path):
+    buf = oiio.ImageBuf(path)
+    if buf.has_error:
+        fail("%s: %s" % (path, buf.geterror()))
+    pix = buf.get_pixels(oiio.FLOAT)
+    if pix is None:
+        fail("%s: cannot read pixels: %s" % (path, buf.geterror()))
+    return buf, {n: pix[..., i] for i, n in enumerate(buf.spec().channelnames)}
+
+
+def rgb(img, prefix, path):
+    try:
+        return np.stack([img[prefix + c] for c in "RGB"], -1).astype(np.float64)
+    except KeyError as e:
+        fail("%s has no channel %s" % (path, e))
+
+
+def relmse_map(x, y):
+    return ((x - y) ** 2 / (y ** 2 + 0.01)).mean(-1)
+
+
+def relmse(x, y):
+    return float(relmse_map(x, y).mean())
+
+
+def denoise(tool, model, src, dst):
+    r = subprocess.run([tool, src, "--denoise:model=" + model, "-o", dst],
+                       stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    if r.returncode != 0:
+        fail("kpcntool --denoise on %s: %s" % (src, r.stderr.strip()))
+    return rgb(load(dst)[1], "", dst)
+
+
+def main():
+    ap = argparse.ArgumentParser(usage=__doc__.split("\n\n")[1])
+    ap.add_argument("noisy")
+    ap.add_argument("ref")
+    ap.add_argument("--model")
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    ap.add_argument("--kpcntool", default=os.path.join(here, "build/tools/kpcntool/kpcntool"))
+    ap.add_argument("--eps", type=float, default=0.00316)
+    a = ap.parse_args()
+    nbuf, n = load(a.noisy)
+    _, r = load(a.ref)
+    if n["R"].shape != r["R"].shape:
+        fail("%s and %s differ in size" % (a.noisy, a.ref))
+    d_n, s_n, a_n = (rgb(n, p, a.noisy) for p in ("diffuse.", "specular.", "albedo."))
+    d_r, s_r, a_r = (rgb(r, p, a.ref) for p in ("diffuse.", "specular.", "albedo."))
+    ref = rgb(r, "", a.ref)
+    out = {
+        "noisy": relmse(rgb(n, "", a.noisy), ref),
+        "irradiance_oracle": relmse((a_n + a.eps) * d_r / (a_r + a.eps) + s_r, ref),
+        "diffuse_exact": relmse(d_r + s_n, ref),
+        "specular_exact": relmse(d_n + s_r, ref),
+    }
+    if a.model:
+        with tempfile.TemporaryDirectory() as tmp:
+            full = denoise(a.kpcntool, a.model, a.noisy, os.path.join(tmp, "full.exr"))
+            spec = nbuf.spec()
+            pix = nbuf.get_pixels(oiio.FLOAT)
+            for i, name in enumerate(spec.channelnames):
+                if name.startswith("specular."):
+                    pix[..., i] = 0.0
+            nospec = oiio.ImageBuf(spec)
+            nospec.set_pixels(oiio.ROI(), pix)
+            path = os.path.join(tmp, "nospec.exr")
+            if not nospec.write(path):
+                fail("cannot write %s: %s" % (path, nospec.geterror()))
+            diff = denoise(a.kpcntool, a.model, path, os.path.join(tmp, "diffuse.exr"))
+        err = np.sort(relmse_map(full, ref).ravel())[::-1]
+        out.update({
+            "kpcn": float(err.mean()),
+            "kpcn_diffuse": relmse(diff + s_r, ref),
+            "kpcn_specular": relmse(d_r + (full - diff), ref),
+            "kpcn_top1pct": float(err[:max(1, err.size // 100)].sum() / err.sum()),
+        })
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    main()
