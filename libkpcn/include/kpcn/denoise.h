@@ -186,8 +186,9 @@ typedef struct kpcn_denoiser_options {
   int ensemble;           /* self-ensemble: 0 or 1 = off; 2, 4 or 8 = denoise that many
                              mirrored / rotated copies of the input and average the results
                              mapped back (kpcn_denoise_ensemble_xform), at that many times the
-                             cost. The transforms form a group, so the result is exactly
-                             equivariant to them (up to float summation order). */
+                             cost, plus one transformed copy of the input buffers and two
+                             RGB images of memory. The transforms form a group, so the result
+                             is exactly equivariant to them (up to float summation order). */
   kpcn_baseline_params bilateral;
   kpcn_baseline_params nlmeans;
 } kpcn_denoiser_options;
