@@ -389,8 +389,87 @@ static void presets_fast(void) {
   }
 }
 
+/* kpcn_model_widen: the widened model computes the same logits (exactly in the double
+ * reference, to rounding in oneDNN), its zero weights from the new channels receive non-zero
+ * gradients (the added capacity is trainable), and narrowing is refused. */
+static void widen(void) {
+  const cfg c = {27, 3, 16, 5, 2, 12, 14, {3, 3, 3, 3}, {1, 2, 4, 1}};
+  kpcn_arch a;
+  make_arch(&c, &a);
+  kpcn_model *m = NULL, *w = NULL, *bad = NULL;
+  CHECK(kpcn_model_create(&a, 77, &m) == KPCN_OK);
+  if (!m) return;
+  unsigned rs = 99;
+  randomize_bias(m, &rs);
+  CHECK(kpcn_model_set_meta(m, "train.iteration", "123") == KPCN_OK);
+  CHECK(kpcn_model_widen(m, 32, 5, &w) == KPCN_OK);
+  CHECK(kpcn_model_widen(m, 8, 5, &bad) == KPCN_ERR_INVALID_ARGUMENT && bad == NULL);
+  CHECK(strstr(kpcn_last_error(), "channels 8") != NULL);
+  if (!w) {
+    kpcn_model_destroy(m);
+    return;
+  }
+  CHECK(kpcn_model_arch(w)->channels == 32 && kpcn_model_arch(w)->n_hidden == 3);
+  CHECK(kpcn_model_get_meta(w, "train.iteration") != NULL);
+  const int K2 = c.K * c.K;
+  const size_t px = (size_t)c.N * c.H * c.W, nin = px * c.n_in, nout = px * K2;
+  float *in = malloc(nin * 4), *lm = malloc(nout * 4), *lw = malloc(nout * 4),
+        *dl = malloc(nout * 4);
+  fill(in, nin, &rs, 1.f);
+  fill(dl, nout, &rs, 1.f);
+  for (int b = 0; b < KPCN_N_BRANCHES; b++) {
+    nn_ref rm, rw;
+    nn_ref_init(&rm, m, (kpcn_branch)b, c.N, c.H, c.W);
+    nn_ref_init(&rw, w, (kpcn_branch)b, c.N, c.H, c.W);
+    const double *gm = nn_ref_forward(&rm, in), *gw = nn_ref_forward(&rw, in);
+    int same = 1;
+    for (size_t i = 0; i < nout; i++)
+      same &= gm[i] == gw[i];
+    CHECK(same);
+    /* gradient of a weight from a new channel into an old unit (layer 2, zero now) */
+    nn_ref_backward(&rw, dl);
+    kpcn_layer_view v;
+    kpcn_model_layer(w, (kpcn_branch)b, 2, &v);
+    double zero_w = 0, grad = 0;
+    for (int o = 0; o < 16; o++)
+      for (int i = 16; i < 32; i++)
+        for (int k = 0; k < 9; k++) {
+          const size_t j = ((size_t)o * 32 + i) * 9 + k;
+          zero_w += fabs(v.weight[j]);
+          grad += fabs(rw.gw[2][j]);
+        }
+    CHECK(zero_w == 0.0 && grad > 0.0);
+    nn_ref_free(&rm);
+    nn_ref_free(&rw);
+    kpcn_net_options o;
+    kpcn_net_options_defaults(&o);
+    o.batch = c.N, o.height = c.H, o.width = c.W;
+    kpcn_net *nm = NULL, *nw = NULL;
+    CHECK(kpcn_net_create(m, (kpcn_branch)b, &o, &nm) == KPCN_OK);
+    CHECK(kpcn_net_create(w, (kpcn_branch)b, &o, &nw) == KPCN_OK);
+    if (nm && nw) {
+      CHECK(kpcn_net_forward(nm, in, lm) == KPCN_OK && kpcn_net_forward(nw, in, lw) == KPCN_OK);
+      double e = 0, mx = 0;
+      for (size_t i = 0; i < nout; i++)
+        e = fmax(e, fabs((double)lm[i] - lw[i])), mx = fmax(mx, fabs((double)lm[i]));
+      printf("widen 16 -> 32 channels, branch %d: reference logits identical: %s, oneDNN %.2e\n", b,
+             same ? "yes" : "no", e / mx);
+      CHECK(e <= 1e-5 * mx);
+    }
+    kpcn_net_destroy(nm);
+    kpcn_net_destroy(nw);
+  }
+  free(in);
+  free(lm);
+  free(lw);
+  free(dl);
+  kpcn_model_destroy(m);
+  kpcn_model_destroy(w);
+}
+
 int main(void) {
   presets_fast();
+  widen();
   const cfg cs[] = {
       {3, 1, 16, 3, 2, 12, 10, {3, 3}, {1, 1}},
       {7, 2, 20, 5, 3, 13, 17, {5, 3, 1}, {1, 2, 1}},

@@ -244,6 +244,50 @@ static void test_validation_geomean(void) {
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT);
 }
 
+/* --widen: a 16-channel model widened to 32 validates to the same relMSE (same function),
+ * trains, and ends with 32 channels; without an init model, or narrower, it is an error. */
+static void test_widen(void) {
+  kpcn_aov_set *n, *r;
+  CHECK(tf_make_pair(&n, &r, 40, 32, 41, 0) == 0);
+  const char *vn[1] = {tf_tmp("w_noisy.exr")}, *vr[1] = {tf_tmp("w_ref.exr")};
+  CHECK(kpcn_exr_write_aov(vn[0], n, NULL) == KPCN_OK);
+  CHECK(kpcn_exr_write_aov(vr[0], r, NULL) == KPCN_OK);
+  kpcn_aov_destroy(n), kpcn_aov_destroy(r);
+  kpcn_train_settings s;
+  settings(&s, tf_tmp("w16.safetensors"));
+  s.nval = 1, s.val_noisy = vn, s.val_ref = vr;
+  kpcn_trainer *t = NULL;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (!t) return;
+  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
+  kpcn_val_result narrow, wide;
+  CHECK(kpcn_trainer_validate(t, &narrow) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+  settings(&s, tf_tmp("w32.safetensors"));
+  s.nval = 1, s.val_noisy = vn, s.val_ref = vr;
+  s.init_model = tf_tmp("w16.safetensors");
+  s.widen_channels = 32;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (!t) return;
+  CHECK(kpcn_model_arch(kpcn_trainer_model(t))->channels == 32);
+  CHECK(kpcn_trainer_validate(t, &wide) == KPCN_OK);
+  printf("widened 16 -> 32 channels: validation relMSE %.9g before, %.9g after\n", narrow.relmse,
+         wide.relmse);
+  CHECK(fabs(wide.relmse - narrow.relmse) <= 1e-6 * narrow.relmse);
+  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+  kpcn_model *m = NULL;
+  CHECK(kpcn_model_load(tf_tmp("w32.safetensors"), &m) == KPCN_OK);
+  CHECK(m && kpcn_model_arch(m)->channels == 32);
+  kpcn_model_destroy(m);
+  s.widen_channels = 8; /* narrower than the model */
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "w16.safetensors") != NULL);
+  s.init_model = NULL, s.widen_channels = 32;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "init model") != NULL);
+}
+
 static void test_validation(void) {
   kpcn_train_settings s;
   settings(&s, tf_tmp("v.safetensors"));
@@ -535,6 +579,7 @@ int main(void) {
   test_batch_wiring();
   test_determinism_and_resume();
   test_validation();
+  test_widen();
   test_validation_geomean();
   test_best_and_stage2_lr();
   test_average();

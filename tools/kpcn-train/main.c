@@ -25,6 +25,8 @@ static void usage(FILE *f) {
         "                            architecture overrides (hidden layers, width, conv size\n"
         "                            of every layer, prediction window, per-layer dilation)\n"
         "  --init MODEL              start from an existing model (fine-tuning)\n"
+        "  --widen C                 with --init: first widen it to C hidden channels (same\n"
+        "                            function: new units get zero outgoing weights)\n"
         "  --loss l1|l2|relmse|rell1|ssim   stage-1 loss (default l1)\n"
         "  --loss2 NAME              stage-2 loss (default: same as --loss)\n"
         "  --ssim-window N           SSIM window (odd, default 11), --loss-margin M\n"
@@ -271,6 +273,7 @@ int main(int argc, char **argv) {
     STR("--best-by", best_by)
     INT("--layers", 1, KPCN_NN_MAX_LAYERS - 1, layers)
     INT("--channels", 1, 1024, channels)
+    INT("--widen", 1, 1024, s.widen_channels)
     INT("--conv", 1, 11, conv)
     INT("--kernel", 3, KPCN_NN_MAX_KERNEL, kernel)
     INT("--ssim-window", 1, 63, ssim_win)

@@ -23,13 +23,14 @@
 #   relMSE, R,G,B: the trainer's own validation figure) and ship the lower; needs pairs;
 #   SNAPSHOT_NOTE: README text on how the snapshots were kept, if not by --snapshots),
 #   BEST_BY (mean: default; geomean: the best model, the SWA comparison and SHIP_IF_BELOW use
-#   the geometric mean of the per-pair relMSE instead, kpcn-train --best-by).
+#   the geometric mean of the per-pair relMSE instead, kpcn-train --best-by), WIDEN (with
+#   INIT: widen it to this many hidden channels first, kpcn-train --widen).
 # With a time budget the iteration count is unknown in advance, so the script first measures
 # the speed (20 iterations) and sets --iters to fit MINUTES, --stage1-iters to STAGE1_FRACTION.
 # Resumable: if the run is interrupted, re-running continues from its checkpoint.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/../.." && pwd)
-[ $# -ge 1 ] || { sed -n 2,28p "$0"; exit 2; }
+[ $# -ge 1 ] || { sed -n 2,29p "$0"; exit 2; }
 store=$1
 shift
 bin=${KPCN_TRAIN:-$here/build/tools/kpcn-train/kpcn-train}
@@ -67,6 +68,7 @@ case $BEST_BY in mean) vcol=7 ;; geomean) vcol=10 ;; *) echo "ship_model.sh: BES
 [ "$BEST_BY" = geomean ] && args+=(--best-by geomean)
 [ -n "${LR2:-}" ] && args+=(--lr2 "$LR2")
 [ -n "${INIT:-}" ] && args+=(--init "$INIT")
+[ -n "${WIDEN:-}" ] && args+=(--widen "$WIDEN")
 [ -n "${TIME_LIMIT:-}" ] && args+=(--time-limit "$TIME_LIMIT")
 snapdir=${SNAPSHOT_DIR:-$work/snapshots}
 [ -n "${SWA_FROM:-}" ] && [ -z "${SNAPSHOT_DIR:-}" ] && args+=(--snapshots "$snapdir")
@@ -146,6 +148,7 @@ cpu=$(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -1)
   echo "| patch store | \`$(basename "$store")\` |"
   echo "| dataset recipe | ${DATASET_RECIPE:-see docs/dataset.md} |"
   [ -n "${INIT:-}" ] && echo "| initialised from | \`$(basename "$INIT")\` (${INIT_NOTE:-the previously shipped model; its own README is in git history}) |"
+  [ -n "${WIDEN:-}" ] && echo "| widened | to $WIDEN hidden channels before training (\`kpcn-train --widen\`: same function, new units start with zero outgoing weights) |"
   echo "| iterations | $done_iters of $iters planned (stage 1: $stage1, stage-2 loss $LOSS2) |"
   echo "| training time | ${secs} s |"
   echo "| hardware | ${cpu:-unknown CPU}, $(nproc) cores, threads=$THREADS |"

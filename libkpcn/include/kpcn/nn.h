@@ -111,6 +111,13 @@ typedef struct kpcn_layer_view {
 kpcn_status kpcn_model_create(const kpcn_arch *arch, uint64_t seed, kpcn_model **out);
 /* Deep copy. */
 kpcn_status kpcn_model_clone(const kpcn_model *m, kpcn_model **out);
+/* A copy of m with `channels` (>= m's) hidden channels that computes the same function
+ * (function-preserving widening, Net2Net-style): the old units keep their weights and
+ * biases and get zero weights from the new channels; the new units get Xavier weights
+ * (deterministic in seed) and zero biases. Their outgoing weights start at zero, so the
+ * logits are unchanged (up to summation order), and training can use the added capacity
+ * from the first step (the zero weights receive gradients). Metadata is copied. */
+kpcn_status kpcn_model_widen(const kpcn_model *m, int channels, uint64_t seed, kpcn_model **out);
 void kpcn_model_destroy(kpcn_model *m);
 
 const kpcn_arch *kpcn_model_arch(const kpcn_model *m);

@@ -211,6 +211,9 @@ typedef struct kpcn_train_settings {
   const char *store_path;  /* patch store (.kps), required */
   kpcn_arch arch;          /* architecture (inputs are set by the trainer); from a preset */
   const char *init_model;  /* optional model file to start from (fine-tuning) */
+  int widen_channels;      /* > 0 (needs init_model): widen it to this many hidden channels
+                              first (kpcn_model_widen with `seed`: same function, more
+                              capacity); 0 = as it is */
   kpcn_loss_kind loss1;    /* stage-1 loss, default l1 (seed §4.4) */
   kpcn_loss_kind loss2;    /* stage-2 loss, default l1 (seed fine-tunes with ssim) */
   kpcn_loss_settings loss; /* defaults */

@@ -79,12 +79,8 @@ kpcn_status kpcn_model_create(const kpcn_arch *arch, uint64_t seed, kpcn_model *
   return KPCN_OK;
 }
 
-kpcn_status kpcn_model_clone(const kpcn_model *src, kpcn_model **out) {
-  if (!src || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_clone: NULL argument");
-  *out = NULL;
-  kpcn_model *m;
-  KPCN_TRY(kpcn_model_alloc(&src->arch, &m));
-  memcpy(m->block, src->block, src->block_floats * sizeof(float));
+/* Copies src's user metadata into m; on failure destroys m. */
+static kpcn_status copy_meta(kpcn_model *m, const kpcn_model *src) {
   for (int i = 0; i < src->n_meta; i++) {
     kpcn_status s = kpcn_model_set_meta(m, src->meta_key[i], src->meta_val[i]);
     if (s != KPCN_OK) {
@@ -92,6 +88,46 @@ kpcn_status kpcn_model_clone(const kpcn_model *src, kpcn_model **out) {
       return s;
     }
   }
+  return KPCN_OK;
+}
+
+kpcn_status kpcn_model_clone(const kpcn_model *src, kpcn_model **out) {
+  if (!src || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_clone: NULL argument");
+  *out = NULL;
+  kpcn_model *m;
+  KPCN_TRY(kpcn_model_alloc(&src->arch, &m));
+  memcpy(m->block, src->block, src->block_floats * sizeof(float));
+  KPCN_TRY(copy_meta(m, src));
+  *out = m;
+  return KPCN_OK;
+}
+
+kpcn_status kpcn_model_widen(const kpcn_model *src, int channels, uint64_t seed, kpcn_model **out) {
+  if (!src || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_widen: NULL argument");
+  *out = NULL;
+  if (channels < src->arch.channels)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "kpcn_model_widen: channels %d is fewer than the model's %d", channels,
+                     src->arch.channels);
+  kpcn_arch a = src->arch;
+  a.channels = channels;
+  kpcn_model *m;
+  KPCN_TRY(kpcn_model_create(&a, seed, &m)); /* Xavier everywhere, zero biases */
+  for (int b = 0; b < KPCN_N_BRANCHES; b++)
+    for (int l = 0; l <= a.n_hidden; l++) {
+      const int k2 = a.conv_size[l] * a.conv_size[l];
+      const int oo = kpcn_arch_layer_out(&src->arch, l), io = kpcn_arch_layer_in(&src->arch, l);
+      const int in = kpcn_arch_layer_in(&a, l);
+      /* rows of the old units: their old weights, and zero from every new input channel, so
+       * they compute what they did; rows of new units keep their random weights */
+      for (int o = 0; o < oo; o++) {
+        float *row = m->w[b][l] + (size_t)o * in * k2;
+        memcpy(row, src->w[b][l] + (size_t)o * io * k2, sizeof(float) * (size_t)io * k2);
+        memset(row + (size_t)io * k2, 0, sizeof(float) * (size_t)(in - io) * k2);
+        m->b[b][l][o] = src->b[b][l][o];
+      }
+    }
+  KPCN_TRY(copy_meta(m, src));
   *out = m;
   return KPCN_OK;
 }

@@ -223,8 +223,18 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
     int n = kpcn_features_channel_names(KPCN_BRANCH_DIFFUSE, names, KPCN_NN_MAX_INPUTS);
     GO(kpcn_arch_set_inputs(&t->arch, n, names));
   }
+  if (s->widen_channels > 0 && !t->init_model)
+    GO(kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "widen_channels needs an init model"));
   if (t->init_model) {
     GO(kpcn_model_load(t->init_model, &t->model));
+    if (s->widen_channels > 0) {
+      kpcn_model *wide = NULL;
+      st = kpcn_model_widen(t->model, s->widen_channels, s->seed, &wide);
+      if (st != KPCN_OK) kpcn_fail_context("widening model '%s'", t->init_model);
+      GO(st);
+      kpcn_model_destroy(t->model);
+      t->model = wide;
+    }
     t->arch = *kpcn_model_arch(t->model);
     char what[600];
     snprintf(what, sizeof what, "model '%s'", t->init_model);
