@@ -421,6 +421,30 @@ static void test_ensemble(void) {
   kpcn_augment_xform x;
   CHECK(kpcn_denoise_ensemble_xform(0, &x) == KPCN_OK && !x.mirror_h && !x.rot90);
   CHECK(kpcn_denoise_ensemble_xform(8, &x) != KPCN_OK);
+  /* closure: x_j after x_i is some x_k with k < n, for n = 2, 4, 8 (on a 5 x 5 ramp) */
+  {
+    float img[25], t1[25], t2[25], tk[25];
+    for (int i = 0; i < 25; i++)
+      img[i] = (float)i;
+    int closed = 1;
+    for (int n = 2; n <= 8; n *= 2)
+      for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+          kpcn_augment_xform xi, xj, xk;
+          kpcn_denoise_ensemble_xform(i, &xi);
+          kpcn_denoise_ensemble_xform(j, &xj);
+          kpcn_augment_planes(t1, img, 1, NULL, 5, 5, &xi, 1);
+          kpcn_augment_planes(t2, t1, 1, NULL, 5, 5, &xj, 1);
+          int found = 0;
+          for (int k = 0; k < n && !found; k++) {
+            kpcn_denoise_ensemble_xform(k, &xk);
+            kpcn_augment_planes(tk, img, 1, NULL, 5, 5, &xk, 1);
+            found = memcmp(tk, t2, sizeof tk) == 0;
+          }
+          closed &= found;
+        }
+    CHECK(closed);
+  }
   /* by hand: mean over members of inverse(denoise(transform(a))), in member order */
   for (int n = 2; n <= 8; n *= 2) {
     memset(want, 0, sizeof(float) * N);
