@@ -9,6 +9,8 @@
  *                                 its bundled reference (also part of the default run)
  *   --threads N  --tile N  --preset NAME (only that preset)  --no-baselines
  *   --direct-conv                 fp32 without Winograd convolutions (the pre-Winograd path)
+ *   --ensemble N                  self-ensemble of N (2, 4, 8) members: ms/Mpx of the whole
+ *                                 ensemble; GFLOP/s count the members' FLOPs
  *   --max-tiles N                 stop (through the progress callback) after N tiles of the
  *                                 diffuse pass: peak memory is reached by the first full tile
  *                                 (buffers are sized once), so --4k --max-tiles 2 measures the
@@ -41,6 +43,7 @@ static double peak_rss_mib(void) {
 }
 
 static int g_max_tiles = 0, g_calls = 0, g_direct = 0;
+static int g_ensemble = 0; /* --ensemble N: kpcn_denoiser_options.ensemble */
 static int stop_after(void *user, double f) {
   (void)user;
   (void)f;
@@ -84,6 +87,7 @@ static void bench_kpcn(kpcn_aov_set *a, const char *preset, int bf16, int tile, 
   o.tile = tile;
   o.nthreads = nthreads;
   o.direct_conv = g_direct;
+  o.ensemble = g_ensemble;
   kpcn_denoiser *d = NULL;
   float *out = malloc(sizeof(float) * 3 * kpcn_aov_plane_size(a));
   kpcn_status es = kpcn_denoiser_create_with_model(&d, m, &o);
@@ -121,7 +125,7 @@ static void bench_kpcn(kpcn_aov_set *a, const char *preset, int bf16, int tile, 
     kpcn_denoise_stats st;
     kpcn_denoiser_get_stats(d, &st);
     double px = (double)kpcn_aov_plane_size(a), mpx = px * 1e-6;
-    double useful = 2.0 * kpcn_arch_flops_per_pixel(&arch) * px;
+    double useful = 2.0 * kpcn_arch_flops_per_pixel(&arch) * px * (g_ensemble > 1 ? g_ensemble : 1);
     char grid[32];
     snprintf(grid, sizeof grid, "%dx%d", st.tile_w, st.tile_h);
     printf("kpcn %-6s %-4s %-4s tile %-9s %9.1f ms/Mpx  conv %6.1f GFLOP/s  e2e %6.1f GFLOP/s  "
@@ -230,10 +234,12 @@ int main(int argc, char **argv) {
       quality_only = 1;
     } else if (!strcmp(argv[i], "--direct-conv")) {
       g_direct = 1;
+    } else if (!strcmp(argv[i], "--ensemble") && i + 1 < argc) {
+      g_ensemble = atoi(argv[++i]);
     } else {
       fprintf(stderr, "usage: bench_denoise [--size WxH] [--4k] [--threads N] [--tile N] "
                       "[--preset NAME] [--no-baselines] [--max-tiles N] [--bf16-quality] "
-                      "[--direct-conv]\n");
+                      "[--direct-conv] [--ensemble N]\n");
       return 2;
     }
   }
