@@ -130,8 +130,12 @@ if [ "${README_ONLY:-0}" != 1 ]; then
   cp "$work/model.safetensors.png" "$outdir/$NAME-curves.png"
   cp "$work/model.safetensors.csv" "$outdir/$NAME-log.csv"
 fi
-last=$(awk -F, 'NR > 1 && $7 != "" { r = $7; s = $8; p = $9; it = $1 } END { print it "," r "," s "," p }' "$work/model.safetensors.csv")
-best=$(awk -F, -v c="$vcol" 'NR > 1 && $c != "" && (v == "" || $c + 0 < v + 0) { v = $c; b = $7; s = $8; p = $9; it = $1 } END { print it "," b "," s "," p }' "$work/model.safetensors.csv")
+# validation rows: iteration, mean relMSE, SSIM, PSNR (and the geometric mean when selecting by it)
+g=$([ "$BEST_BY" = geomean ] && echo 1 || echo 0)
+last=$(awk -F, -v g="$g" 'NR > 1 && $7 != "" { r = $7; s = $8; p = $9; it = $1; q = $10 } END { print it "," r "," s "," p (g ? "," q : "") }' "$work/model.safetensors.csv")
+best=$(awk -F, -v c="$vcol" -v g="$g" 'NR > 1 && $c != "" && (v == "" || $c + 0 < v + 0) { v = $c; b = $7; s = $8; p = $9; it = $1; q = $10 } END { print it "," b "," s "," p (g ? "," q : "") }' "$work/model.safetensors.csv")
+cols="iter, relMSE, SSIM, PSNR dB$([ "$g" = 1 ] && echo ", geometric-mean relMSE")"
+score=$([ "$g" = 1 ] && echo "geometric-mean validation relMSE" || echo "validation relMSE")
 done_iters=$(awk -F, 'NR > 1 { it = $1 } END { print it }' "$work/model.safetensors.csv")
 secs=$(awk -F, 'NR > 1 { s = $6 } END { print s }' "$work/model.safetensors.csv")
 cpu=$(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -1)
@@ -153,13 +157,13 @@ cpu=$(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -1)
   echo "| training time | ${secs} s |"
   echo "| hardware | ${cpu:-unknown CPU}, $(nproc) cores, threads=$THREADS |"
   [ "$BEST_BY" = geomean ] && echo "| selection | by the geometric mean of the per-pair validation relMSE (\`--best-by geomean\`; the relMSE columns below are means) |"
-  echo "| last validation (iter, relMSE, SSIM, PSNR dB) | $last |"
+  echo "| last validation ($cols) | $last |"
   if [ -n "${SWA_FROM:-}" ]; then
-    [ "${KEEP_BEST:-0}" = 1 ] && echo "| best validation (iter, relMSE, SSIM, PSNR dB) | $best |"
-    echo "| weight average (SWA) | mean of $swa_n checkpoints, iterations $swa_from to $done_iters ($(basename "$snapdir")/, ${SNAPSHOT_NOTE:-kept by \`--snapshots\`}): validation relMSE $swa_score |"
+    [ "${KEEP_BEST:-0}" = 1 ] && echo "| best validation ($cols) | $best |"
+    echo "| weight average (SWA) | mean of $swa_n checkpoints, iterations $swa_from to $done_iters ($(basename "$snapdir")/, ${SNAPSHOT_NOTE:-kept by \`--snapshots\`}): $score $swa_score |"
     echo "| shipped | $([ "$shipped" = "$work/swa.safetensors" ] && echo "the weight average (lower validation relMSE)" || echo "the $col model (lower validation relMSE than the average)") |"
   elif [ "${KEEP_BEST:-0}" = 1 ]; then
-    echo "| shipped: best validation (iter, relMSE, SSIM, PSNR dB) | $best |"
+    echo "| shipped: best validation ($cols) | $best |"
   fi
   echo
   echo "Exact command:"
