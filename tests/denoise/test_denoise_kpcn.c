@@ -99,17 +99,25 @@ static void reference(kpcn_model *m, const kpcn_aov_set *a, double *out) {
   free(filt[1]);
 }
 
+/* One denoiser with options o (and progress callback fn, may be NULL) on a: out [3][H][W]. */
+static kpcn_status run_opts(kpcn_model *m, const kpcn_aov_set *a, const kpcn_denoiser_options *o,
+                            kpcn_progress_fn fn, float *out) {
+  kpcn_denoiser *d = NULL;
+  kpcn_status s = kpcn_denoiser_create_with_model(&d, m, o);
+  if (s == KPCN_OK && fn) kpcn_denoiser_set_progress(d, fn, NULL);
+  if (s == KPCN_OK) s = kpcn_denoiser_execute_aov(d, a, out);
+  kpcn_denoiser_destroy(d);
+  return s;
+}
+
 static kpcn_status run(kpcn_model *m, const kpcn_aov_set *a, int tile, int bf16, float *out) {
   kpcn_denoiser_options o;
   kpcn_denoiser_options_defaults(&o);
   o.tile = tile;
   o.bf16 = bf16;
   o.nthreads = 2;
-  kpcn_denoiser *d = NULL;
-  kpcn_status s = kpcn_denoiser_create_with_model(&d, m, &o);
-  if (s == KPCN_OK) s = kpcn_denoiser_execute_aov(d, a, out);
+  kpcn_status s = run_opts(m, a, &o, NULL, out);
   if (s != KPCN_OK) fprintf(stderr, "denoise: %s\n", kpcn_last_error());
-  kpcn_denoiser_destroy(d);
   return s;
 }
 
@@ -370,7 +378,7 @@ static void test_reuse_between_executes(void) {
   kpcn_model_destroy(m);
 }
 
-/* ensemble = n with the given options (and progress callback): out is [3][H][W]. */
+/* ensemble = n (tile, progress callback fn may be NULL): out is [3][H][W]. */
 static kpcn_status run_ensemble(kpcn_model *m, const kpcn_aov_set *a, int n, int tile,
                                 kpcn_progress_fn fn, float *out) {
   kpcn_denoiser_options o;
@@ -378,12 +386,7 @@ static kpcn_status run_ensemble(kpcn_model *m, const kpcn_aov_set *a, int n, int
   o.tile = tile;
   o.nthreads = 2;
   o.ensemble = n;
-  kpcn_denoiser *d = NULL;
-  kpcn_status s = kpcn_denoiser_create_with_model(&d, m, &o);
-  if (s == KPCN_OK && fn) kpcn_denoiser_set_progress(d, fn, NULL);
-  if (s == KPCN_OK) s = kpcn_denoiser_execute_aov(d, a, out);
-  kpcn_denoiser_destroy(d);
-  return s;
+  return run_opts(m, a, &o, fn, out);
 }
 
 /* Applies transform i of the ensemble to the RGB planes of a W x H image (out: its size). */
