@@ -157,6 +157,19 @@ int main(void) {
   expect_fail("bad fov",
               "{\"primitives\":[" LIGHT "],\"camera\":{\"type\":\"pinhole\",\"fov\":180}}",
               "camera.fov", NULL);
+  /* finite but absurd magnitudes: Embree asserted on the camera rays (found by fuzzing) */
+  expect_fail("huge aperture",
+              "{\"primitives\":[" LIGHT "],\"camera\":{\"type\":\"thinlens\","
+              "\"aperture_size\":9.2e18}}",
+              "camera", "aperture_size");
+  expect_fail("huge scale",
+              "{\"primitives\":[" LIGHT ",{\"type\":\"cube\",\"bsdf\":{\"type\":\"lambert\"},"
+              "\"transform\":{\"scale\":1e30}}]}",
+              "primitives[1]", "1e+15");
+  expect_fail("huge camera position",
+              "{\"primitives\":[" LIGHT "],\"camera\":{\"type\":\"pinhole\","
+              "\"transform\":{\"position\":[0,0,-1e17],\"look_at\":[0,0,0]}}}",
+              "camera", "position");
   /* a minimal valid scene loads */
   CHECK(kpcn_scene_load_json("{\"primitives\":[" LIGHT "]}", NULL, NULL, &s) == KPCN_OK);
   kpcn_scene_destroy(s);

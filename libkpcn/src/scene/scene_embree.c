@@ -81,7 +81,58 @@ static RTCGeometry make_geometry(RTCDevice dev, const kpcn_prim *p) {
   return g;
 }
 
+/* Largest |coordinate| primitive p reaches (its vertices, or centre ± radius). */
+static float prim_reach(const kpcn_prim *p) {
+  float m = 0.0f;
+  kpcn_vec3 pts[4];
+  int n = 0;
+  switch (p->type) {
+  case KPCN_PRIM_QUAD:
+    pts[0] = p->base, pts[1] = kv3_add(p->base, p->e0), pts[2] = kv3_add(p->base, p->e1);
+    pts[3] = kv3_add(pts[1], p->e1), n = 4;
+    break;
+  case KPCN_PRIM_CUBE: /* the corners lie within |centre| + the half-diagonal */
+    m = kv3_length(p->half);
+    pts[0] = p->center, n = 1;
+    break;
+  case KPCN_PRIM_SPHERE:
+  case KPCN_PRIM_DISK: m = p->radius, pts[0] = p->center, n = 1; break;
+  case KPCN_PRIM_MESH:
+    for (size_t i = 0; i < 3 * (size_t)p->mesh.nverts; i++)
+      m = fmaxf(m, fabsf(p->mesh.pos[i]));
+    return m;
+  case KPCN_PRIM_INFINITE_SPHERE: return 0.0f;
+  }
+  float c = 0.0f;
+  for (int i = 0; i < n; i++)
+    c = fmaxf(c, fmaxf(fmaxf(fabsf(pts[i].x), fabsf(pts[i].y)), fabsf(pts[i].z)));
+  return c + m; /* NaN stays NaN: the caller's test rejects it */
+}
+
+/* Embree asserts (or returns garbage) on rays whose origin is beyond ~1.8e18 and on geometry
+ * with non-finite bounds; a finite but absurd scale, position or aperture in the scene file
+ * gets there through products. Refuse such scenes before building, naming the culprit. */
+static kpcn_status check_extent(const kpcn_scene *s) {
+  for (int i = 0; i < s->nprims; i++) {
+    float r = prim_reach(&s->prims[i]);
+    if (!(r <= KPCN_SCENE_MAX_EXTENT))
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                       "primitives[%d]%s%s%s: coordinates reach %g; supported |x| <= %g", i,
+                       s->prims[i].name[0] ? " ('" : "", s->prims[i].name,
+                       s->prims[i].name[0] ? "')" : "", (double)r, (double)KPCN_SCENE_MAX_EXTENT);
+  }
+  const kpcn_camera *c = &s->cam;
+  float cr = fmaxf(fmaxf(fabsf(c->pos.x), fabsf(c->pos.y)), fabsf(c->pos.z));
+  if (c->thinlens) cr += c->aperture;
+  if (!(cr <= KPCN_SCENE_MAX_EXTENT))
+    return kpcn_fail(
+        KPCN_ERR_INVALID_ARGUMENT, "camera: position%s reaches %g; supported |x| <= %g",
+        c->thinlens ? " plus aperture_size" : "", (double)cr, (double)KPCN_SCENE_MAX_EXTENT);
+  return KPCN_OK;
+}
+
 kpcn_status kpcn_scene_build_embree(kpcn_scene *s) {
+  KPCN_TRY(check_extent(s));
   RTCDevice dev = rtcNewDevice(NULL);
   if (!dev)
     return kpcn_fail(KPCN_ERR_INTERNAL, "cannot create the Embree device (error %d)",

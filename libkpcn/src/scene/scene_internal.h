@@ -118,7 +118,12 @@ kpcn_status kpcn_mesh_load(const char *path, const char *json_path, kpcn_mesh *m
 void kpcn_mesh_free(kpcn_mesh *m);
 
 /* ---- scene_embree.c ---- */
-/* Creates the Embree device/scene from scene->prims. */
+/* Largest |coordinate| a scene may reach (vertices, sphere/disc extents, camera position plus
+ * aperture): far enough inside Embree's valid ray range (|origin| < 1.8e18) that ray offsets
+ * and hit points computed from it stay finite and valid. */
+#define KPCN_SCENE_MAX_EXTENT 1e15f
+
+/* Checks the scene's extent, then creates the Embree device/scene from scene->prims. */
 kpcn_status kpcn_scene_build_embree(struct kpcn_scene *scene);
 void kpcn_scene_release_embree(struct kpcn_scene *scene);
 

@@ -352,7 +352,9 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
   c->filter = KPCN_FILTER_TENT;
   c->focus_dist = 1.0f;
   c->aperture = 0.001f;
-  kpcn_vec3 pos = kv3(0, 0, 2), look = kv3(0, 0, -1), up = kv3(0, 1, 0);
+  /* view direction kept as a direction: (pos + dir) - pos in float loses it far from the
+   * origin (ulp(1e7) = 1) */
+  kpcn_vec3 pos = kv3(0, 0, 2), dir = kv3(0, 0, -3), up = kv3(0, 1, 0);
   if (!cj) goto finish;
   if (!cJSON_IsObject(cj)) return kpcn_fail(KPCN_ERR_FORMAT, "camera: expected an object");
   static const char *known[] = {"type",
@@ -434,10 +436,11 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
     kpcn_xform x;
     KPCN_TRY(kpcn_xform_parse(tj, "camera.transform", &x));
     pos = kpcn_xform_point(&x, kv3s(0));
-    look = kv3_add(pos, kpcn_xform_column(&x, 2));
+    dir = kpcn_xform_column(&x, 2);
     up = kpcn_xform_column(&x, 1);
   } else { /* Tungsten's older camera fields */
     const char *keys[3] = {"position", "lookAt", "up"};
+    kpcn_vec3 look = kv3_add(pos, dir);
     kpcn_vec3 *dst[3] = {&pos, &look, &up};
     for (int k = 0; k < 3; k++) {
       const cJSON *a = cJSON_GetObjectItemCaseSensitive(cj, keys[k]);
@@ -447,16 +450,17 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
       float v[3];
       for (int i = 0; i < 3; i++) {
         const cJSON *e = cJSON_GetArrayItem(a, i);
-        if (!cJSON_IsNumber(e) || !isfinite(e->valuedouble))
+        if (!cJSON_IsNumber(e) || !isfinite((float)e->valuedouble))
           return kpcn_fail(KPCN_ERR_FORMAT, "camera.%s[%d]: expected a finite number", keys[k], i);
         v[i] = (float)e->valuedouble;
       }
       *dst[k] = kv3(v[0], v[1], v[2]);
     }
+    dir = kv3_sub(look, pos);
   }
 finish:
   c->pos = pos;
-  c->fwd = kv3_normalize(kv3_sub(look, pos));
+  c->fwd = kv3_normalize(dir);
   c->right = kv3_normalize(kv3_cross(c->fwd, up));
   if (!(kv3_length2(c->fwd) > 0.5f) || !(kv3_length2(c->right) > 0.5f))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera.transform: degenerate view (look_at/up)");
