@@ -170,6 +170,9 @@ int main(void) {
               "{\"primitives\":[" LIGHT "],\"camera\":{\"type\":\"pinhole\","
               "\"transform\":{\"position\":[0,0,-1e17],\"look_at\":[0,0,0]}}}",
               "camera", "position");
+  expect_fail("ignored field, wrong type",
+              "{\"primitives\":[" LIGHT "],\"renderer\":{\"output_file\":0.5}}",
+              "renderer.output_file", "file name");
   /* a minimal valid scene loads */
   CHECK(kpcn_scene_load_json("{\"primitives\":[" LIGHT "]}", NULL, NULL, &s) == KPCN_OK);
   kpcn_scene_destroy(s);

@@ -26,6 +26,31 @@ static kpcn_status check_fields(const cJSON *obj, const char *path, const char *
   return KPCN_OK;
 }
 
+/* Fields accepted without effect (Tungsten's own output and scheduling settings) must still
+ * have Tungsten's types: a number where a file name belongs is a broken scene file, not
+ * something to ignore. */
+enum { JT_STR = 1, JT_BOOL = 2, JT_NUM = 4, JT_ARR = 8 };
+typedef struct kpcn_typed_field {
+  const char *key;
+  int types; /* JT_* mask */
+  const char *what;
+} kpcn_typed_field;
+
+static kpcn_status check_types(const cJSON *obj, const char *path, const kpcn_typed_field *f) {
+  for (; f->key; f++) {
+    const cJSON *it = cJSON_GetObjectItemCaseSensitive(obj, f->key);
+    if (!it) continue;
+    int t = cJSON_IsString(it)   ? JT_STR
+            : cJSON_IsBool(it)   ? JT_BOOL
+            : cJSON_IsNumber(it) ? JT_NUM
+            : cJSON_IsArray(it)  ? JT_ARR
+                                 : 0;
+    if (!(t & f->types))
+      return kpcn_fail(KPCN_ERR_FORMAT, "%s.%s: expected %s", path, f->key, f->what);
+  }
+  return KPCN_OK;
+}
+
 static kpcn_status get_number(const cJSON *obj, const char *key, const char *path, double *v,
                               int *found) {
   const cJSON *it = cJSON_GetObjectItemCaseSensitive(obj, key);
@@ -373,6 +398,11 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
                                 "spp",
                                 NULL};
   KPCN_TRY(check_fields(cj, path, known));
+  static const kpcn_typed_field typed[] = {{"tonemap", JT_STR, "a tonemapper name"},
+                                           {"file", JT_STR, "a file name"},
+                                           {"spp", JT_NUM, "a number"},
+                                           {NULL, 0, NULL}};
+  KPCN_TRY(check_types(cj, path, typed));
   const char *type = get_string(cj, "type");
   if (!type) return kpcn_fail(KPCN_ERR_FORMAT, "camera.type: missing or not a string");
   if (strcmp(type, "thinlens") == 0)
@@ -517,6 +547,22 @@ static kpcn_status parse_renderer(kpcn_scene *s, const cJSON *rj) {
                                 "output_buffers",
                                 NULL};
   KPCN_TRY(check_fields(rj, "renderer", known));
+  /* checkpoint_interval was an integer in older Tungsten versions, a duration string later */
+  static const kpcn_typed_field typed[] = {
+      {"output_file", JT_STR, "a file name"},
+      {"hdr_output_file", JT_STR, "a file name"},
+      {"resume_render_file", JT_STR, "a file name"},
+      {"overwrite_output_files", JT_BOOL, "true or false"},
+      {"adaptive_sampling", JT_BOOL, "true or false"},
+      {"enable_resume_render", JT_BOOL, "true or false"},
+      {"stratified_sampler", JT_BOOL, "true or false"},
+      {"scene_bvh", JT_BOOL, "true or false"},
+      {"spp_step", JT_NUM, "a number"},
+      {"checkpoint_interval", JT_STR | JT_NUM, "a duration string or a number"},
+      {"timeout", JT_STR | JT_NUM, "a duration string or a number"},
+      {"output_buffers", JT_ARR, "an array"},
+      {NULL, 0, NULL}};
+  KPCN_TRY(check_types(rj, "renderer", typed));
   return get_int(rj, "spp", "renderer", &s->spp, 1, 1 << 24);
 }
 
