@@ -30,6 +30,7 @@ expect_fail "modifier 'range' must be positive" "" "$REF" "$REF" --psnr:range=-1
 expect_fail "modifier 'display' must be srgb or linear (got 'rec2020')" "" "$REF" "$REF" --ssim:display=rec2020
 expect_fail "unknown metric 'foo'" "" "$REF" "$REF" --errormap:metric=foo
 expect_fail "n=5 but the stack holds 2" "" "$REF" "$REF" --mosaic:n=5
+expect_fail "fontsize=0 is outside [1, 1000]" "" "$REF" "$REF" --mosaic:labels=a,b:fontsize=0
 expect_fail "thread count must be an integer" "" --threads many "$REF"
 # OCIO.
 expect_fail "view 'Nope' of display 'sRGB' is not in OCIO config" out.png "$REF" --ociodisplay:view=Nope -o out.png

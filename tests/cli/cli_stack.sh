@@ -51,4 +51,10 @@ grep -qF "512x256" out.txt && pass "mosaic n=2" || fail "$(cat out.txt)"
 run_ok "$REF" "$REF" --mosaic:labels=a,b:font=NoSuchFont -o nofont.exr
 grep -q "warning: --mosaic: labels not drawn" err.txt && [ -f nofont.exr ] && pass "font fallback" ||
   fail "font fallback: $(cat err.txt)"
+# A font larger than the tile: OIIO's render_text aborted the process (found by fuzzing); now
+# the labels are skipped with a warning naming the size, and the mosaic is written.
+oiiotool "$REF" --cut 0,0,23,23 -o tile24.exr
+run_ok tile24.exr tile24.exr --mosaic:labels=a,b:fontsize=90 -o big.exr
+grep -qF "fontsize 90 does not fit a 24x24 tile" err.txt && [ -f big.exr ] && pass "oversized labels" ||
+  fail "oversized labels: $(cat err.txt)"
 finish

@@ -382,7 +382,11 @@ bool cmd_mosaic(Context &ctx, const Modifiers &m, const std::vector<std::string>
   ImageBuf dst(spec);
   IBA::zero(dst);
   int x = 0;
-  int fontsize = (int)m.integer("fontsize", 16);
+  long fontsize = m.integer("fontsize", 16);
+  if (fontsize < 1 || fontsize > 1000) {
+    err = "fontsize=" + std::to_string(fontsize) + " is outside [1, 1000]";
+    return false;
+  }
   std::string font = m.str("font", "DejaVuSans");
   std::vector<float> white((size_t)nch, 1.0f);
   bool warned = false;
@@ -392,8 +396,17 @@ bool cmd_mosaic(Context &ctx, const Modifiers &m, const std::vector<std::string>
       err = dst.geterror();
       return false;
     }
+    /* OIIO 2.4's render_text asserts (aborts) when the text's origin lies outside the image,
+     * so a label that cannot start inside its tile is not drawn */
+    if (!labels.empty() && !warned && (b.spec().width <= 4 || 4 + fontsize > H)) {
+      std::fprintf(stderr,
+                   "kpcntool: warning: --mosaic: labels not drawn (fontsize %ld does not fit "
+                   "a %dx%d tile)\n",
+                   fontsize, b.spec().width, H);
+      warned = true;
+    }
     if (!labels.empty() && !warned &&
-        !IBA::render_text(dst, x + 4, 4 + fontsize, labels[i], fontsize, font, white,
+        !IBA::render_text(dst, x + 4, 4 + (int)fontsize, labels[i], (int)fontsize, font, white,
                           IBA::TextAlignX::Left, IBA::TextAlignY::Baseline, 1)) {
       std::fprintf(stderr, "kpcntool: warning: --mosaic: labels not drawn (%s)\n",
                    dst.geterror().c_str());
