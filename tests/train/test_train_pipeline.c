@@ -403,6 +403,22 @@ static void test_snapshots(void) {
   }
   kpcn_model_destroy(m);
   kpcn_trainer_destroy(t);
+  /* ckpt_path "" = no checkpoint (it tried to rename its temp file to ""): the run and its
+   * snapshots still complete; resuming from no checkpoint is refused by name */
+  settings(&s, tf_tmp("nockpt.safetensors"));
+  s.ckpt_every = 2;
+  s.ckpt_path = "";
+  s.snapshot_dir = tf_tmp("snaps_nockpt");
+  t = NULL;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  CHECK(t && kpcn_trainer_run(t, NULL) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+  snprintf(p2, sizeof p2, "%s/ckpt_000002.safetensors", s.snapshot_dir);
+  CHECK(access(s.out_path, F_OK) == 0 && access(p2, F_OK) == 0);
+  s.resume = 1;
+  t = NULL;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT && t == NULL);
+  CHECK(strstr(kpcn_last_error(), "checkpoint path is empty") != NULL);
 }
 
 /* Weight averaging of two checkpoints and a model file against the mean computed here; a

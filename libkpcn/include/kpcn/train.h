@@ -234,7 +234,7 @@ typedef struct kpcn_train_settings {
   int64_t ckpt_every;                 /* 0 = only at the end / on stop */
   double time_limit_s;                /* 0 = none: stop cleanly, checkpoint, stopped = 1 */
   const char *out_path;               /* final model, required (written atomically) */
-  const char *ckpt_path;              /* NULL = "<out_path>.ckpt" */
+  const char *ckpt_path;              /* NULL = "<out_path>.ckpt"; "" = none */
   const char *csv_path;               /* NULL = "<out_path>.csv"; "" = none */
   const char *plot_path;              /* NULL = "<out_path>.png"; "" = none */
   const char *best_path;              /* NULL/"" = none: after every validation that improves the

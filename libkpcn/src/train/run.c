@@ -108,14 +108,15 @@ static kpcn_status save_model(kpcn_trainer *t, double elapsed, const char *path)
 static kpcn_status checkpoint(kpcn_trainer *t, double elapsed) {
   double keep = t->elapsed_prev;
   t->elapsed_prev = elapsed;
-  kpcn_status st = kt_checkpoint_save(t, t->ckpt_path);
+  /* an empty checkpoint path means none (kpcn-train --ckpt ''): snapshots are still kept */
+  kpcn_status st = *t->ckpt_path ? kt_checkpoint_save(t, t->ckpt_path) : KPCN_OK;
   if (st == KPCN_OK && t->snapshot_dir) {
     char snap[4096];
     snprintf(snap, sizeof snap, "%s/ckpt_%06lld.safetensors", t->snapshot_dir, (long long)t->iter);
     st = kt_checkpoint_save(t, snap);
   }
   t->elapsed_prev = keep;
-  if (st == KPCN_OK)
+  if (st == KPCN_OK && *t->ckpt_path)
     kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_INFO, "checkpoint '%s' at iteration %lld",
              t->ckpt_path, (long long)t->iter);
   return st;

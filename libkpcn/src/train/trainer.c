@@ -273,6 +273,8 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
     GO(st);
   }
   kpcn_rng_seed(&t->rng, s->seed);
+  if (s->resume && !*t->ckpt_path)
+    GO(kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "resume: the checkpoint path is empty (--ckpt '')"));
   if (s->resume) GO(kt_checkpoint_load(t, t->ckpt_path));
   *out = t;
   return KPCN_OK;
