@@ -548,6 +548,32 @@ static void test_bad_stores(void) {
   s.init_model = tf_tmp("rgb.safetensors");
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
   CHECK(strstr(kpcn_last_error(), "input channels") != NULL);
+  /* NaN in the patch data (every 64th 4-byte word of the payload set to 0xff bytes: NaN as
+   * f32 and f16): the run stops naming the patch and channel, not as a "diverged" loss */
+  {
+    FILE *in = fopen(g_store, "rb"), *outf = fopen(tf_tmp("nan.kps"), "wb");
+    CHECK(in && outf);
+    unsigned char hdr[64];
+    if (in && outf && fread(hdr, 1, 64, in) == 64) {
+      uint64_t index_offset;
+      memcpy(&index_offset, hdr + 40, 8);
+      fwrite(hdr, 1, 64, outf);
+      int ch;
+      for (uint64_t pos = 64; (ch = fgetc(in)) != EOF; pos++)
+        fputc(pos >= KPCN_PATCHSTORE_DATA_OFFSET && pos < index_offset && (pos / 4) % 64 == 0 ? 0xff
+                                                                                              : ch,
+              outf);
+    }
+    if (in) fclose(in);
+    if (outf) fclose(outf);
+    settings(&s, tf_tmp("nan.safetensors"));
+    s.store_path = tf_tmp("nan.kps");
+    CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+    CHECK(t && kpcn_trainer_run(t, NULL) == KPCN_ERR_NONFINITE);
+    CHECK(strstr(kpcn_last_error(), "non-finite value in channel") != NULL);
+    kpcn_trainer_destroy(t);
+    t = NULL;
+  }
   /* resume without a checkpoint */
   settings(&s, tf_tmp("nockpt.safetensors"));
   s.resume = 1;

@@ -102,6 +102,13 @@ static kpcn_status one_sample(kpcn_trainer *t, int b, float *scr) {
   float *canon = aug + (size_t)nch * pp;
   kpcn_patch_record rec;
   KPCN_TRY(kpcn_patchstore_get(t->ps, t->batch_idx[b], raw, &rec));
+  /* a NaN/Inf in the store would surface iterations later as a diverged loss; name it here */
+  for (size_t i = 0; i < (size_t)nch * S * S; i++)
+    if (!isfinite(raw[i]))
+      return kpcn_fail(KPCN_ERR_NONFINITE,
+                       "patch %llu (source %u at %d,%d) holds a non-finite value in channel '%s'",
+                       (unsigned long long)t->batch_idx[b], rec.source, rec.x, rec.y,
+                       kpcn_patchstore_channels(t->ps)[i / ((size_t)S * S)]);
   const kpcn_patch_source *src = kpcn_patchstore_source(t->ps, (int)rec.source);
   int ox = t->batch_ox[b], oy = t->batch_oy[b];
   for (int c = 0; c < nch; c++)
