@@ -4,6 +4,7 @@
 #include "kpcn/dataset.h"
 #include "testutil.h"
 
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -191,6 +192,30 @@ static void malformed(void) {
   swapped[5] = "diffuse.X";
   CHECK(kpcn_patchstore_open(&ps, p, swapped, 33) == KPCN_ERR_FORMAT);
   CHECK(strstr(kpcn_last_error(), "diffuse.X") != NULL);
+  /* index records: a weight that is not positive and finite, a flat fraction outside [0, 1]
+   * and reserved flags are refused naming the patch (a NaN weight was accepted) */
+  uint64_t index_offset;
+  memcpy(&index_offset, d + 40, 8);
+  unsigned char *rec0 = d + index_offset;
+  const float bad_weight = NAN, bad_flat = 1.5f;
+  const uint32_t bad_flags = 1;
+  const struct {
+    size_t at;
+    const void *v;
+  } bad_fields[3] = {{20, &bad_weight}, {16, &bad_flat}, {12, &bad_flags}};
+  for (int i = 0; i < 3; i++) {
+    unsigned char keep[4];
+    memcpy(keep, rec0 + bad_fields[i].at, 4);
+    memcpy(rec0 + bad_fields[i].at, bad_fields[i].v, 4);
+    write_bytes(p, d, n);
+    CHECK(kpcn_patchstore_open(&ps, p, NULL, 0) == KPCN_ERR_FORMAT && !ps);
+    CHECK(strstr(kpcn_last_error(), "patch 0 has an invalid record") != NULL);
+    memcpy(rec0 + bad_fields[i].at, keep, 4);
+  }
+  write_bytes(p, d, n);
+  CHECK(kpcn_patchstore_open(&ps, p, NULL, 0) == KPCN_OK && ps);
+  kpcn_patchstore_close(ps);
+  ps = NULL;
   /* corrupt JSON */
   d[n - 1] = '#';
   write_bytes(p, d, n);
@@ -223,6 +248,17 @@ static void writer_errors(void) {
   CHECK(strstr(kpcn_last_error(), "'Z'") != NULL);
   kpcn_patchstore_abort(w);
   CHECK(!exists(path));
+  /* a finite value beyond float16's range would be stored as Inf */
+  s.dtype = KPCN_DTYPE_F16;
+  CHECK(kpcn_patchstore_create(&w, path, &s) == KPCN_OK);
+  CHECK(kpcn_patchstore_add_source(w, &src, NULL) == KPCN_OK);
+  p[17] = 65504.0f;
+  CHECK(kpcn_patchstore_append(w, &rec, p) == KPCN_OK);
+  p[17] = 70000.0f;
+  CHECK(kpcn_patchstore_append(w, &rec, p) == KPCN_ERR_NONFINITE);
+  CHECK(strstr(kpcn_last_error(), "overflows float16") != NULL);
+  kpcn_patchstore_abort(w);
+  s.dtype = KPCN_DTYPE_F32;
   s.settings_json = "[1,2";
   CHECK(kpcn_patchstore_create(&w, path, &s) == KPCN_ERR_INVALID_ARGUMENT);
   /* Missing buffer when extracting from an AOV set. */

@@ -10,6 +10,7 @@
 #include <fcntl.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <math.h>
 #include <string.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
@@ -188,9 +189,16 @@ kpcn_status kpcn_patchstore_open(kpcn_patchstore **out, const char *path,
   for (uint64_t i = 0; i < h->count; i++) {
     kpcn_patch_record r;
     kps_get_record(&r, ps->map + h->index_offset + i * KPS_RECORD_BYTES);
-    if (r.source >= (uint32_t)ps->nsrc) {
+    if (r.source >= (uint32_t)ps->nsrc)
       st = kpcn_fail(KPCN_ERR_FORMAT, "patch store '%s': patch %llu names source %u of %d", path,
                      (unsigned long long)i, r.source, ps->nsrc);
+    else if (!(r.flat_frac >= 0.0f && r.flat_frac <= 1.0f) || !(r.weight > 0.0f) ||
+             !isfinite(r.weight) || r.flags != 0)
+      st = kpcn_fail(KPCN_ERR_FORMAT,
+                     "patch store '%s': patch %llu has an invalid record (flat fraction %g, "
+                     "weight %g, flags %u)",
+                     path, (unsigned long long)i, (double)r.flat_frac, (double)r.weight, r.flags);
+    if (st != KPCN_OK) {
       kpcn_patchstore_close(ps);
       return st;
     }

@@ -293,6 +293,13 @@ kpcn_status kpcn_patchstore_append(kpcn_patchstore_writer *w, const kpcn_patch_r
       return kpcn_fail(KPCN_ERR_NONFINITE,
                        "patch store '%s': non-finite value in channel '%s' of patch %llu", w->path,
                        w->channels[i / ((size_t)w->S * w->S)], (unsigned long long)w->nrec);
+    else if (w->dtype == KPCN_DTYPE_F16 && fabsf(planes[i]) > 65504.0f)
+      /* would be stored as Inf, which training then refuses */
+      return kpcn_fail(KPCN_ERR_NONFINITE,
+                       "patch store '%s': value %g in channel '%s' of patch %llu overflows "
+                       "float16 (max 65504); write the store as f32",
+                       w->path, (double)planes[i], w->channels[i / ((size_t)w->S * w->S)],
+                       (unsigned long long)w->nrec);
   if (w->dtype == KPCN_DTYPE_F32) {
     unsigned char *o = w->conv;
     for (size_t i = 0; i < pe; i++)
