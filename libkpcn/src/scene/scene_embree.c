@@ -81,7 +81,14 @@ static RTCGeometry make_geometry(RTCDevice dev, const kpcn_prim *p) {
   return g;
 }
 
-/* Largest |coordinate| primitive p reaches (its vertices, or centre ± radius). */
+/* max(c, |v|) that keeps a NaN once seen (fmaxf would drop it) */
+static inline float max_abs(float c, float v) {
+  float a = fabsf(v);
+  return a > c || a != a ? a : c;
+}
+
+/* Largest |coordinate| primitive p reaches (its vertices, or centre ± radius); NaN if any is
+ * NaN. */
 static float prim_reach(const kpcn_prim *p) {
   float m = 0.0f;
   kpcn_vec3 pts[4];
@@ -99,14 +106,14 @@ static float prim_reach(const kpcn_prim *p) {
   case KPCN_PRIM_DISK: m = p->radius, pts[0] = p->center, n = 1; break;
   case KPCN_PRIM_MESH:
     for (size_t i = 0; i < 3 * (size_t)p->mesh.nverts; i++)
-      m = fmaxf(m, fabsf(p->mesh.pos[i]));
+      m = max_abs(m, p->mesh.pos[i]);
     return m;
   case KPCN_PRIM_INFINITE_SPHERE: return 0.0f;
   }
   float c = 0.0f;
   for (int i = 0; i < n; i++)
-    c = fmaxf(c, fmaxf(fmaxf(fabsf(pts[i].x), fabsf(pts[i].y)), fabsf(pts[i].z)));
-  return c + m; /* NaN stays NaN: the caller's test rejects it */
+    c = max_abs(max_abs(max_abs(c, pts[i].x), pts[i].y), pts[i].z);
+  return c + m; /* the caller's test rejects NaN */
 }
 
 /* Embree asserts (or returns garbage) on rays whose origin is beyond ~1.8e18 and on geometry
@@ -122,7 +129,7 @@ static kpcn_status check_extent(const kpcn_scene *s) {
                        s->prims[i].name[0] ? "')" : "", (double)r, (double)KPCN_SCENE_MAX_EXTENT);
   }
   const kpcn_camera *c = &s->cam;
-  float cr = fmaxf(fmaxf(fabsf(c->pos.x), fabsf(c->pos.y)), fabsf(c->pos.z));
+  float cr = max_abs(max_abs(max_abs(0.0f, c->pos.x), c->pos.y), c->pos.z);
   if (c->thinlens) cr += c->aperture;
   if (!(cr <= KPCN_SCENE_MAX_EXTENT))
     return kpcn_fail(
