@@ -173,6 +173,16 @@ int main(void) {
   expect_fail("ignored field, wrong type",
               "{\"primitives\":[" LIGHT "],\"renderer\":{\"output_file\":0.5}}",
               "renderer.output_file", "file name");
+  /* a primitive that fails after its mesh loaded: the mesh is freed (a leak under ASan, found
+   * by fuzzing) */
+  {
+    kpcn_scene *sm = NULL;
+    CHECK(kpcn_scene_load_json("{\"primitives\":[" LIGHT ",{\"type\":\"mesh\",\"file\":"
+                               "\"Ring.wo3\",\"bsdf\":{\"type\":\"lambert\"},"
+                               "\"backface_culling\":true}]}",
+                               KPCN_TESTDATA "/scenes/materialtest", "mesh.json", &sm) != KPCN_OK);
+    CHECK(sm == NULL && strstr(kpcn_last_error(), "primitives[1].backface_culling") != NULL);
+  }
   /* a minimal valid scene loads */
   CHECK(kpcn_scene_load_json("{\"primitives\":[" LIGHT "]}", NULL, NULL, &s) == KPCN_OK);
   kpcn_scene_destroy(s);

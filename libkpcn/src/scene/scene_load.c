@@ -246,7 +246,7 @@ static kpcn_status setup_shape(kpcn_prim *p, const kpcn_xform *x, const char *pa
   return KPCN_OK;
 }
 
-static kpcn_status parse_primitive(kpcn_scene *s, const cJSON *pj, int index) {
+static kpcn_status parse_primitive_into_slot(kpcn_scene *s, const cJSON *pj, int index) {
   char path[JP], sub[JP + 64];
   snprintf(path, sizeof(path), "primitives[%d]", index);
   if (!cJSON_IsObject(pj)) return kpcn_fail(KPCN_ERR_FORMAT, "%s: expected an object", path);
@@ -365,6 +365,18 @@ static kpcn_status parse_primitive(kpcn_scene *s, const cJSON *pj, int index) {
   }
   s->nprims++;
   return KPCN_OK;
+}
+
+/* Parses primitive `index` into the next slot (s->prims[s->nprims]); the slot only counts
+ * (and is freed with the scene) once it is complete, so a failure part-way frees what the
+ * slot already holds (a loaded mesh) here. */
+static kpcn_status parse_primitive(kpcn_scene *s, const cJSON *pj, int index) {
+  kpcn_status st = parse_primitive_into_slot(s, pj, index);
+  if (st != KPCN_OK) {
+    kpcn_mesh_free(&s->prims[s->nprims].mesh);
+    memset(&s->prims[s->nprims], 0, sizeof(kpcn_prim));
+  }
+  return st;
 }
 
 /* ---- camera, integrator, renderer ---- */
