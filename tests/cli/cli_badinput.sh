@@ -37,5 +37,15 @@ expect_fail "view 'Nope' of display 'sRGB' is not in OCIO config" out.png "$REF"
 expect_fail "display 'P3' is not in OCIO config" "" "$REF" --ociodisplay:display=P3
 OCIO=$PWD/none.ocio expect_fail "OCIO config '$PWD/none.ocio' not found" "" "$REF" --ociodisplay
 expect_fail "no R,G,B to display" "" "$NOISY" --ch N.X,N.Y,N.Z,Z,visibility.V --ociodisplay
+# A channel name with an escape sequence and a byte that is not UTF-8: printed escaped, never
+# raw (a damaged file must not drive the terminal or break the JSON's UTF-8).
+oiiotool --pattern constant:color=1 4x4 1 --chnames "$(printf '\033[31mR\377')" -o esc.exr
+"$KT" esc.exr --info >info.txt 2>&1
+"$KT" esc.exr --info --json >>info.txt 2>&1
+if grep -q "$(printf '\033')" info.txt || ! grep -qF '\x1b[31mR\xff' info.txt; then
+  fail "raw control bytes printed: $(cat -v info.txt)"
+else
+  pass "file text printed escaped"
+fi
 [ -z "$(ls -a | grep -E '\.tmp|^out\.(exr|png)$|^map\.exr$')" ] && pass "no stray outputs" || fail "stray: $(ls -a)"
 finish

@@ -120,9 +120,9 @@ bool cmd_json(Context &ctx, const Modifiers &, const std::vector<std::string> &,
 
 std::string quote(const std::string &s) {
   std::string o = "\"";
-  for (char c : s) {
+  for (char c : printable(s)) {
     if (c == '"' || c == '\\') o += '\\';
-    if ((unsigned char)c >= 0x20) o += c;
+    o += c;
   }
   return o + "\"";
 }
@@ -184,7 +184,7 @@ bool cmd_info(Context &ctx, const Modifiers &, const std::vector<std::string> &,
   if (ctx.json)
     ctx.json_items.emplace_back("info", js.str());
   else
-    std::fputs(txt.str().c_str(), stdout);
+    std::fputs(printable(txt.str(), true).c_str(), stdout);
   return true;
 }
 

@@ -69,5 +69,10 @@ std::vector<const Command *> all_commands();          // sorted by name
 bool write_image(const OIIO::ImageBuf &img, const std::string &path, std::string &err);
 // Reads an image file fully as float; false with err naming the file on failure.
 bool read_image(OIIO::ImageBuf &dst, const std::string &path, std::string &err);
+// Text that came from a file (channel names, attributes, messages quoting them), made safe to
+// print: control characters (except newline if keep_newlines) and bytes that are not valid
+// UTF-8 become \xNN, so a damaged file can neither send escape sequences to the terminal nor
+// make the output invalid UTF-8.
+std::string printable(const std::string &s, bool keep_newlines = false);
 
 } // namespace kpcntool

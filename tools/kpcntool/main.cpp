@@ -164,7 +164,7 @@ int main(int argc, char **argv) {
   std::vector<Step> steps;
   std::string err;
   if (!parse(argc, argv, steps, err)) {
-    std::fprintf(stderr, "kpcntool: error: %s\n", err.c_str());
+    std::fprintf(stderr, "kpcntool: error: %s\n", kpcntool::printable(err, true).c_str());
     return 2;
   }
   if (steps.empty()) {
@@ -192,13 +192,15 @@ int main(int argc, char **argv) {
     }
     if (!ok) {
       if (err.empty()) err = "failed";
-      std::fprintf(stderr, "kpcntool: error: %s: %s\n", st.token.c_str(), err.c_str());
+      std::fprintf(stderr, "kpcntool: error: %s: %s\n", kpcntool::printable(st.token).c_str(),
+                   kpcntool::printable(err, true).c_str());
       return 1;
     }
   }
   for (auto &o : ctx.outputs) {
     if (!kpcntool::write_image(o.second, o.first, err)) {
-      std::fprintf(stderr, "kpcntool: error: -o %s: %s\n", o.first.c_str(), err.c_str());
+      std::fprintf(stderr, "kpcntool: error: -o %s: %s\n", kpcntool::printable(o.first).c_str(),
+                   kpcntool::printable(err, true).c_str());
       return 1;
     }
   }

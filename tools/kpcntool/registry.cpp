@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdio>
 #include <cstdlib>
 
 namespace kpcntool {
@@ -77,6 +78,29 @@ void Context::add_result(const std::string &key, double value) {
     k = key + "_" + std::to_string(n);
   }
   results.emplace_back(k, value);
+}
+
+std::string printable(const std::string &s, bool keep_newlines) {
+  std::string o;
+  const size_t n = s.size();
+  for (size_t i = 0; i < n;) {
+    unsigned char c = (unsigned char)s[i];
+    size_t len = c < 0x80 ? 1 : (c >> 5) == 6 ? 2 : (c >> 4) == 14 ? 3 : (c >> 3) == 30 ? 4 : 0;
+    bool ok = len > 0 && i + len <= n;
+    for (size_t k = 1; ok && k < len; ++k)
+      ok = ((unsigned char)s[i + k] >> 6) == 2;
+    if (ok && len == 1 && (c < 0x20 || c == 0x7f) && !(keep_newlines && c == '\n')) ok = false;
+    if (ok) {
+      o.append(s, i, len);
+      i += len;
+    } else {
+      char esc[8];
+      std::snprintf(esc, sizeof esc, "\\x%02x", c);
+      o += esc;
+      ++i;
+    }
+  }
+  return o;
 }
 
 } // namespace kpcntool
