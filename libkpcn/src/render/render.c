@@ -48,20 +48,39 @@ static void sample_to_channels(const kpcn_sample_out *so, float *v) {
   v[16] = so->visibility;
 }
 
+kpcn_status kpcn_render_ctx_init(kpcn_render_ctx *ctx, const kpcn_scene *scene,
+                                 const kpcn_render_settings *settings) {
+  const kpcn_render_settings *st = settings;
+  memset(ctx, 0, sizeof(*ctx));
+  ctx->scene = scene;
+  ctx->width = st->width > 0 ? st->width : scene->cam.width;
+  ctx->height = st->height > 0 ? st->height : scene->cam.height;
+  if ((st->width > 0) != (st->height > 0) || st->width < 0 || st->height < 0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "resolution override: give both width and height (> 0)");
+  KPCN_TRY(kpcn_check_size(ctx->width, ctx->height, "render resolution"));
+  ctx->ratio = (float)ctx->height / (float)ctx->width;
+  ctx->max_bounces = st->max_bounces >= 0 ? st->max_bounces : scene->max_bounces;
+  ctx->min_bounces = scene->min_bounces;
+  kpcn_light_strategy ls = st->lights;
+  if (ls == KPCN_LIGHTS_SCENE) ls = scene->light_sampling ? KPCN_LIGHTS_MIS : KPCN_LIGHTS_BSDF_ONLY;
+  ctx->nee = ls == KPCN_LIGHTS_MIS || ls == KPCN_LIGHTS_NEE_ONLY;
+  ctx->bsdf_emission = ls == KPCN_LIGHTS_MIS || ls == KPCN_LIGHTS_BSDF_ONLY;
+  ctx->mis = ls == KPCN_LIGHTS_MIS;
+  ctx->color_only = st->color_only;
+  ctx->seed = (uint64_t)st->seed;
+  kpcn_filter_table_init(&ctx->filter, scene->cam.filter);
+  kpcn_sampler_init();
+  return KPCN_OK;
+}
+
 kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *settings,
                            kpcn_aov_set **out, kpcn_render_stats *stats) {
   if (!scene || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_render: NULL scene or out");
   *out = NULL;
   kpcn_render_settings st = settings ? *settings : kpcn_render_settings_defaults();
   kpcn_render_ctx ctx;
-  memset(&ctx, 0, sizeof(ctx));
-  ctx.scene = scene;
-  ctx.width = st.width > 0 ? st.width : scene->cam.width;
-  ctx.height = st.height > 0 ? st.height : scene->cam.height;
-  if ((st.width > 0) != (st.height > 0) || st.width < 0 || st.height < 0)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "resolution override: give both width and height (> 0)");
-  KPCN_TRY(kpcn_check_size(ctx.width, ctx.height, "render resolution"));
+  KPCN_TRY(kpcn_render_ctx_init(&ctx, scene, &st));
   int spp = st.spp > 0 ? st.spp : scene->spp;
   if (st.spp < 0 || spp > (1 << 24))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "spp: %d is out of range [1, 2^24]", st.spp);
@@ -72,18 +91,6 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
       return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "crop %d,%d,%d,%d lies outside the %dx%d image",
                        cx, cy, cw, chh, ctx.width, ctx.height);
   }
-  ctx.ratio = (float)ctx.height / (float)ctx.width;
-  ctx.max_bounces = st.max_bounces >= 0 ? st.max_bounces : scene->max_bounces;
-  ctx.min_bounces = scene->min_bounces;
-  kpcn_light_strategy ls = st.lights;
-  if (ls == KPCN_LIGHTS_SCENE) ls = scene->light_sampling ? KPCN_LIGHTS_MIS : KPCN_LIGHTS_BSDF_ONLY;
-  ctx.nee = ls == KPCN_LIGHTS_MIS || ls == KPCN_LIGHTS_NEE_ONLY;
-  ctx.bsdf_emission = ls == KPCN_LIGHTS_MIS || ls == KPCN_LIGHTS_BSDF_ONLY;
-  ctx.mis = ls == KPCN_LIGHTS_MIS;
-  ctx.color_only = st.color_only;
-  ctx.seed = (uint64_t)st.seed;
-  kpcn_filter_table_init(&ctx.filter, scene->cam.filter);
-  kpcn_sampler_init();
 
   kpcn_aov_set *set = NULL;
   KPCN_TRY(kpcn_aov_create(&set, cw, chh));
@@ -120,26 +127,32 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
         memset(m2, 0, sizeof(m2));
         kpcn_sampler_cache cache;
         kpcn_sampler_cache_reset(&cache, kpcn_pixel_seed(ctx.seed, (uint32_t)px, (uint32_t)py));
-        for (int i = 0; i < spp; i++) {
-          kpcn_sampler smp;
-          kpcn_sampler_start(&smp, ctx.seed, (uint32_t)px, (uint32_t)py, (uint32_t)i, &cache);
-          kpcn_sample_out so;
-          kpcn_trace_sample(&ctx, px, py, &smp, &so);
-          total_rays += so.rays;
-          float v[NCH];
-          sample_to_channels(&so, v);
-          int ok = 1;
-          for (int c = 0; c < NCH; c++)
-            ok &= isfinite(v[c]) != 0;
-          if (!ok) { /* a NaN/Inf sample (should not happen) counts as black */
-            nonfinite++;
-            memset(v, 0, sizeof(v));
-          }
-          double inv_n = 1.0 / (double)(i + 1);
-          for (int c = 0; c < NCH; c++) {
-            double delta = (double)v[c] - mean[c];
-            mean[c] += delta * inv_n;
-            m2[c] += delta * ((double)v[c] - mean[c]);
+        for (int i0 = 0; i0 < spp; i0 += 16) {
+          int n = spp - i0 < 16 ? spp - i0 : 16;
+          kpcn_sampler smp[16];
+          kpcn_sample_out so[16];
+          for (int k = 0; k < n; k++)
+            kpcn_sampler_start(&smp[k], ctx.seed, (uint32_t)px, (uint32_t)py, (uint32_t)(i0 + k),
+                               &cache);
+          kpcn_trace_pixel(&ctx, px, py, smp, n, so);
+          for (int k = 0; k < n; k++) { /* accumulated in sample order */
+            int i = i0 + k;
+            total_rays += so[k].rays;
+            float v[NCH];
+            sample_to_channels(&so[k], v);
+            int ok = 1;
+            for (int c = 0; c < NCH; c++)
+              ok &= isfinite(v[c]) != 0;
+            if (!ok) { /* a NaN/Inf sample (should not happen) counts as black */
+              nonfinite++;
+              memset(v, 0, sizeof(v));
+            }
+            double inv_n = 1.0 / (double)(i + 1);
+            for (int c = 0; c < NCH; c++) {
+              double delta = (double)v[c] - mean[c];
+              mean[c] += delta * inv_n;
+              m2[c] += delta * ((double)v[c] - mean[c]);
+            }
           }
         }
         size_t pi = (size_t)row * (size_t)cw + (size_t)col;

@@ -61,10 +61,15 @@ void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_p
 /* Float-robust ray origin: p pushed off the surface along n (Waechter & Binder 2019). */
 kpcn_vec3 kpcn_offset_ray(kpcn_vec3 p, kpcn_vec3 n);
 
+/* render.c: the context of a render with these settings (resolution checked, filter table and
+ * sampler tables ready). */
+kpcn_status kpcn_render_ctx_init(kpcn_render_ctx *ctx, const kpcn_scene *scene,
+                                 const kpcn_render_settings *settings);
+
 /* integrator.c */
 void kpcn_filter_table_init(kpcn_filter_table *t, kpcn_filter_type type);
-/* Traces one camera sample through pixel (px, py) of the full image. */
-void kpcn_trace_sample(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler *smp,
-                       kpcn_sample_out *out);
+/* Traces samples smp[0..n-1] (n <= 16, started by the caller) of pixel (px, py). */
+void kpcn_trace_pixel(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler *smp, int n,
+                      kpcn_sample_out *out);
 
 #endif
