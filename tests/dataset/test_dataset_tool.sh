@@ -75,6 +75,20 @@ ls "$T"/d/renders/*/*.exr 2>/dev/null | grep -v part | sed "s|$T/d/||" | sort > 
 n1=$(wc -l < "$T/done1")
 ok '[ "$n1" -gt 0 ] && [ "$n1" -lt 18 ]' "some but not all outputs after the kill ($n1)"
 ok '[ -z "$(ls "$T"/d/renders/*/*.part* 2>/dev/null)" ]' "no part files left after SIGTERM"
+# a wrapper renderer's children are stopped with it (the run signals the renderer's process
+# group): otherwise they keep running and write part files after the run has removed them
+"$DS" plan --scenes "$TD/scenes" --variants 1 --seed 3 --spp 2 --ref-spp 128 \
+  --split train:0.34,val:0.33,test:0.33 -o "$T/w" > /dev/null
+export FAKE_LOG="$T/logw" FAKE_SLEEP=0.8 FAKE_DETACH=1
+"$DS" run "$T/w" --jobs 2 --renderer "$FAKE" > /dev/null 2>&1 &
+pid=$!
+sleep 0.3
+kill -TERM $pid
+wait $pid
+sleep 1.2
+ok '[ -z "$(ls "$T"/w/renders/*/*.part* 2>/dev/null)" ] && ! grep -q "^done" "$T/logw"' \
+  "a wrapper renderer's children stop with it"
+unset FAKE_DETACH
 export FAKE_LOG="$T/log2" FAKE_SLEEP=0
 "$DS" run "$T/d" --jobs 2 --renderer "$FAKE" > "$T/run2.out" 2>&1
 rc=$?

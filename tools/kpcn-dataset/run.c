@@ -15,6 +15,7 @@
 #include <signal.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -149,6 +150,10 @@ static pid_t spawn(const run_opts *o, const ds_job *j, char *part, size_t pn) {
                   "--resolution",      res,   "--threads", thr,  "--quiet", NULL};
   pid_t pid = fork();
   if (pid == 0) {
+    /* Its own process group, so that stopping the run reaches everything the renderer
+     * started: a wrapper script's children would otherwise survive it, keep computing, and
+     * could write the part file after it was removed. */
+    setpgid(0, 0);
     int fd = open(logp, O_WRONLY | O_CREAT | O_TRUNC, 0666);
     if (fd >= 0) {
       dup2(fd, 1);
@@ -161,7 +166,20 @@ static pid_t spawn(const run_opts *o, const ds_job *j, char *part, size_t pn) {
     fprintf(stderr, "cannot execute renderer '%s': %s\n", argv[0], strerror(errno));
     _exit(127);
   }
+  if (pid > 0) setpgid(pid, pid); /* also here: the group must exist before any kill */
   return pid;
+}
+
+/* After a stop: the renderer (group leader) was reaped, but members of its group (a wrapper
+ * script's children) may still be dying; wait for them (up to 2 s) so that none can write
+ * the part file after it is removed. */
+static void wait_group_gone(pid_t pgid) {
+  for (int i = 0; i < 2000; i++) {
+    while (waitpid(-pgid, NULL, WNOHANG) > 0) /* orphans are ours: the run is a subreaper */
+      ;
+    if (kill(-pgid, 0) != 0) return;
+    usleep(1000);
+  }
 }
 
 typedef struct counts {
@@ -208,7 +226,7 @@ static int run_pool(const run_opts *o, const ds_manifest *m, const int *idx, int
       if (errno == EINTR) {
         if (g_stop)
           for (int k = 0; k < o->jobs; k++)
-            if (slots[k].pid) kill(slots[k].pid, SIGTERM);
+            if (slots[k].pid) kill(-slots[k].pid, SIGTERM); /* the renderer's group */
         continue;
       }
       break;
@@ -222,6 +240,7 @@ static int run_pool(const run_opts *o, const ds_manifest *m, const int *idx, int
           rename(slots[k].part, out) == 0) {
         c->done++;
       } else {
+        if (g_stop) wait_group_gone(p);
         unlink(slots[k].part);
         if (!g_stop) {
           char lp[DS_PATH];
@@ -349,6 +368,9 @@ int ds_cmd_run(int argc, char **argv) {
   sa.sa_handler = on_signal;
   sigaction(SIGINT, &sa, NULL);
   sigaction(SIGTERM, &sa, NULL);
+  /* orphans of a renderer's group (a wrapper script's children) become our children, so a
+   * stop can reap them instead of leaving zombies for an init that may never reap */
+  prctl(PR_SET_CHILD_SUBREAPER, 1);
 
   double t0 = ds_now();
   counts c = {0, 0, 0, 0, nmine};
