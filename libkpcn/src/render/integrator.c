@@ -326,6 +326,17 @@ static void shade_hit(const kpcn_render_ctx *ctx, path_state *L, unsigned geom_i
   L->alive = 1;
 }
 
+static inline void ray_set(struct RTCRay *r, kpcn_vec3 o, kpcn_vec3 d, float tfar) {
+  r->org_x = o.x, r->org_y = o.y, r->org_z = o.z;
+  r->dir_x = d.x, r->dir_y = d.y, r->dir_z = d.z;
+  r->tnear = 0.0f;
+  r->tfar = tfar;
+  r->mask = 0xffffffffU;
+  r->flags = 0;
+  r->time = 0.0f;
+  r->id = 0;
+}
+
 /* Traces one path to its end with its state in a local copy, which the compiler keeps in
  * registers (the same loop over an array of paths in memory measured ~13 % slower). The
  * first extension ray was already answered by the caller's packet (first). */
@@ -338,14 +349,7 @@ static void trace_path(const kpcn_render_ctx *ctx, path_state *path,
   struct RTCRayHit rh = *first;
   for (int bounce0 = 1; P.alive; bounce0 = 0) {
     if (!bounce0) {
-      rh.ray.org_x = P.o.x, rh.ray.org_y = P.o.y, rh.ray.org_z = P.o.z;
-      rh.ray.dir_x = P.d.x, rh.ray.dir_y = P.d.y, rh.ray.dir_z = P.d.z;
-      rh.ray.tnear = 0.0f;
-      rh.ray.tfar = INFINITY;
-      rh.ray.mask = 0xffffffffU;
-      rh.ray.flags = 0;
-      rh.ray.time = 0.0f;
-      rh.ray.id = 0;
+      ray_set(&rh.ray, P.o, P.d, INFINITY);
       rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
       rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
       rtcIntersect1(scene, &ic, &rh);
@@ -358,14 +362,7 @@ static void trace_path(const kpcn_render_ctx *ctx, path_state *path,
       shade_hit(ctx, &P, rh.hit.geomID, rh.hit.primID, rh.ray.tfar, rh.hit.u, rh.hit.v);
     if (!P.shadow) continue;
     struct RTCRay r;
-    r.org_x = P.nee.origin.x, r.org_y = P.nee.origin.y, r.org_z = P.nee.origin.z;
-    r.dir_x = P.nee.dir.x, r.dir_y = P.nee.dir.y, r.dir_z = P.nee.dir.z;
-    r.tnear = 0.0f;
-    r.tfar = P.nee.tfar;
-    r.mask = 0xffffffffU;
-    r.flags = 0;
-    r.time = 0.0f;
-    r.id = 0;
+    ray_set(&r, P.nee.origin, P.nee.dir, P.nee.tfar);
     rtcOccluded1(scene, &ic, &r);
     P.out->rays++;
     if (r.tfar < 0.0f) continue; /* Embree sets tfar = -inf on a hit */
