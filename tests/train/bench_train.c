@@ -4,6 +4,7 @@
  * usage: bench_train [--threads N] [PRESET[:STAGE]:ITERS ...]   (default cpu:1:6 cpu:2:6 paper:1:2)
  * STAGE 1 = both branches on their own targets, 2 = fine-tuning through the recombination. */
 #include "kpcn/train.h"
+#include "machine_peak.h"
 #include "testutil.h"
 #include "train_fixture.h"
 
@@ -53,6 +54,7 @@ static void bench(const char *store, const char *preset, int iters, int threads,
     return;
   }
   double warm = now() - t0;
+  kt_machine_peak peak = kt_measure_peak(kpcn_resolve_threads(threads)); /* the VM drifts */
   t0 = now();
   double c0 = cpu_s();
   for (int i = 0; i < iters; i++)
@@ -76,6 +78,7 @@ static void bench(const char *store, const char *preset, int iters, int threads,
          (long long)tm.steps, 100 * tm.conv_s / tm.total_s, f * tm.steps / tm.conv_s * 1e-9,
          100 * (tm.net_s - tm.conv_s) / tm.total_s, 100 * tm.batch_s / tm.total_s,
          100 * tm.kpa_s / tm.total_s, 100 * tm.loss_s / tm.total_s, 100 * tm.adam_s / tm.total_s);
+  kt_print_vs_peak(&peak, 0, "training", f * iters / dt * 1e-9, 180.0);
   fflush(stdout);
   kpcn_trainer_destroy(t);
 }

@@ -1,0 +1,114 @@
+/* FMA-peak probes (machine_peak.h). Each thread runs 12 independent accumulator chains, more
+ * than FMA latency x issue width on current x86 (4 cycles x 2 units), so the loop is bound
+ * by throughput alone; the result is summed and returned so nothing is optimised away. */
+#include "machine_peak.h"
+
+#include <immintrin.h>
+#include <omp.h>
+#include <stdio.h>
+#include <time.h>
+
+enum { CHAINS = 12 };
+
+static double now_s(void) {
+  struct timespec t;
+  clock_gettime(CLOCK_MONOTONIC, &t);
+  return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+__attribute__((target("avx512f"))) static float fma512(long iters) {
+  __m512 a[CHAINS], b = _mm512_set1_ps(0.999f), c = _mm512_set1_ps(1e-6f);
+  for (int i = 0; i < CHAINS; i++)
+    a[i] = _mm512_set1_ps((float)i);
+  for (long k = 0; k < iters; k++) {
+#pragma GCC unroll 12
+    for (int i = 0; i < CHAINS; i++)
+      a[i] = _mm512_fmadd_ps(a[i], b, c);
+  }
+  __m512 s = a[0];
+  for (int i = 1; i < CHAINS; i++)
+    s = _mm512_add_ps(s, a[i]);
+  return _mm512_reduce_add_ps(s);
+}
+
+__attribute__((target("avx2,fma"))) static float fma256(long iters) {
+  __m256 a[CHAINS], b = _mm256_set1_ps(0.999f), c = _mm256_set1_ps(1e-6f);
+  for (int i = 0; i < CHAINS; i++)
+    a[i] = _mm256_set1_ps((float)i);
+  for (long k = 0; k < iters; k++) {
+#pragma GCC unroll 12
+    for (int i = 0; i < CHAINS; i++)
+      a[i] = _mm256_fmadd_ps(a[i], b, c);
+  }
+  __m256 s = a[0];
+  for (int i = 1; i < CHAINS; i++)
+    s = _mm256_add_ps(s, a[i]);
+  float v[8];
+  _mm256_storeu_ps(v, s);
+  return v[0] + v[1] + v[2] + v[3] + v[4] + v[5] + v[6] + v[7];
+}
+
+/* vdpbf16ps: 32 bf16 products per lane group, i.e. 64 FLOP per instruction */
+__attribute__((target("avx512f,avx512bf16"))) static float dpbf16(long iters) {
+  __m512 a[CHAINS];
+  __m512bh x = (__m512bh)_mm512_set1_epi16(0x3f80), y = (__m512bh)_mm512_set1_epi16(0x3a80);
+  for (int i = 0; i < CHAINS; i++)
+    a[i] = _mm512_set1_ps((float)i);
+  for (long k = 0; k < iters; k++) {
+#pragma GCC unroll 12
+    for (int i = 0; i < CHAINS; i++)
+      a[i] = _mm512_dpbf16_ps(a[i], x, y);
+  }
+  __m512 s = a[0];
+  for (int i = 1; i < CHAINS; i++)
+    s = _mm512_add_ps(s, a[i]);
+  return _mm512_reduce_add_ps(s);
+}
+
+/* kind 0: fp32 512-bit, 1: fp32 256-bit, 2: bf16. Returns GFLOP/s, best of three tries. */
+static double probe(int kind, int nthreads) {
+  const double flop_per_iter = CHAINS * (kind == 0 ? 32.0 : kind == 1 ? 16.0 : 64.0);
+  const long iters = 3000000; /* ~0.1 s per try at ~3.5 GHz */
+  double best = 0.0;
+  volatile float sink = 0.0f;
+  for (int r = 0; r < 3; r++) {
+    float acc = 0.0f;
+    double t0 = now_s();
+#pragma omp parallel num_threads(nthreads) reduction(+ : acc)
+    acc += kind == 0 ? fma512(iters) : kind == 1 ? fma256(iters) : dpbf16(iters);
+    double dt = now_s() - t0;
+    sink += acc;
+    double g = (double)nthreads * (double)iters * flop_per_iter / dt * 1e-9;
+    if (g > best) best = g;
+  }
+  (void)sink;
+  return best;
+}
+
+kt_machine_peak kt_measure_peak(int nthreads) {
+  kt_machine_peak p = {0.0, 0.0, "avx2"};
+  if (nthreads < 1) nthreads = omp_get_max_threads();
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("avx512f")) {
+    p.isa = "avx512";
+    p.fp32 = probe(0, nthreads);
+  } else {
+    p.fp32 = probe(1, nthreads);
+  }
+  if (__builtin_cpu_supports("avx512bf16")) p.bf16 = probe(2, nthreads);
+  return p;
+}
+
+void kt_print_vs_peak(const kt_machine_peak *p, int bf16, const char *what, double gflops,
+                      double target) {
+  double peak = bf16 ? p->bf16 : p->fp32, ref = bf16 ? KT_REF_PEAK_BF16 : KT_REF_PEAK_FP32;
+  if (!(peak > 0.0)) {
+    printf("  %s vs peak: this CPU has no %s FMA probe\n", what, bf16 ? "bf16" : "fp32");
+    return;
+  }
+  double share = gflops / peak;
+  printf("  %s %.1f GFLOP/s = %.1f%% of this machine's %s peak (%.0f GFLOP/s, %s, measured just "
+         "before) -> %.0f on the targets' machine (peak %.0f); target %.0f = %.1f%% of it: %s\n",
+         what, gflops, 100.0 * share, bf16 ? "bf16" : "fp32 FMA", peak, p->isa, share * ref, ref,
+         target, 100.0 * target / ref, share * ref >= target ? "met at this share" : "NOT met");
+}
