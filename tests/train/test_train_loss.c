@@ -10,8 +10,9 @@
 #include <string.h>
 
 /* Independent double-precision loss in plain loops (no separable filters). */
+/* xden: the prediction relmse-sg divides by (its stop-gradient copy; NULL = x itself) */
 static double naive_loss(kpcn_loss_kind k, const double *x, const float *y, int planes, int w,
-                         int h, int win) {
+                         int h, int win, const double *xden) {
   size_t n = (size_t)w * h;
   if (k != KPCN_LOSS_SSIM) {
     double s = 0;
@@ -21,6 +22,11 @@ static double naive_loss(kpcn_loss_kind k, const double *x, const float *y, int 
       case KPCN_LOSS_L1: s += fabs(d); break;
       case KPCN_LOSS_L2: s += d * d; break;
       case KPCN_LOSS_RELMSE: s += d * d / ((double)y[i] * y[i] + 0.01); break;
+      case KPCN_LOSS_RELMSE_SG: {
+        double xs = xden ? xden[i] : x[i];
+        s += d * d / (xs * xs + 0.01);
+        break;
+      }
       default: s += fabs(d) / (fabs((double)y[i]) + 0.01); break;
       }
     }
@@ -77,7 +83,9 @@ static void check_loss(kpcn_loss_kind k, int planes, int w, int h, int win, unsi
   ls.ssim_window = win;
   double v = 0, v1 = 0;
   CHECK(kpcn_loss_compute(k, &ls, x, y, 1, planes, w, h, g, &v, 2) == KPCN_OK);
-  double ref = naive_loss(k, xd, y, planes, w, h, win);
+  double ref = naive_loss(k, xd, y, planes, w, h, win, NULL);
+  double *x0 = malloc(n * sizeof(double)); /* relmse-sg: denominator frozen at the start */
+  memcpy(x0, xd, n * sizeof(double));
   CHECK_CLOSE(v, ref, 1e-9, 1e-12);
   /* thread-count independence, bit for bit */
   CHECK(kpcn_loss_compute(k, &ls, x, y, 1, planes, w, h, g1, &v1, 1) == KPCN_OK);
@@ -89,9 +97,9 @@ static void check_loss(kpcn_loss_kind k, int planes, int w, int h, int win, unsi
     size_t i = (size_t)(kt_randf(&st) * (float)n) % n;
     double hstep = 1e-5, keep = xd[i];
     xd[i] = keep + hstep;
-    double fp = naive_loss(k, xd, y, planes, w, h, win);
+    double fp = naive_loss(k, xd, y, planes, w, h, win, x0);
     xd[i] = keep - hstep;
-    double fm = naive_loss(k, xd, y, planes, w, h, win);
+    double fm = naive_loss(k, xd, y, planes, w, h, win, x0);
     xd[i] = keep;
     double fd = (fp - fm) / (2 * hstep);
     double err = fabs(fd - g[i]) / (fabs(fd) + 1e-3 * (1.0 / (double)n) + 1e-12);
@@ -99,12 +107,33 @@ static void check_loss(kpcn_loss_kind k, int planes, int w, int h, int win, unsi
   }
   if (maxrel > 2e-3) fprintf(stderr, "loss %s: max rel grad err %g\n", kpcn_loss_name(k), maxrel);
   CHECK(maxrel <= 2e-3);
-  free(x), free(y), free(g), free(g1), free(xd);
+  free(x), free(y), free(g), free(g1), free(xd), free(x0);
 }
 
 int main(void) {
   for (int k = KPCN_LOSS_L1; k <= KPCN_LOSS_RELL1; k++)
     check_loss((kpcn_loss_kind)k, 3, 13, 9, 11, 7u + k);
+  check_loss(KPCN_LOSS_RELMSE_SG, 3, 13, 9, 11, 17u);
+
+  /* Bias: one prediction x for two equally likely references 0.5 and 1.5 (a pixel whose
+   * clean value the input leaves uncertain). relmse-sg's gradient vanishes at their mean
+   * x = 1; relmse's is positive there (descent lowers x: the dark bias) and vanishes at
+   * sum(y/(y^2+eps)) / sum(1/(y^2+eps)). */
+  {
+    float xb[2] = {1.0f, 1.0f}, yb[2] = {0.5f, 1.5f}, gb[2];
+    double vb;
+    CHECK(kpcn_loss_compute(KPCN_LOSS_RELMSE_SG, NULL, xb, yb, 1, 1, 2, 1, gb, &vb, 1) ==
+          KPCN_OK);
+    CHECK_NEAR((double)gb[0] + gb[1], 0.0, 1e-7);
+    CHECK(kpcn_loss_compute(KPCN_LOSS_RELMSE, NULL, xb, yb, 1, 1, 2, 1, gb, &vb, 1) == KPCN_OK);
+    CHECK((double)gb[0] + gb[1] > 0.1);
+    double a = 1.0 / (0.25 + 0.01), b = 1.0 / (2.25 + 0.01), xm = (0.5 * a + 1.5 * b) / (a + b);
+    xb[0] = xb[1] = (float)xm;
+    CHECK(kpcn_loss_compute(KPCN_LOSS_RELMSE, NULL, xb, yb, 1, 1, 2, 1, gb, &vb, 1) == KPCN_OK);
+    CHECK_NEAR((double)gb[0] + gb[1], 0.0, 1e-6);
+    kpcn_loss_kind kk;
+    CHECK(kpcn_loss_parse("relmse-sg", &kk) == KPCN_OK && kk == KPCN_LOSS_RELMSE_SG);
+  }
   check_loss(KPCN_LOSS_SSIM, 2, 16, 14, 11, 3u); /* 6x4 valid positions, full window */
   check_loss(KPCN_LOSS_SSIM, 3, 12, 12, 7, 5u);  /* the small-window variant */
   check_loss(KPCN_LOSS_SSIM, 1, 5, 5, 5, 9u);    /* window == image: one position */

@@ -31,20 +31,28 @@ extern "C" {
  *                                        the value equals the MSE metric)
  *   relmse (x - y)^2 / (y^2 + eps)      eps = rel_eps (0.01, as the relMSE metric)
  *   rell1  |x - y| / (|y| + eps)
+ *   relmse-sg (x - y)^2 / (sg(x)^2 + eps)  the prediction's own square in the denominator,
+ *                                        treated as a constant (stop-gradient; Lehtinen et
+ *                                        al. 2018's HDR loss): the gradient is
+ *                                        2 (x - y) / (x^2 + eps), zero where x = E[y], so
+ *                                        unlike relmse it does not pull predictions dark
  *   ssim   1 - SSIM(x, y)               Wang 2004 per plane, Gaussian window
  *                                        (ssim_window x ssim_window, sigma ssim_sigma),
  *                                        C1 = (k1 L)^2, C2 = (k2 L)^2, L = ssim_range;
  *                                        only "valid" window positions (never padded)
- * The relative losses divide by a function of the REFERENCE y only, so the denominator is
+ * relmse and rell1 divide by a function of the REFERENCE y only, so the denominator is
  * a constant w.r.t. the prediction x (Rousselle 2011, Bako 2017 normalise the same way);
- * the gradient does not differentiate it. L1's subgradient at x == y is 0.
+ * the gradient does not differentiate it. Because 1/(y^2 + eps) weights darker references
+ * more, their minimiser over a spread of plausible references lies below the mean: a dark
+ * bias, which relmse-sg avoids. L1's subgradient at x == y is 0.
  */
 typedef enum kpcn_loss_kind {
   KPCN_LOSS_L1 = 0,
   KPCN_LOSS_L2 = 1,
   KPCN_LOSS_RELMSE = 2,
   KPCN_LOSS_RELL1 = 3,
-  KPCN_LOSS_SSIM = 4
+  KPCN_LOSS_SSIM = 4,
+  KPCN_LOSS_RELMSE_SG = 5
 } kpcn_loss_kind;
 
 typedef struct kpcn_loss_settings {
@@ -56,7 +64,7 @@ typedef struct kpcn_loss_settings {
 } kpcn_loss_settings;
 
 void kpcn_loss_settings_defaults(kpcn_loss_settings *s);
-/* "l1", "l2", "relmse", "rell1", "ssim". */
+/* "l1", "l2", "relmse", "rell1", "ssim", "relmse-sg". */
 const char *kpcn_loss_name(kpcn_loss_kind k);
 /* Accepts the names above and "mse" for l2; error names the string. */
 kpcn_status kpcn_loss_parse(const char *name, kpcn_loss_kind *out);
