@@ -16,54 +16,37 @@ static double now_s(void) {
   return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
 }
 
-__attribute__((target("avx512f"))) static float fma512(long iters) {
-  __m512 a[CHAINS], b = _mm512_set1_ps(0.999f), c = _mm512_set1_ps(1e-6f);
-  for (int i = 0; i < CHAINS; i++)
-    a[i] = _mm512_set1_ps((float)i);
-  for (long k = 0; k < iters; k++) {
-#pragma GCC unroll 12
-    for (int i = 0; i < CHAINS; i++)
-      a[i] = _mm512_fmadd_ps(a[i], b, c);
+/* One probe kernel per instruction: CHAINS accumulators a[i] = OP(a[i], b, c) for `iters`
+ * rounds, then their sum (so the loop is not optimised away). */
+#define PROBE_KERNEL(NAME, TARGET, VEC, ARG, SET_ACC, SET_B, SET_C, OP, ADD, SUM)                  \
+  __attribute__((target(TARGET))) static float NAME(long iters) {                                  \
+    VEC a[CHAINS];                                                                                 \
+    ARG b = SET_B, c = SET_C;                                                                      \
+    for (int i = 0; i < CHAINS; i++)                                                               \
+      a[i] = SET_ACC((float)i);                                                                    \
+    for (long k = 0; k < iters; k++) {                                                             \
+      _Pragma("GCC unroll 12") for (int i = 0; i < CHAINS; i++) a[i] = OP(a[i], b, c);             \
+    }                                                                                              \
+    VEC s = a[0];                                                                                  \
+    for (int i = 1; i < CHAINS; i++)                                                               \
+      s = ADD(s, a[i]);                                                                            \
+    return SUM(s);                                                                                 \
   }
-  __m512 s = a[0];
-  for (int i = 1; i < CHAINS; i++)
-    s = _mm512_add_ps(s, a[i]);
-  return _mm512_reduce_add_ps(s);
-}
 
-__attribute__((target("avx2,fma"))) static float fma256(long iters) {
-  __m256 a[CHAINS], b = _mm256_set1_ps(0.999f), c = _mm256_set1_ps(1e-6f);
-  for (int i = 0; i < CHAINS; i++)
-    a[i] = _mm256_set1_ps((float)i);
-  for (long k = 0; k < iters; k++) {
-#pragma GCC unroll 12
-    for (int i = 0; i < CHAINS; i++)
-      a[i] = _mm256_fmadd_ps(a[i], b, c);
-  }
-  __m256 s = a[0];
-  for (int i = 1; i < CHAINS; i++)
-    s = _mm256_add_ps(s, a[i]);
+__attribute__((target("avx2"))) static float sum256(__m256 s) {
   float v[8];
   _mm256_storeu_ps(v, s);
   return v[0] + v[1] + v[2] + v[3] + v[4] + v[5] + v[6] + v[7];
 }
 
-/* vdpbf16ps: 32 bf16 products per lane group, i.e. 64 FLOP per instruction */
-__attribute__((target("avx512f,avx512bf16"))) static float dpbf16(long iters) {
-  __m512 a[CHAINS];
-  __m512bh x = (__m512bh)_mm512_set1_epi16(0x3f80), y = (__m512bh)_mm512_set1_epi16(0x3a80);
-  for (int i = 0; i < CHAINS; i++)
-    a[i] = _mm512_set1_ps((float)i);
-  for (long k = 0; k < iters; k++) {
-#pragma GCC unroll 12
-    for (int i = 0; i < CHAINS; i++)
-      a[i] = _mm512_dpbf16_ps(a[i], x, y);
-  }
-  __m512 s = a[0];
-  for (int i = 1; i < CHAINS; i++)
-    s = _mm512_add_ps(s, a[i]);
-  return _mm512_reduce_add_ps(s);
-}
+PROBE_KERNEL(fma512, "avx512f", __m512, __m512, _mm512_set1_ps, _mm512_set1_ps(0.999f),
+             _mm512_set1_ps(1e-6f), _mm512_fmadd_ps, _mm512_add_ps, _mm512_reduce_add_ps)
+PROBE_KERNEL(fma256, "avx2,fma", __m256, __m256, _mm256_set1_ps, _mm256_set1_ps(0.999f),
+             _mm256_set1_ps(1e-6f), _mm256_fmadd_ps, _mm256_add_ps, sum256)
+/* vdpbf16ps: 32 bf16 products summed pairwise into 16 fp32 lanes, i.e. 64 FLOP */
+PROBE_KERNEL(dpbf16, "avx512f,avx512bf16", __m512, __m512bh, _mm512_set1_ps,
+             (__m512bh)_mm512_set1_epi16(0x3f80), (__m512bh)_mm512_set1_epi16(0x3a80),
+             _mm512_dpbf16_ps, _mm512_add_ps, _mm512_reduce_add_ps)
 
 /* kind 0: fp32 512-bit, 1: fp32 256-bit, 2: bf16. Returns GFLOP/s, best of three tries. */
 static double probe(int kind, int nthreads) {
