@@ -27,6 +27,7 @@ static double naive_loss(kpcn_loss_kind k, const double *x, const float *y, int 
         s += d * d / (xs * xs + 0.01);
         break;
       }
+      case KPCN_LOSS_RELL1_SG: s += fabs(d) / (fabs(xden ? xden[i] : x[i]) + 0.01); break;
       default: s += fabs(d) / (fabs((double)y[i]) + 0.01); break;
       }
     }
@@ -114,6 +115,7 @@ int main(void) {
   for (int k = KPCN_LOSS_L1; k <= KPCN_LOSS_RELL1; k++)
     check_loss((kpcn_loss_kind)k, 3, 13, 9, 11, 7u + k);
   check_loss(KPCN_LOSS_RELMSE_SG, 3, 13, 9, 11, 17u);
+  check_loss(KPCN_LOSS_RELL1_SG, 3, 13, 9, 11, 19u);
 
   /* Bias: one prediction x for two equally likely references 0.5 and 1.5 (a pixel whose
    * clean value the input leaves uncertain). relmse-sg's gradient vanishes at their mean
@@ -122,8 +124,7 @@ int main(void) {
   {
     float xb[2] = {1.0f, 1.0f}, yb[2] = {0.5f, 1.5f}, gb[2];
     double vb;
-    CHECK(kpcn_loss_compute(KPCN_LOSS_RELMSE_SG, NULL, xb, yb, 1, 1, 2, 1, gb, &vb, 1) ==
-          KPCN_OK);
+    CHECK(kpcn_loss_compute(KPCN_LOSS_RELMSE_SG, NULL, xb, yb, 1, 1, 2, 1, gb, &vb, 1) == KPCN_OK);
     CHECK_NEAR((double)gb[0] + gb[1], 0.0, 1e-7);
     CHECK(kpcn_loss_compute(KPCN_LOSS_RELMSE, NULL, xb, yb, 1, 1, 2, 1, gb, &vb, 1) == KPCN_OK);
     CHECK((double)gb[0] + gb[1] > 0.1);
@@ -133,6 +134,7 @@ int main(void) {
     CHECK_NEAR((double)gb[0] + gb[1], 0.0, 1e-6);
     kpcn_loss_kind kk;
     CHECK(kpcn_loss_parse("relmse-sg", &kk) == KPCN_OK && kk == KPCN_LOSS_RELMSE_SG);
+    CHECK(kpcn_loss_parse("rell1-sg", &kk) == KPCN_OK && kk == KPCN_LOSS_RELL1_SG);
   }
   check_loss(KPCN_LOSS_SSIM, 2, 16, 14, 11, 3u); /* 6x4 valid positions, full window */
   check_loss(KPCN_LOSS_SSIM, 3, 12, 12, 7, 5u);  /* the small-window variant */

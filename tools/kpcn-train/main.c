@@ -27,7 +27,7 @@ static void usage(FILE *f) {
         "  --init MODEL              start from an existing model (fine-tuning)\n"
         "  --widen C                 with --init: first widen it to C hidden channels (same\n"
         "                            function: new units get zero outgoing weights)\n"
-        "  --loss l1|l2|relmse|rell1|ssim|relmse-sg   stage-1 loss (default l1)\n"
+        "  --loss l1|l2|relmse|rell1|ssim|relmse-sg|rell1-sg   stage-1 loss (default l1)\n"
         "  --loss2 NAME              stage-2 loss (default: same as --loss)\n"
         "  --ssim-window N           SSIM window (odd, default 11), --loss-margin M\n"
         "  --lr X (1e-3) --lr-decay X (0.96) --decay-every N (100000) --staircase --clip X\n"

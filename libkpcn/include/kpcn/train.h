@@ -36,6 +36,8 @@ extern "C" {
  *                                        al. 2018's HDR loss): the gradient is
  *                                        2 (x - y) / (x^2 + eps), zero where x = E[y], so
  *                                        unlike relmse it does not pull predictions dark
+ *   rell1-sg  |x - y| / (|sg(x)| + eps)  the same for relative L1: gradient
+ *                                        sign(x - y) / (|x| + eps), zero at the median of y
  *   ssim   1 - SSIM(x, y)               Wang 2004 per plane, Gaussian window
  *                                        (ssim_window x ssim_window, sigma ssim_sigma),
  *                                        C1 = (k1 L)^2, C2 = (k2 L)^2, L = ssim_range;
@@ -52,7 +54,8 @@ typedef enum kpcn_loss_kind {
   KPCN_LOSS_RELMSE = 2,
   KPCN_LOSS_RELL1 = 3,
   KPCN_LOSS_SSIM = 4,
-  KPCN_LOSS_RELMSE_SG = 5
+  KPCN_LOSS_RELMSE_SG = 5,
+  KPCN_LOSS_RELL1_SG = 6
 } kpcn_loss_kind;
 
 typedef struct kpcn_loss_settings {
@@ -64,7 +67,7 @@ typedef struct kpcn_loss_settings {
 } kpcn_loss_settings;
 
 void kpcn_loss_settings_defaults(kpcn_loss_settings *s);
-/* "l1", "l2", "relmse", "rell1", "ssim", "relmse-sg". */
+/* "l1", "l2", "relmse", "rell1", "ssim", "relmse-sg", "rell1-sg". */
 const char *kpcn_loss_name(kpcn_loss_kind k);
 /* Accepts the names above and "mse" for l2; error names the string. */
 kpcn_status kpcn_loss_parse(const char *name, kpcn_loss_kind *out);

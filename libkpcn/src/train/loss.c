@@ -25,6 +25,7 @@ const char *kpcn_loss_name(kpcn_loss_kind k) {
   case KPCN_LOSS_RELL1: return "rell1";
   case KPCN_LOSS_SSIM: return "ssim";
   case KPCN_LOSS_RELMSE_SG: return "relmse-sg";
+  case KPCN_LOSS_RELL1_SG: return "rell1-sg";
   }
   return "?";
 }
@@ -33,17 +34,23 @@ kpcn_status kpcn_loss_parse(const char *name, kpcn_loss_kind *out) {
   static const struct {
     const char *n;
     kpcn_loss_kind k;
-  } tab[] = {{"l1", KPCN_LOSS_L1},         {"l2", KPCN_LOSS_L2},       {"mse", KPCN_LOSS_L2},
-             {"relmse", KPCN_LOSS_RELMSE}, {"rell1", KPCN_LOSS_RELL1}, {"ssim", KPCN_LOSS_SSIM},
-             {"relmse-sg", KPCN_LOSS_RELMSE_SG}};
+  } tab[] = {{"l1", KPCN_LOSS_L1},
+             {"l2", KPCN_LOSS_L2},
+             {"mse", KPCN_LOSS_L2},
+             {"relmse", KPCN_LOSS_RELMSE},
+             {"rell1", KPCN_LOSS_RELL1},
+             {"ssim", KPCN_LOSS_SSIM},
+             {"relmse-sg", KPCN_LOSS_RELMSE_SG},
+             {"rell1-sg", KPCN_LOSS_RELL1_SG}};
   if (!name || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_loss_parse: NULL argument");
   for (size_t i = 0; i < sizeof tab / sizeof tab[0]; i++)
     if (strcmp(tab[i].n, name) == 0) {
       *out = tab[i].k;
       return KPCN_OK;
     }
-  return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                   "unknown loss '%s' (expected l1, l2, relmse, rell1, ssim or relmse-sg)", name);
+  return kpcn_fail(
+      KPCN_ERR_INVALID_ARGUMENT,
+      "unknown loss '%s' (expected l1, l2, relmse, rell1, ssim, relmse-sg or rell1-sg)", name);
 }
 
 void kpcn_loss_settings_defaults(kpcn_loss_settings *s) {
@@ -66,8 +73,8 @@ static double ordered_sum(const double *p, size_t n) {
 /* Pixel-wise losses. relMSE = (x-y)^2/(y^2+eps) and relL1 = |x-y|/(|y|+eps): the
  * denominator depends on the reference only, so it is a constant w.r.t. x (as in
  * Rousselle 2011 / Bako 2017, who normalise by the reference or a stop-gradient
- * copy of it). relmse-sg divides by the prediction's own x^2 + eps, held constant
- * (stop-gradient), so its gradient is not the derivative of its value: it is the
+ * copy of it). relmse-sg and rell1-sg divide by the prediction's own x^2 + eps or |x| + eps, held
+ * constant (stop-gradient), so its gradient is not the derivative of its value: it is the
  * derivative with the denominator frozen. At x == y the L1 subgradient is taken as 0. */
 static kpcn_status pixel_loss(kpcn_loss_kind kind, const kpcn_loss_settings *s, const float *x,
                               const float *y, size_t rows, size_t w, float *grad, double *value,
@@ -101,8 +108,8 @@ static kpcn_status pixel_loss(kpcn_loss_kind kind, const kpcn_loss_settings *s, 
         g = 2.0 * d / den;
         break;
       }
-      default: { /* RELL1 */
-        double den = fabs((double)yr[i]) + eps;
+      default: { /* RELL1, RELL1_SG: the reference's or (stop-gradient) prediction's magnitude */
+        double den = fabs(kind == KPCN_LOSS_RELL1 ? (double)yr[i] : (double)xr[i]) + eps;
         v = fabs(d) / den;
         g = (d > 0 ? 1.0 : (d < 0 ? -1.0 : 0.0)) / den;
         break;
@@ -293,6 +300,7 @@ kpcn_status kpcn_loss_compute(kpcn_loss_kind kind, const kpcn_loss_settings *set
   case KPCN_LOSS_RELMSE:
   case KPCN_LOSS_RELMSE_SG:
   case KPCN_LOSS_RELL1:
+  case KPCN_LOSS_RELL1_SG:
     return pixel_loss(kind, settings, pred, ref, planes * (size_t)h, (size_t)w, grad, value, nt);
   case KPCN_LOSS_SSIM: return ssim_loss(settings, pred, ref, (int)planes, w, h, grad, value, nt);
   }
