@@ -1,7 +1,8 @@
 /* The oneDNN branch net vs the naive double reference (nn_ref.c): forward (conv + bias +
  * fused ReLU, linear last layer), backward-data, backward-weights, backward-bias, for
  * several sizes, paddings, dilations and batches; finite differences validate the
- * reference's backward; bf16 inference vs fp32 stays within a bounded difference. */
+ * reference's backward; bf16 inference vs fp32 stays within a bounded difference, and so do
+ * bf16 (mixed-precision) training gradients vs the exact ones. */
 #include "kpcn/nn.h"
 #include "nn_ref.h"
 #include "testutil.h"
@@ -326,8 +327,6 @@ static void bf16_vs_f32(void) {
   kpcn_status s = kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &n16);
   if (s != KPCN_OK) fprintf(stderr, "bf16 net: %s\n", kpcn_last_error());
   CHECK(s == KPCN_OK);
-  o.training = 1;
-  CHECK(kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &(kpcn_net *){NULL}) == KPCN_ERR_UNSUPPORTED);
   if (n32 && n16) {
     CHECK(kpcn_net_forward(n32, in, l32) == KPCN_OK);
     CHECK(kpcn_net_forward(n16, in, l16) == KPCN_OK);
@@ -352,6 +351,95 @@ static void bf16_vs_f32(void) {
   free(in), free(l32), free(l16);
 }
 
+/* rms(got - ref) / rms(ref): the bf16 error figure (a max-norm bound would be set by the
+ * rare element whose bf16 rounding errors all point one way). */
+static double rms_rel(const float *got, const double *ref, size_t n) {
+  double se = 0, s2 = 0;
+  for (size_t i = 0; i < n; i++) {
+    const double d = (double)got[i] - ref[i];
+    se += d * d, s2 += ref[i] * ref[i];
+  }
+  return s2 > 0 ? sqrt(se / s2) : sqrt(se);
+}
+
+/* Mixed-precision training (bf16 activations, weight copies and output gradients; f32
+ * weight/bias gradients) against the double reference, for one linear conv layer and for a
+ * cpu-preset-like net of four. The per-pixel terms of a gradient sum mostly cancel (random
+ * signs), so a pixel whose pre-activation changes sign under bf16 rounding (its ReLU gate
+ * flips) shows as ~1/sqrt(pixels) of the result: with gates the error is a few percent
+ * (bound 15 %), without them only rounding (bound 2 %); the exact gradient for another
+ * output gradient, as a wrong answer, reads > 100 %. Deterministic run to run. */
+static void bf16_training_cfg(const cfg *c, double bound) {
+  kpcn_arch a;
+  make_arch(c, &a);
+  kpcn_model *m = NULL;
+  CHECK(kpcn_model_create(&a, 31, &m) == KPCN_OK);
+  if (!m) return;
+  unsigned rs = 4321;
+  randomize_bias(m, &rs);
+  const int K2 = c->K * c->K;
+  const size_t px = (size_t)c->N * c->H * c->W, nin = px * c->n_in, nout = px * K2;
+  float *in = malloc(nin * 4), *dl = malloc(nout * 4), *lg = malloc(nout * 4),
+        *din = malloc(nin * 4), *din2 = malloc(nin * 4);
+  fill(in, nin, &rs, 1.f);
+  kpcn_net_options o;
+  kpcn_net_options_defaults(&o);
+  o.batch = c->N, o.height = c->H, o.width = c->W, o.training = 1, o.input_grad = 1;
+  o.precision = KPCN_PREC_BF16;
+  kpcn_net *net = NULL;
+  kpcn_status s = kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &net);
+  if (s != KPCN_OK) fprintf(stderr, "bf16 training net: %s\n", kpcn_last_error());
+  CHECK(s == KPCN_OK);
+  nn_ref ref[2];
+  for (int r = 0; net && r < 2; r++) {
+    fill(dl, nout, &rs, 1.f);
+    nn_ref_init(&ref[r], m, KPCN_BRANCH_DIFFUSE, c->N, c->H, c->W);
+    nn_ref_forward(&ref[r], in);
+    nn_ref_backward(&ref[r], dl);
+  }
+  if (net) {
+    kpcn_net_stats st;
+    kpcn_net_get_stats(net, &st);
+    CHECK(st.n_slow == 0);
+    CHECK(kpcn_net_forward(net, in, lg) == KPCN_OK);
+    CHECK(kpcn_net_backward(net, dl, din) == KPCN_OK);
+    const double ef = rms_rel(lg, ref[1].act[c->n_hidden + 1], nout),
+                 ed = rms_rel(din, ref[1].dinput, nin);
+    kpcn_param P[2 * KPCN_NN_MAX_LAYERS];
+    CHECK(kpcn_net_params(net, P, 2 * KPCN_NN_MAX_LAYERS) == KPCN_OK);
+    double ew = 0, eb = 0;
+    for (int l = 0; l <= c->n_hidden; l++) {
+      ew = fmax(ew, rms_rel(P[2 * l].grad, ref[1].gw[l], P[2 * l].count));
+      eb = fmax(eb, rms_rel(P[2 * l + 1].grad, ref[1].gb[l], P[2 * l + 1].count));
+    }
+    float *g0 = malloc(P[0].count * 4);
+    for (size_t i = 0; i < P[0].count; i++)
+      g0[i] = (float)ref[0].gw[0][i];
+    const double wrong = rms_rel(g0, ref[1].gw[0], P[0].count);
+    free(g0);
+    printf("bf16 training vs exact, %d layer(s) (rms rel): logits %.3g, dW %.3g, db %.3g, dX %.3g; "
+           "a wrong dW %.3g | %s\n",
+           c->n_hidden + 1, ef, ew, eb, ed, wrong, kpcn_net_impl_name(net, 0));
+    CHECK(ef < 0.02 && ew < bound && eb < bound && ed < bound);
+    CHECK(wrong > 1.0);
+    CHECK(kpcn_net_forward(net, in, lg) == KPCN_OK);
+    CHECK(kpcn_net_backward(net, dl, din2) == KPCN_OK);
+    CHECK(memcmp(din, din2, nin * 4) == 0);
+    nn_ref_free(&ref[0]);
+    nn_ref_free(&ref[1]);
+  }
+  kpcn_net_destroy(net);
+  kpcn_model_destroy(m);
+  free(in), free(dl), free(lg), free(din), free(din2);
+}
+
+static void bf16_training(void) {
+  const cfg linear = {27, 0, 0, 5, 2, 20, 24, {3}, {1}};
+  const cfg deep = {27, 3, 48, 5, 2, 20, 24, {3, 3, 3, 3}, {1, 2, 4, 1}};
+  bf16_training_cfg(&linear, 0.02);
+  bf16_training_cfg(&deep, 0.15);
+}
+
 /* The presets must run on optimized oneDNN kernels in every mode we use (a layout mix-up once
  * sent a dilated layer to oneDNN's reference kernel, 100x slower). Creation only. */
 static void presets_fast(void) {
@@ -366,13 +454,14 @@ static void presets_fast(void) {
     kpcn_arch_set_inputs(&a, 36, names);
     kpcn_model *m = NULL;
     kpcn_model_create(&a, 1, &m);
-    for (int mode = 0; mode < 3; mode++) {
+    for (int mode = 0; mode < 4; mode++) {
       kpcn_net_options o;
       kpcn_net_options_defaults(&o);
       o.batch = mode == 0 ? 16 : 1;
       o.height = o.width = mode == 0 ? 64 : 256;
-      o.training = mode == 0;
-      o.precision = mode == 2 ? KPCN_PREC_BF16 : KPCN_PREC_F32;
+      o.training = mode == 0 || mode == 3;
+      o.precision = mode >= 2 ? KPCN_PREC_BF16 : KPCN_PREC_F32;
+      if (mode == 3) o.batch = 16, o.height = o.width = 64;
       kpcn_net *n = NULL;
       CHECK(kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &n) == KPCN_OK);
       kpcn_net_stats st;
@@ -380,7 +469,8 @@ static void presets_fast(void) {
       printf("preset %-5s %-9s: %d slow primitives, layer-1 %s, last layer %s\n", ps[p],
              mode == 0   ? "train"
              : mode == 1 ? "infer f32"
-                         : "infer bf16",
+             : mode == 2 ? "infer bf16"
+                         : "train bf16",
              st.n_slow, kpcn_net_impl_name(n, 1), kpcn_net_impl_name(n, a.n_hidden));
       CHECK(st.n_slow == 0);
       kpcn_net_destroy(n);
@@ -482,5 +572,6 @@ int main(void) {
   fd_reference();
   fd_onednn();
   bf16_vs_f32();
+  bf16_training();
   return kt_summary("test_nn_conv");
 }

@@ -1,8 +1,10 @@
 /* bench_train: training speed for the cpu and paper presets at batch 16 of 64x64 patches
  * (synthetic 65x65 store): iterations/s, patches/s and achieved GFLOP/s counting the conv
  * FLOPs of forward + backward (both branches; see kpcn_trainer_flops_per_iter).
- * usage: bench_train [--threads N] [PRESET[:STAGE]:ITERS ...]   (default cpu:1:6 cpu:2:6 paper:1:2)
- * STAGE 1 = both branches on their own targets, 2 = fine-tuning through the recombination. */
+ * usage: bench_train [--threads N] [PRESET[:STAGE]:ITERS[:bf16] ...]
+ *   (default cpu:1:6 cpu:2:6 cpu:2:6:bf16 paper:1:2)
+ * STAGE 1 = both branches on their own targets, 2 = fine-tuning through the recombination;
+ * bf16 = mixed-precision training (kpcn_train_settings.bf16), compared with the bf16 peak. */
 #include "kpcn/train.h"
 #include "machine_peak.h"
 #include "testutil.h"
@@ -31,7 +33,8 @@ static double cpu_s(void) {
          1e-6 * (double)r.ru_stime.tv_usec;
 }
 
-static void bench(const char *store, const char *preset, int iters, int threads, int stage) {
+static void bench(const char *store, const char *preset, int iters, int threads, int stage,
+                  int bf16) {
   kpcn_train_settings s;
   kpcn_train_settings_defaults(&s);
   if (kpcn_arch_preset(preset, &s.arch) != KPCN_OK) return;
@@ -42,6 +45,7 @@ static void bench(const char *store, const char *preset, int iters, int threads,
   s.iters = 1000000;
   s.stage1_iters = stage == 1 ? 1000000 : 0;
   s.nthreads = threads;
+  s.bf16 = bf16;
   kpcn_trainer *t;
   if (kpcn_trainer_create(&t, &s) != KPCN_OK) {
     fprintf(stderr, "bench_train: %s\n", kpcn_last_error());
@@ -65,10 +69,10 @@ static void bench(const char *store, const char *preset, int iters, int threads,
   double dt = now() - t0, f = kpcn_trainer_flops_per_iter(t), dc = cpu_s() - c0;
   kpcn_train_timing tm;
   kpcn_trainer_get_timing(t, &tm); /* includes the warm-up step */
-  printf("%-6s stage %d  batch 16x64x64  threads %d: %.3f it/s  %.1f patches/s  %.1f GFLOP/s "
+  printf("%-6s stage %d %s batch 16x64x64  threads %d: %.3f it/s  %.1f patches/s  %.1f GFLOP/s "
          "(%.1f GFLOP/it; warm-up %.2f s, %d timed iterations)\n",
-         preset, stage, kpcn_resolve_threads(threads), iters / dt, 16 * iters / dt,
-         f * iters / dt * 1e-9, f * 1e-9, warm, iters);
+         preset, stage, bf16 ? "bf16" : "f32 ", kpcn_resolve_threads(threads), iters / dt,
+         16 * iters / dt, f * iters / dt * 1e-9, f * 1e-9, warm, iters);
   int nt = kpcn_resolve_threads(threads);
   printf("       CPU obtained %.2f of %d cores; per CPU-second %.1f GFLOP -> %.1f GFLOP/s if the "
          "%d cores were ours\n",
@@ -78,7 +82,7 @@ static void bench(const char *store, const char *preset, int iters, int threads,
          (long long)tm.steps, 100 * tm.conv_s / tm.total_s, f * tm.steps / tm.conv_s * 1e-9,
          100 * (tm.net_s - tm.conv_s) / tm.total_s, 100 * tm.batch_s / tm.total_s,
          100 * tm.kpa_s / tm.total_s, 100 * tm.loss_s / tm.total_s, 100 * tm.adam_s / tm.total_s);
-  kt_print_vs_peak(&peak, 0, "training", f * iters / dt * 1e-9, 180.0);
+  kt_print_vs_peak(&peak, bf16, "training", f * iters / dt * 1e-9, 180.0);
   fflush(stdout);
   kpcn_trainer_destroy(t);
 }
@@ -86,9 +90,9 @@ static void bench(const char *store, const char *preset, int iters, int threads,
 int main(int argc, char **argv) {
   int th = 0, first = 1;
   if (argc > 2 && !strcmp(argv[1], "--threads")) th = atoi(argv[2]), first = 3;
-  static const char *defaults[] = {"cpu:1:6", "cpu:2:6", "paper:1:2"};
+  static const char *defaults[] = {"cpu:1:6", "cpu:2:6", "cpu:2:6:bf16", "paper:1:2"};
   const char *const *jobs = first < argc ? (const char *const *)argv + first : defaults;
-  int njobs = first < argc ? argc - first : 3;
+  int njobs = first < argc ? argc - first : 4;
   const char *store = kt_tmpfile("bench.kps");
   if (tf_make_store(store, 65, 160, 160, 64, 1, 0, NULL, 0) != 0) return 1;
   printf("bench_train: conv FLOPs = forward + backward-weights + backward-data (no input "
@@ -100,7 +104,7 @@ int main(int argc, char **argv) {
     size_t pl = c1 ? (size_t)(c1 - jobs[j]) : strlen(jobs[j]);
     snprintf(preset, sizeof preset, "%.*s", (int)(pl < 31 ? pl : 31), jobs[j]);
     if (c1 && sscanf(c1 + 1, "%d:%d", &stage, &iters) < 2) sscanf(c1 + 1, "%d", &iters), stage = 1;
-    bench(store, preset, iters, th, stage);
+    bench(store, preset, iters, th, stage, strstr(jobs[j], ":bf16") != NULL);
   }
   unlink(store);
   return 0;

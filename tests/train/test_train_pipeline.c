@@ -18,6 +18,7 @@
 #include <unistd.h>
 
 static const char *g_store;
+static int g_bf16; /* settings(): mixed-precision training */
 /* kt_tmpfile rotates 8 static buffers; the tests keep many paths alive */
 /* kt_tmpfile cycles through 8 buffers; this test holds more paths at once, so it copies them
  * into its own pool (static, so nothing is left to free). */
@@ -43,6 +44,7 @@ static void settings(kpcn_train_settings *s, const char *out) {
   s->seed = 5;
   s->adam.lr = 1e-2;
   s->log_every = 2;
+  s->bf16 = g_bf16;
 }
 
 /* All parameters of both branches, concatenated (malloc'ed). */
@@ -90,7 +92,11 @@ static float *run_full(const char *out, size_t *n) {
   return w;
 }
 
+/* Run once in f32 and once in bf16 (g_bf16): the file names are reused; a bf16 run's
+ * weights must differ from the f32 run's (the precision is really switched). */
 static void test_determinism_and_resume(void) {
+  static float *f32_weights;
+  static size_t f32_n;
   size_t n1, n2, n3;
   float *w1 = run_full(tf_tmp("a.safetensors"), &n1);
   float *w2 = run_full(tf_tmp("b.safetensors"), &n2);
@@ -120,6 +126,14 @@ static void test_determinism_and_resume(void) {
   float *w3 = weights(t, &n3);
   CHECK(n3 == n1 && memcmp(w3, w1, n1 * sizeof(float)) == 0);
   kpcn_trainer_destroy(t);
+  printf("determinism and resume (%s): bit-identical\n", g_bf16 ? "bf16" : "f32");
+  if (g_bf16) CHECK(f32_weights && f32_n == n1 && memcmp(f32_weights, w1, n1 * sizeof(float)) != 0);
+  /* a checkpoint written in the other precision is refused, naming the key */
+  settings(&s, tf_tmp("c.safetensors"));
+  s.bf16 = !g_bf16;
+  s.resume = 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
+  CHECK(strstr(kpcn_last_error(), "train.precision") != NULL);
   /* the resumed CSV reads as one run: rows 2,4,6 */
   FILE *f = fopen(tf_tmp("c.safetensors.csv"), "r");
   CHECK(f != NULL);
@@ -165,6 +179,13 @@ static void test_determinism_and_resume(void) {
   s.ckpt_path = tf_tmp("trunc.ckpt");
   s.resume = 1;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
+  if (!g_bf16) {
+    free(f32_weights);
+    f32_weights = w1, f32_n = n1, w1 = NULL;
+  } else {
+    free(f32_weights);
+    f32_weights = NULL;
+  }
   free(w0), free(w1), free(w2), free(w3);
 }
 
@@ -613,13 +634,18 @@ static void test_batch_wiring(void) {
 }
 
 int main(void) {
-  g_store = tf_tmp("train.kps");
+  static char store[512]; /* out of tf_tmp's pool, which wraps after 64 names */
+  snprintf(store, sizeof store, "%s", tf_tmp("train.kps"));
+  g_store = store;
   if (tf_make_store(g_store, 20, 48, 40, 12, 1, 0, NULL, 0) != 0) {
     fprintf(stderr, "cannot build the synthetic store: %s\n", kpcn_last_error());
     return 1;
   }
   test_batch_wiring();
   test_determinism_and_resume();
+  g_bf16 = 1;
+  test_determinism_and_resume();
+  g_bf16 = 0;
   test_validation();
   test_widen();
   test_validation_geomean();

@@ -24,13 +24,14 @@
 #   SNAPSHOT_NOTE: README text on how the snapshots were kept, if not by --snapshots),
 #   BEST_BY (mean: default; geomean: the best model, the SWA comparison and SHIP_IF_BELOW use
 #   the geometric mean of the per-pair relMSE instead, kpcn-train --best-by), WIDEN (with
-#   INIT: widen it to this many hidden channels first, kpcn-train --widen).
+#   INIT: widen it to this many hidden channels first, kpcn-train --widen), BF16 (1: mixed-
+#   precision training, kpcn-train --bf16).
 # With a time budget the iteration count is unknown in advance, so the script first measures
 # the speed (20 iterations) and sets --iters to fit MINUTES, --stage1-iters to STAGE1_FRACTION.
 # Resumable: if the run is interrupted, re-running continues from its checkpoint.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/../.." && pwd)
-[ $# -ge 1 ] || { sed -n 2,29p "$0"; exit 2; }
+[ $# -ge 1 ] || { sed -n 2,31p "$0"; exit 2; }
 store=$1
 shift
 bin=${KPCN_TRAIN:-$here/build/tools/kpcn-train/kpcn-train}
@@ -51,7 +52,8 @@ else
   # speed probe: 20 iterations of the same configuration, no outputs kept
   start=$(date +%s.%N)
   "$bin" --store "$store" -o "$work/probe.safetensors" --preset "$PRESET" --iters 20 \
-    --stage1-iters 10 --threads "$THREADS" --seed "$SEED" --csv '' --plot '' --quiet
+    --stage1-iters 10 --threads "$THREADS" --seed "$SEED" --csv '' --plot '' --quiet \
+    $([ "${BF16:-0}" = 1 ] && echo --bf16)
   end=$(date +%s.%N)
   rm -f "$work"/probe.*
   iters=$(awk -v s="$start" -v e="$end" -v m="$MINUTES" 'BEGIN { r = 20 / (e - s); n = int(r * m * 60 * 0.9); print (n < 20 ? 20 : n) }')
@@ -69,6 +71,7 @@ case $BEST_BY in mean) vcol=7 ;; geomean) vcol=10 ;; *) echo "ship_model.sh: BES
 [ -n "${LR2:-}" ] && args+=(--lr2 "$LR2")
 [ -n "${INIT:-}" ] && args+=(--init "$INIT")
 [ -n "${WIDEN:-}" ] && args+=(--widen "$WIDEN")
+[ "${BF16:-0}" = 1 ] && args+=(--bf16)
 [ -n "${TIME_LIMIT:-}" ] && args+=(--time-limit "$TIME_LIMIT")
 snapdir=${SNAPSHOT_DIR:-$work/snapshots}
 [ -n "${SWA_FROM:-}" ] && [ -z "${SNAPSHOT_DIR:-}" ] && args+=(--snapshots "$snapdir")
@@ -153,6 +156,7 @@ cpu=$(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -1)
   echo "| dataset recipe | ${DATASET_RECIPE:-see docs/dataset.md} |"
   [ -n "${INIT:-}" ] && echo "| initialised from | \`$(basename "$INIT")\` (${INIT_NOTE:-the previously shipped model; its own README is in git history}) |"
   [ -n "${WIDEN:-}" ] && echo "| widened | to $WIDEN hidden channels before training (\`kpcn-train --widen\`: same function, new units start with zero outgoing weights) |"
+  [ "${BF16:-0}" = 1 ] && echo "| precision | bf16 mixed precision (\`kpcn-train --bf16\`: bf16 convolutions, f32 weights, gradients and Adam) |"
   echo "| iterations | $done_iters of $iters planned (stage 1: $stage1, stage-2 loss $LOSS2) |"
   echo "| training time | ${secs} s |"
   echo "| hardware | ${cpu:-unknown CPU}, $(nproc) cores, threads=$THREADS |"

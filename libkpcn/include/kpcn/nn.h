@@ -159,7 +159,9 @@ typedef enum kpcn_layout {
 typedef struct kpcn_net_options {
   int batch, height, width; /* N, H, W the net is bound to */
   kpcn_precision precision; /* BF16: weights+activations bf16, fp32 accumulate, fp32 I/O */
-  int training;             /* 1: keep activations, enable kpcn_net_backward (F32 only) */
+  int training;             /* 1: keep activations, enable kpcn_net_backward; with BF16 this is
+                               mixed precision (bf16 activations, weight copies and output
+                               gradients; weight/bias gradients in f32) */
   int input_grad;           /* 1: backward also computes dL/dinput */
   int nthreads;             /* 0 = all cores */
   kpcn_layout layout;       /* activation layout, AUTO by default */

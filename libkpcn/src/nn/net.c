@@ -6,8 +6,9 @@
  * nhwc for bf16 brgconv) from layer to layer. Reorders happen only at the ends (user NCHW
  * input -> layer 0, last layer -> user NCHW logits, and the weights from the model's OIHW
  * arrays, which are re-read each forward so an optimizer can update them in place).
- * Backward (f32 training nets): ReLU backward (from the stored post-ReLU activation) in
- * place on the gradient buffer, then backward-weights and backward-data per layer.
+ * Backward (training nets, f32 or bf16 mixed precision): ReLU backward (from the stored
+ * post-ReLU activation) in place on the gradient buffer, then backward-weights and
+ * backward-data per layer; weight and bias gradients are f32 in either precision.
  * One user-mode scratchpad is shared by all primitives. */
 #include "core/internal.h"
 #include "nn/model_internal.h"
@@ -36,6 +37,7 @@ typedef struct reorder {
 typedef struct layer {
   int cin, cout, k, d, has_relu;
   dnnl_memory_desc_t src_md, dst_md, w_md, bw_md, dw_md;
+  dnnl_memory_desc_t ddst_md; /* dst gradient: dst_md, but bf16 for bf16 f32-logits layers */
   dnnl_primitive_desc_t fwd_pd, bwdd_pd, bwdw_pd, relu_pd;
   dnnl_primitive_t fwd, bwdd, bwdw, relu;
   dnnl_memory_t src, dst, w, bias;      /* forward operands */
@@ -272,20 +274,27 @@ static kpcn_status build_layer(kpcn_net *n, int l, const dnnl_memory_desc_t *src
   KPCN_TRY(make_reorder(n, &y->w_in, &oihw, &y->w_md, scratch));
   if (!n->o.training) return KPCN_OK;
 
-  /* backward: weights (always), data (for l > 0, or l == 0 when input_grad) */
+  /* backward: weights (always), data (for l > 0, or l == 0 when input_grad). bf16 nets train
+   * mixed-precision: activations, weight copies and output gradients in bf16 (oneDNN's bf16
+   * backward kernels take bf16 diff_dst only, so the f32 logits' gradient is rounded too),
+   * weight and bias gradients accumulated and returned in f32 for the f32 master weights. */
+  y->ddst_md = y->dst_md;
+  if (bf && !y->has_relu) DN(dnnl_memory_desc_init_by_tag(&y->ddst_md, 4, dd, dnnl_bf16, tag));
+  dnnl_memory_desc_t dwany;
+  DN(dnnl_memory_desc_init_by_tag(&dwany, 4, wd, dnnl_f32, dnnl_format_tag_any));
   dnnl_convolution_desc_t bwd;
   DN(dnnl_dilated_convolution_backward_weights_desc_init(
-      &bwd, dnnl_convolution_direct, &y->src_md, &wany, &bmd, &y->dst_md, strides, dil, pl, pr));
+      &bwd, dnnl_convolution_direct, &y->src_md, &dwany, &bmd, &y->ddst_md, strides, dil, pl, pr));
   KPCN_TRY(make_pd(n, &y->bwdw_pd, &bwd, n->attr, y->fwd_pd, "backward-weights", l, scratch));
   y->dw_md = *dnnl_primitive_desc_query_md(y->bwdw_pd, dnnl_query_diff_weights_md, 0);
   DN(dnnl_primitive_create(&y->bwdw, y->bwdw_pd));
   KPCN_TRY(mem(n, &y->dw, &y->dw_md, NULL));
   KPCN_TRY(mem(n, &y->db, &bmd, NULL));
-  KPCN_TRY(mem(n, &y->ddst, &y->dst_md, NULL));
+  KPCN_TRY(mem(n, &y->ddst, &y->ddst_md, NULL));
   KPCN_TRY(make_reorder(n, &y->dw_out, &y->dw_md, &oihw, scratch));
   if (l > 0 || n->o.input_grad) {
     DN(dnnl_dilated_convolution_backward_data_desc_init(&bwd, dnnl_convolution_direct, &y->src_md,
-                                                        &wany, &y->dst_md, strides, dil, pl, pr));
+                                                        &wany, &y->ddst_md, strides, dil, pl, pr));
     KPCN_TRY(make_pd(n, &y->bwdd_pd, &bwd, n->attr, y->fwd_pd, "backward-data", l, scratch));
     y->bw_md = *dnnl_primitive_desc_query_md(y->bwdd_pd, dnnl_query_weights_md, 0);
     DN(dnnl_primitive_create(&y->bwdd, y->bwdd_pd));
@@ -325,7 +334,7 @@ static kpcn_status bind_buffers(kpcn_net *n, size_t scratch) {
                (((size_t)y->cout + 15) & ~(size_t)15);
     size_t ds = md_size(&y->dst_md);
     if (ds > pp[l & 1]) pp[l & 1] = ds;
-    if (ds > db) db = ds;
+    if (n->o.training && md_size(&y->ddst_md) > db) db = md_size(&y->ddst_md);
     if (md_size(&y->src_md) > db) db = md_size(&y->src_md);
   }
   n->wbuf = net_alloc(n, wbytes, "net weight copies");
@@ -465,7 +474,7 @@ static kpcn_status build(kpcn_net *n) {
   KPCN_TRY(make_reorder(n, &n->out, &last->dst_md, &user_out, &scratch));
   n->native_ok = logits_layout_of(&last->dst_md, last->cout, H, W, &n->native);
   if (n->o.training) {
-    KPCN_TRY(make_reorder(n, &n->dout_in, &user_out, &last->dst_md, &scratch));
+    KPCN_TRY(make_reorder(n, &n->dout_in, &user_out, &last->ddst_md, &scratch));
     if (n->o.input_grad)
       KPCN_TRY(make_reorder(n, &n->dinput_out, &n->L[0].src_md, &user_in, &scratch));
   }
@@ -495,8 +504,6 @@ kpcn_status kpcn_net_create(kpcn_model *m, kpcn_branch b, const kpcn_net_options
   if ((int)o->layout < 0 || (int)o->layout > KPCN_LAYOUT_NHWC)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_create: unknown layout %d",
                      (int)o->layout);
-  if (o->training && o->precision != KPCN_PREC_F32)
-    return kpcn_fail(KPCN_ERR_UNSUPPORTED, "kpcn_net_create: bf16 is inference-only");
   if (o->layout == KPCN_LAYOUT_AUTO) {
     /* nhwc first (brgconv / AMX kernels); if oneDNN falls back to its slow reference kernel
      * for some layer (e.g. f32 jit with large dilation), try nChw16c and keep the better. */

@@ -7,9 +7,9 @@
  *            kpcn.architecture  kpcn_arch_to_json (must equal the trainer's on load)
  *            train.iteration, train.rng (hex splitmix64 word), train.adam_steps.<branch>,
  *            train.elapsed_s, train.seed, train.batch, train.patch, train.stage1_iters,
- *            train.loss1, train.loss2
+ *            train.precision ("f32" | "bf16"), train.loss1, train.loss2
  * Loading checks format, architecture and the settings that change the trajectory (seed,
- * batch, patch, stage-1 length) and names the first mismatch. */
+ * batch, patch, stage-1 length, precision) and names the first mismatch. */
 #include "core/internal.h"
 #include "train/train_internal.h"
 
@@ -80,6 +80,7 @@ kpcn_status kt_checkpoint_save(kpcn_trainer *t, const char *path) {
   meta_i64(meta, "train.batch", t->N);
   meta_i64(meta, "train.patch", t->P);
   meta_i64(meta, "train.stage1_iters", t->s.stage1_iters);
+  cJSON_AddStringToObject(meta, "train.precision", t->s.bf16 ? "bf16" : "f32");
   cJSON_AddStringToObject(meta, "train.loss1", kpcn_loss_name(t->s.loss1));
   cJSON_AddStringToObject(meta, "train.loss2", kpcn_loss_name(t->s.loss2));
   cJSON_AddItemToObject(root, "__metadata__", meta);
@@ -259,6 +260,11 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
       (st = meta_expect(meta, "train.patch", t->P, path, NULL)) ||
       (st = meta_expect(meta, "train.stage1_iters", t->s.stage1_iters, path, NULL)))
     goto done;
+  /* checkpoints from before mixed precision carry no train.precision: they were f32 */
+  const char *prec = meta_str(meta, "train.precision"), *mine_prec = t->s.bf16 ? "bf16" : "f32";
+  if (strcmp(prec ? prec : "f32", mine_prec))
+    BAD("checkpoint '%s' was written with train.precision = %s, this run uses %s (--bf16)", path,
+        prec, mine_prec);
   long long iter = 0, steps[2] = {0, 0};
   if ((st = meta_expect(meta, "train.iteration", 0, path, &iter)) ||
       (st = meta_expect(meta, "train.adam_steps.diffuse", 0, path, &steps[0])) ||

@@ -141,6 +141,7 @@ static kpcn_status setup_nets(kpcn_trainer *t) {
   no.height = no.width = t->P;
   no.training = 1;
   no.nthreads = t->nt;
+  no.precision = t->s.bf16 ? KPCN_PREC_BF16 : KPCN_PREC_F32;
   for (int b = 0; b < KT_NB; b++) {
     KPCN_TRY(kpcn_net_create(t->model, (kpcn_branch)b, &no, &t->net[b]));
     int np = kpcn_net_param_count(t->net[b]);
