@@ -264,7 +264,7 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
   const char *prec = meta_str(meta, "train.precision"), *mine_prec = t->s.bf16 ? "bf16" : "f32";
   if (strcmp(prec ? prec : "f32", mine_prec))
     BAD("checkpoint '%s' was written with train.precision = %s, this run uses %s (--bf16)", path,
-        prec, mine_prec);
+        prec ? prec : "f32 (no key: older checkpoint)", mine_prec);
   long long iter = 0, steps[2] = {0, 0};
   if ((st = meta_expect(meta, "train.iteration", 0, path, &iter)) ||
       (st = meta_expect(meta, "train.adam_steps.diffuse", 0, path, &steps[0])) ||
