@@ -59,6 +59,42 @@ static double rel_err(const float *got, const double *ref, size_t n) {
   return mx > 0 ? e / mx : e;
 }
 
+/* After a backward from planar dlogits dl (dinput din): a forward that leaves the logits in the
+ * net's own layout and a backward from dl written in that layout (padding zero) give the same
+ * parameter gradients and dinput, bit for bit. */
+static int native_backward_same(kpcn_net *net, const cfg *c, const float *in, const float *dl,
+                                const float *din) {
+  const int K2 = c->K * c->K, np = 2 * (c->n_hidden + 1);
+  const size_t nin = (size_t)c->N * c->H * c->W * c->n_in, hw = (size_t)c->H * c->W;
+  kpcn_param P[2 * KPCN_NN_MAX_LAYERS];
+  if (kpcn_net_params(net, P, 2 * KPCN_NN_MAX_LAYERS) != KPCN_OK) return 0;
+  size_t gn = 0;
+  for (int l = 0; l < np; l++)
+    gn += P[l].count;
+  float *g1 = malloc(gn * 4), *din2 = malloc(nin * 4);
+  for (size_t l = 0, o = 0; l < (size_t)np; o += P[l].count, l++)
+    memcpy(g1 + o, P[l].grad, P[l].count * 4);
+  const float *nat;
+  kpcn_logits_layout lay;
+  int same = kpcn_net_forward_logits(net, in, &nat, &lay) == KPCN_OK;
+  float *dnat = calloc((size_t)c->N * lay.image_stride, 4);
+  for (int b = 0; b < c->N; b++)
+    for (int t = 0; t < K2; t++)
+      for (size_t p = 0; p < hw; p++)
+        dnat[b * lay.image_stride + (size_t)(t / lay.block) * lay.block_stride +
+             p * (size_t)lay.pixel_stride + (size_t)(t % lay.block)] =
+            dl[((size_t)b * K2 + t) * hw + p];
+  same &= kpcn_net_backward_logits(net, dnat, din2) == KPCN_OK;
+  same &= memcmp(din, din2, nin * 4) == 0;
+  for (size_t l = 0, o = 0; l < (size_t)np; o += P[l].count, l++)
+    same &= memcmp(g1 + o, P[l].grad, P[l].count * 4) == 0;
+  printf("  backward from dlogits in the native layout (block %d, pixel stride %d): %s\n",
+         lay.block, lay.pixel_stride, same ? "bit-identical" : "DIFFERENT");
+  same &= kpcn_net_backward_logits(net, NULL, din2) == KPCN_ERR_INVALID_ARGUMENT;
+  free(g1), free(din2), free(dnat);
+  return same;
+}
+
 static void check_vs_ref(const cfg *c, int seed) {
   kpcn_arch a;
   make_arch(c, &a);
@@ -117,6 +153,7 @@ static void check_vs_ref(const cfg *c, int seed) {
     /* same thread count -> bit-identical */
     CHECK(kpcn_net_forward(net, in, lg2) == KPCN_OK);
     CHECK(memcmp(lg, lg2, nout * 4) == 0);
+    CHECK(native_backward_same(net, c, in, dl, din));
     kpcn_net_destroy(net);
   }
   /* inference path (ping-pong buffers) gives the same logits, with the default algorithm
@@ -425,6 +462,7 @@ static void bf16_training_cfg(const cfg *c, double bound) {
     CHECK(kpcn_net_forward(net, in, lg) == KPCN_OK);
     CHECK(kpcn_net_backward(net, dl, din2) == KPCN_OK);
     CHECK(memcmp(din, din2, nin * 4) == 0);
+    CHECK(native_backward_same(net, c, in, dl, din));
     nn_ref_free(&ref[0]);
     nn_ref_free(&ref[1]);
   }

@@ -167,6 +167,61 @@ static void backward_fd(int K, int n, int nc, int h, int w) {
   free(lg), free(nz), free(out), free(wt), free(r), free(dl), free(dn), free(dl2), free(dn2);
 }
 
+/* kpcn_kpa_backward_layout: dlogits written planar (through the layout), pixel-major (nhwc,
+ * padded to K2+3 per pixel) and channel-blocked (nChw16c) hold, slot for slot, the planar
+ * kpcn_kpa_backward's values (bit-identical) and zeros in every padding slot; dnoisy is unchanged.
+ */
+static void backward_layouts(int K, int n, int nc, int h, int w) {
+  const int K2 = K * K;
+  size_t pl = (size_t)h * w, nl = (size_t)n * K2 * pl, nn = (size_t)n * nc * pl;
+  float *lg = malloc(nl * 4), *nz = malloc(nn * 4), *out = malloc(nn * 4), *wt = malloc(nl * 4);
+  float *r = malloc(nn * 4), *dl = malloc(nl * 4), *dn = malloc(nn * 4), *dn2 = malloc(nn * 4);
+  unsigned rs = 501u + (unsigned)K;
+  fill(lg, nl, &rs, -2.f, 2.f);
+  fill(nz, nn, &rs, 0.f, 1.f);
+  fill(r, nn, &rs, -1.f, 1.f);
+  CHECK(kpcn_kpa_forward(K, n, nc, h, w, lg, nz, out, wt, 0) == KPCN_OK);
+  CHECK(kpcn_kpa_backward(K, n, nc, h, w, wt, nz, r, dl, dn, 0) == KPCN_OK);
+  const int blocks[3] = {1, K2, 16}, pstr[3] = {1, K2 + 3, 16}, nslots[3] = {1, K2 + 3, 16};
+  for (int v = 0; v < 3; v++) {
+    kpcn_logits_layout lay;
+    lay.block = blocks[v], lay.pixel_stride = pstr[v];
+    const int nb = (K2 + lay.block - 1) / lay.block, slots = nslots[v];
+    lay.block_stride = pl * (size_t)lay.pixel_stride;
+    lay.image_stride = (size_t)nb * lay.block_stride;
+    float *alt = malloc((size_t)n * lay.image_stride * 4);
+    for (size_t i = 0; i < (size_t)n * lay.image_stride; i++)
+      alt[i] = 1e30f; /* every slot must be written */
+    CHECK(kpcn_kpa_backward_layout(K, n, nc, h, w, wt, nz, r, alt, &lay, dn2, 2) == KPCN_OK);
+    size_t same = 0, zero = 0, pad = 0;
+    for (int b = 0; b < n; b++)
+      for (int blk = 0; blk < nb; blk++)
+        for (size_t p = 0; p < pl; p++)
+          for (int j = 0; j < slots; j++) {
+            const int t = blk * lay.block + j;
+            const float a = alt[b * lay.image_stride + blk * lay.block_stride +
+                                p * (size_t)lay.pixel_stride + (size_t)j];
+            if (j < lay.block && t < K2) {
+              const float e = dl[((size_t)b * K2 + t) * pl + p];
+              same += memcmp(&a, &e, 4) == 0;
+            } else {
+              pad++;
+              zero += a == 0.0f;
+            }
+          }
+    printf("kpa bwd layout block %d pixel stride %d, K=%d %dx%d: %zu of %zu dlogits identical, "
+           "%zu of %zu padding slots zero\n",
+           lay.block, lay.pixel_stride, K, h, w, same, nl, zero, pad);
+    CHECK(same == nl);
+    CHECK(zero == pad);
+    CHECK(memcmp(dn, dn2, nn * 4) == 0);
+    CHECK(kpcn_kpa_backward_layout(K, n, nc, h, w, wt, nz, r, wt, &lay, NULL, 1) ==
+          KPCN_ERR_INVALID_ARGUMENT); /* may not alias the weights */
+    free(alt);
+  }
+  free(lg), free(nz), free(out), free(wt), free(r), free(dl), free(dn), free(dn2);
+}
+
 int main(void) {
   forward_vs_naive(3, 1, 3, 5, 4, 2.f);
   forward_vs_naive(5, 2, 3, 9, 13, 4.f);
@@ -177,6 +232,9 @@ int main(void) {
   backward_fd(3, 2, 3, 6, 5);
   backward_fd(5, 1, 3, 7, 9);
   backward_fd(7, 1, 2, 4, 11);
+  backward_layouts(3, 2, 3, 6, 5);
+  backward_layouts(7, 1, 3, 4, 11);  /* K2 = 49: three whole blocks of 16 and one tap */
+  backward_layouts(11, 2, 3, 5, 37); /* the cpu preset's K, 8 x 8 transposes plus edges */
   float x = 0;
   CHECK(kpcn_kpa_forward(4, 1, 3, 4, 4, &x, &x, &x, NULL, 1) == KPCN_ERR_INVALID_ARGUMENT);
   CHECK(kpcn_kpa_forward(3, 1, 3, 0, 4, &x, &x, &x, NULL, 1) != KPCN_OK);

@@ -219,6 +219,10 @@ kpcn_status kpcn_net_forward_logits(kpcn_net *net, const float *input, const flo
  * gradients (overwritten, not accumulated; see kpcn_net_params) and, when the net was
  * created with input_grad, dinput [N][n_inputs][H][W] (may be NULL otherwise). */
 kpcn_status kpcn_net_backward(kpcn_net *net, const float *dlogits, float *dinput);
+/* Same, with dlogits in the layout the last kpcn_net_forward_logits reported (f32; the padding
+ * of blocked layouts zero), as kpcn_kpa_backward_layout writes them: saves the transposing
+ * reorder from planar. dlogits is only read. */
+kpcn_status kpcn_net_backward_logits(kpcn_net *net, const float *dlogits, float *dinput);
 
 /* Parameter list for an optimizer: value points into the model, grad into the net. Order:
  * conv0.weight, conv0.bias, conv1.weight, ... ; 2*n_layers entries. */
@@ -265,6 +269,12 @@ kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const fl
 kpcn_status kpcn_kpa_backward(int K, int n, int nc, int h, int w, const float *weights,
                               const float *noisy, const float *dout, float *dlogits, float *dnoisy,
                               int nthreads);
+/* Same, with dlogits written in any layout kpcn_logits_layout describes (padding slots set
+ * to zero), e.g. the one kpcn_net_forward_logits reported, for kpcn_net_backward_logits;
+ * weights stay planar and dlogits must not alias them. */
+kpcn_status kpcn_kpa_backward_layout(int K, int n, int nc, int h, int w, const float *weights,
+                                     const float *noisy, const float *dout, float *dlogits,
+                                     const kpcn_logits_layout *layout, float *dnoisy, int nthreads);
 
 #ifdef __cplusplus
 }

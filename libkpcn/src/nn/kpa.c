@@ -20,7 +20,7 @@
 /* The per-row loops below are auto-vectorized, and they bound the kernel layer by loads: a
  * second copy built for AVX-512 (x86-64-v4), chosen at load time where the CPU has it, does
  * each load and FMA on 16 pixels instead of 8. The arithmetic per pixel is the same. */
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__AVX2__) && \
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__AVX2__) &&        \
     !defined(KPCN_NO_CLONES)
 #define KPCN_AVX512_CLONES __attribute__((target_clones("arch=x86-64-v4", "default")))
 #else
@@ -40,6 +40,15 @@ static kpcn_status check_args(const char *fn, int K, int n, int nc, int h, int w
   if (n < 1 || nc < 1 || nc > 64)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: n = %d, nc = %d invalid", fn, n, nc);
   return kpcn_check_size(w, h, fn);
+}
+
+static kpcn_status check_layout(const char *fn, const kpcn_logits_layout *l, int K2) {
+  if (l->block < 1 || l->pixel_stride < 1 || (l->block < K2 && l->pixel_stride < l->block) ||
+      (l->block >= K2 && l->pixel_stride < K2))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "%s: logits layout (block %d, pixel stride %d) overlaps itself", fn, l->block,
+                     l->pixel_stride);
+  return KPCN_OK;
 }
 
 /* row[x + r] = src[clamp(x)] for x in [-r, w + r) */
@@ -139,12 +148,60 @@ static inline void transpose8x8(const float *src, size_t ss, float *dst, size_t 
 }
 #endif
 
+#if defined(__GNUC__) && defined(__x86_64__) && defined(__AVX2__)
+#define KPCN_HAVE_T16 1
+/* dst[j * ds + i] = src[i * ss + j] for i < 16, j < nb <= 16: one 16-pixel block of
+ * oneDNN's nChw16c logits (16 whole cache lines) to nb tap rows. Four shuffle stages:
+ * 32-bit and 64-bit interleaves leave a 4 x 4 transposed block in each 128-bit lane, two
+ * lane shuffles gather the four lanes of each output row. Reads all 16 floats of every
+ * pixel (the block's padding too: pixel_stride >= 16), stores only the nb rows asked for. */
+__attribute__((target("avx512f"))) static void transpose16x16(const float *src, size_t ss,
+                                                              float *dst, size_t ds, int nb) {
+  __m512 r[16], t[16], u[16];
+  for (int i = 0; i < 16; i++)
+    r[i] = _mm512_loadu_ps(src + (size_t)i * ss);
+  for (int i = 0; i < 16; i += 2) {
+    t[i] = _mm512_unpacklo_ps(r[i], r[i + 1]);
+    t[i + 1] = _mm512_unpackhi_ps(r[i], r[i + 1]);
+  }
+  /* u[4g + c], lane k: column 4k + c of rows 4g .. 4g + 3 */
+  for (int g = 0; g < 16; g += 4) {
+    const __m512d a = _mm512_castps_pd(t[g]), b = _mm512_castps_pd(t[g + 1]),
+                  c = _mm512_castps_pd(t[g + 2]), d = _mm512_castps_pd(t[g + 3]);
+    u[g] = _mm512_castpd_ps(_mm512_unpacklo_pd(a, c));
+    u[g + 1] = _mm512_castpd_ps(_mm512_unpackhi_pd(a, c));
+    u[g + 2] = _mm512_castpd_ps(_mm512_unpacklo_pd(b, d));
+    u[g + 3] = _mm512_castpd_ps(_mm512_unpackhi_pd(b, d));
+  }
+  for (int c = 0; c < 4; c++) {
+    const __m512 lo01 = _mm512_shuffle_f32x4(u[c], u[4 + c], _MM_SHUFFLE(1, 0, 1, 0)),
+                 hi01 = _mm512_shuffle_f32x4(u[c], u[4 + c], _MM_SHUFFLE(3, 2, 3, 2)),
+                 lo23 = _mm512_shuffle_f32x4(u[8 + c], u[12 + c], _MM_SHUFFLE(1, 0, 1, 0)),
+                 hi23 = _mm512_shuffle_f32x4(u[8 + c], u[12 + c], _MM_SHUFFLE(3, 2, 3, 2));
+    const __m512 row[4] = {_mm512_shuffle_f32x4(lo01, lo23, _MM_SHUFFLE(2, 0, 2, 0)),
+                           _mm512_shuffle_f32x4(lo01, lo23, _MM_SHUFFLE(3, 1, 3, 1)),
+                           _mm512_shuffle_f32x4(hi01, hi23, _MM_SHUFFLE(2, 0, 2, 0)),
+                           _mm512_shuffle_f32x4(hi01, hi23, _MM_SHUFFLE(3, 1, 3, 1))};
+    for (int k = 0; k < 4; k++)
+      if (4 * k + c < nb) _mm512_storeu_ps(dst + (size_t)(4 * k + c) * ds, row[k]);
+  }
+}
+#endif
+
 /* dst[j * ds + x] = src[x * ps + j] for x < w, j < nb: pixel-major logits to the tap-major
  * rows the softmax and apply loops read. Element by element this was ~40 % of the layer
- * (scattered single-float stores); 8 x 8 register transposes leave only the edges scalar. */
+ * (scattered single-float stores); register transposes leave only the edges scalar: 16 x 16
+ * AVX-512 ones for nChw16c blocks where the CPU has AVX-512 (t16), else 8 x 8 AVX2 ones. */
 static void transpose(const float *restrict src, int ps, int w, int nb, float *restrict dst,
-                      size_t ds) {
+                      size_t ds, int t16) {
   int x0 = 0;
+#ifdef KPCN_HAVE_T16
+  if (t16 && ps >= 16 && nb <= 16)
+    for (; x0 + 16 <= w; x0 += 16)
+      transpose16x16(src + (size_t)x0 * ps, (size_t)ps, dst + x0, ds, nb);
+#else
+  (void)t16;
+#endif
 #ifdef __AVX2__
   for (; x0 + 8 <= w; x0 += 8) {
     int j = 0;
@@ -174,7 +231,7 @@ static void transpose(const float *restrict src, int ps, int w, int nb, float *r
 KPCN_AVX512_CLONES static void fwd_row(int K, int nc, int h, int w, int xc_n, size_t ws, int y,
                                        const float *logits, const kpcn_logits_layout *lay,
                                        const float *noisy, float *out, float *weights,
-                                       float *restrict wt) {
+                                       float *restrict wt, int t16) {
   const int r = K / 2, K2 = K * K, pw = w + 2 * r;
   const size_t plane = (size_t)h * w;
   float *restrict mx = wt + (size_t)K2 * ws, *restrict sum = mx + xc_n, *restrict pr = sum + xc_n;
@@ -196,7 +253,7 @@ KPCN_AVX512_CLONES static void fwd_row(int K, int nc, int h, int w, int xc_n, si
         const float *src =
             logits + (size_t)(t0 / bl) * lay->block_stride + ((size_t)y * w + xc) * ps;
         const int nb = K2 - t0 < bl ? K2 - t0 : bl;
-        transpose(src, ps, n, nb, wt + (size_t)t0 * ws, ws);
+        transpose(src, ps, n, nb, wt + (size_t)t0 * ws, ws, t16);
       }
       L = wt, lstride = ws;
     }
@@ -273,11 +330,7 @@ kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const fl
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_kpa_forward: NULL buffer");
   const int r = K / 2, K2 = K * K, nt = kpcn_resolve_threads(nthreads);
   const kpcn_logits_layout lay = *layout;
-  if (lay.block < 1 || lay.pixel_stride < 1 || (lay.block < K2 && lay.pixel_stride < lay.block) ||
-      (lay.block >= K2 && lay.pixel_stride < K2))
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "kpcn_kpa_forward: logits layout (block %d, pixel stride %d) overlaps itself",
-                     lay.block, lay.pixel_stride);
+  KPCN_TRY(check_layout("kpcn_kpa_forward", &lay, K2));
   const size_t plane = (size_t)h * w;
   /* per thread: softmax rows [K2][ws] of one chunk, its max and sum, nc x K padded rows. The
    * row stride ws is padded (kpcn_plane_stride) so the K2 rows the apply loop reads together
@@ -288,12 +341,17 @@ kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const fl
   const size_t scratch = (size_t)K2 * ws + 2 * (size_t)xc_n + (size_t)nc * K * (w + 2 * r) + 64;
   float *buf = kpcn_aligned_alloc((size_t)nt * scratch * sizeof(float), "kpa scratch");
   if (!buf) return KPCN_ERR_OUT_OF_MEMORY;
+#ifdef KPCN_HAVE_T16
+  const int t16 = lay.block == 16 && __builtin_cpu_supports("avx512f");
+#else
+  const int t16 = 0;
+#endif
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++) {
     const int b = (int)(row / h), y = (int)(row % h);
     fwd_row(K, nc, h, w, xc_n, ws, y, logits + (size_t)b * lay.image_stride, &lay,
             noisy + (size_t)b * nc * plane, out + (size_t)b * nc * plane,
-            weights ? weights + (size_t)b * K2 * plane : NULL, thread_scratch(buf, scratch));
+            weights ? weights + (size_t)b * K2 * plane : NULL, thread_scratch(buf, scratch), t16);
   }
   kpcn_aligned_free(buf);
   return KPCN_OK;
@@ -345,10 +403,28 @@ KPCN_AVX512_CLONES static void bwd_dnoisy_row(int K, int nc, int h, int w, long 
   }
 }
 
-/* Backward, dlogits: one (image, row) through the softmax Jacobian. */
+/* Row y of one image's dlogits (img) in layout lay, from tap-major rows D[t][w]: the transpose
+ * the forward does on the way in, reversed (pixel-major rows of the tap-major ones), with the
+ * layout's padding slots zeroed (oneDNN requires zero padding in blocked layouts). */
+static void store_dlogits_row(const float *D, int K2, int w, int y, const kpcn_logits_layout *lay,
+                              float *img) {
+  const int bl = lay->block, ps = lay->pixel_stride, slots = bl < K2 ? bl : ps;
+  for (int t0 = 0; t0 < K2; t0 += bl) {
+    const int nb = K2 - t0 < bl ? K2 - t0 : bl;
+    float *dst = img + (size_t)(t0 / bl) * lay->block_stride + (size_t)y * w * ps;
+    transpose(D + (size_t)t0 * w, w, nb, w, dst, (size_t)ps, 0);
+    if (nb < slots)
+      for (int x = 0; x < w; x++)
+        memset(dst + (size_t)x * ps + nb, 0, (size_t)(slots - nb) * sizeof(float));
+  }
+}
+
+/* Backward, dlogits: one (image, row) through the softmax Jacobian. Planar dlogits are written
+ * in place of the row's result; other layouts (lay non-NULL) go through store_dlogits_row. */
 KPCN_AVX512_CLONES static void bwd_dlogits_row(int K, int nc, int h, int w, long row,
                                                const float *weights, const float *noisy,
-                                               const float *dout, float *dlogits, float *scratch) {
+                                               const float *dout, float *dlogits,
+                                               const kpcn_logits_layout *lay, float *scratch) {
   const int r = K / 2, K2 = K * K;
   const size_t plane = (size_t)h * w;
   float *g = scratch; /* [K2][w]: dL/dw_t */
@@ -375,19 +451,29 @@ KPCN_AVX512_CLONES static void bwd_dlogits_row(int K, int nc, int h, int w, long
   for (int t = 0; t < K2; t++)
     for (int x = 0; x < w; x++)
       dot[x] += W[t * plane + x] * g[(size_t)t * w + x];
+  if (lay) {
+    for (int t = 0; t < K2; t++)
+      for (int x = 0; x < w; x++)
+        g[(size_t)t * w + x] = W[t * plane + x] * (g[(size_t)t * w + x] - dot[x]);
+    store_dlogits_row(g, K2, w, y, lay, dlogits + (size_t)b * lay->image_stride);
+    return;
+  }
   float *D = dlogits + (size_t)b * K2 * plane + (size_t)y * w;
   for (int t = 0; t < K2; t++)
     for (int x = 0; x < w; x++)
       D[t * plane + x] = W[t * plane + x] * (g[(size_t)t * w + x] - dot[x]);
 }
 
-kpcn_status kpcn_kpa_backward(int K, int n, int nc, int h, int w, const float *weights,
-                              const float *noisy, const float *dout, float *dlogits, float *dnoisy,
-                              int nthreads) {
-  KPCN_TRY(check_args("kpcn_kpa_backward", K, n, nc, h, w));
+/* lay NULL: planar dlogits (which may alias weights) */
+static kpcn_status kpa_backward(const char *fn, int K, int n, int nc, int h, int w,
+                                const float *weights, const float *noisy, const float *dout,
+                                float *dlogits, const kpcn_logits_layout *lay, float *dnoisy,
+                                int nthreads) {
+  KPCN_TRY(check_args(fn, K, n, nc, h, w));
   if (!weights || !noisy || !dout || !dlogits)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_kpa_backward: NULL buffer");
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: NULL buffer", fn);
   const int r = K / 2, K2 = K * K, nt = kpcn_resolve_threads(nthreads);
+  if (lay) KPCN_TRY(check_layout(fn, lay, K2));
   const size_t scratch = (size_t)K2 * w + 2 * (size_t)w + (size_t)w + 2 * r + 64;
   float *buf = kpcn_aligned_alloc((size_t)nt * scratch * sizeof(float), "kpa scratch");
   if (!buf) return KPCN_ERR_OUT_OF_MEMORY;
@@ -401,7 +487,30 @@ kpcn_status kpcn_kpa_backward(int K, int n, int nc, int h, int w, const float *w
   }
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++)
-    bwd_dlogits_row(K, nc, h, w, row, weights, noisy, dout, dlogits, thread_scratch(buf, scratch));
+    bwd_dlogits_row(K, nc, h, w, row, weights, noisy, dout, dlogits, lay,
+                    thread_scratch(buf, scratch));
   kpcn_aligned_free(buf);
   return KPCN_OK;
+}
+
+kpcn_status kpcn_kpa_backward(int K, int n, int nc, int h, int w, const float *weights,
+                              const float *noisy, const float *dout, float *dlogits, float *dnoisy,
+                              int nthreads) {
+  return kpa_backward("kpcn_kpa_backward", K, n, nc, h, w, weights, noisy, dout, dlogits, NULL,
+                      dnoisy, nthreads);
+}
+
+kpcn_status kpcn_kpa_backward_layout(int K, int n, int nc, int h, int w, const float *weights,
+                                     const float *noisy, const float *dout, float *dlogits,
+                                     const kpcn_logits_layout *layout, float *dnoisy,
+                                     int nthreads) {
+  if (!layout) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_kpa_backward_layout: NULL layout");
+  if (dlogits == weights)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "kpcn_kpa_backward_layout: dlogits may not alias weights");
+  const size_t plane = (size_t)h * w;
+  const int planar = layout->block == 1 && layout->pixel_stride == 1 &&
+                     layout->block_stride == plane && layout->image_stride == plane * K * K;
+  return kpa_backward("kpcn_kpa_backward_layout", K, n, nc, h, w, weights, noisy, dout, dlogits,
+                      planar ? NULL : layout, dnoisy, nthreads); /* planar: rows in place */
 }

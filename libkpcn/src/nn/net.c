@@ -60,12 +60,14 @@ struct kpcn_net {
   dnnl_primitive_attr_t attr, attr_relu; /* user scratchpad; + fused ReLU post-op */
   layer L[KPCN_NN_MAX_LAYERS];
   reorder in, out, dout_in, dinput_out;
-  void *xbuf;    /* layer-0 input in its primitive layout */
-  void *rbuf;    /* a layer's input after src_in (inference) */
-  void *pp[2];   /* inference ping-pong activation buffers */
-  void *dbuf[2]; /* backward gradient ping-pong buffers */
-  void *wbuf;    /* all primitive-layout weight copies */
-  float *grads;  /* all gradients */
+  reorder dout_native; /* native-layout f32 dlogits -> the last layer's dst gradient */
+  int dout_direct;     /* ... or none: native dlogits already are that gradient */
+  void *xbuf;          /* layer-0 input in its primitive layout */
+  void *rbuf;          /* a layer's input after src_in (inference) */
+  void *pp[2];         /* inference ping-pong activation buffers */
+  void *dbuf[2];       /* backward gradient ping-pong buffers */
+  void *wbuf;          /* all primitive-layout weight copies */
+  float *grads;        /* all gradients */
   void *scratch;
   dnnl_memory_t scratch_mem;
   size_t bytes;
@@ -475,6 +477,15 @@ static kpcn_status build(kpcn_net *n) {
   n->native_ok = logits_layout_of(&last->dst_md, last->cout, H, W, &n->native);
   if (n->o.training) {
     KPCN_TRY(make_reorder(n, &n->dout_in, &user_out, &last->ddst_md, &scratch));
+    /* dlogits in the logits' own layout (kpcn_net_backward_logits): f32 nets take them as
+     * they are (the last layer has no ReLU, so backward never writes its dst gradient), bf16
+     * nets convert them in place of layout (f32 -> bf16, same order: a streaming pass, where
+     * the planar dlogits needed a transpose) */
+    if (n->native_ok) {
+      n->dout_direct = !last->has_relu && dnnl_memory_desc_equal(&last->dst_md, &last->ddst_md);
+      if (!n->dout_direct)
+        KPCN_TRY(make_reorder(n, &n->dout_native, &last->dst_md, &last->ddst_md, &scratch));
+    }
     if (n->o.input_grad)
       KPCN_TRY(make_reorder(n, &n->dinput_out, &n->L[0].src_md, &user_in, &scratch));
   }
@@ -564,6 +575,7 @@ void kpcn_net_destroy(kpcn_net *n) {
   free_reorder(&n->in);
   free_reorder(&n->out);
   free_reorder(&n->dout_in);
+  free_reorder(&n->dout_native);
   free_reorder(&n->dinput_out);
   if (n->scratch_mem) dnnl_memory_destroy(n->scratch_mem);
   kpcn_aligned_free(n->xbuf);
@@ -644,14 +656,18 @@ kpcn_status kpcn_net_forward_logits(kpcn_net *n, const float *input, const float
   return s;
 }
 
-static kpcn_status backward(kpcn_net *n, const float *dlogits, float *dinput) {
+/* native: dlogits are in the layout kpcn_net_forward_logits reported, else planar */
+static kpcn_status backward(kpcn_net *n, const float *dlogits, float *dinput, int native) {
   const kpcn_model *m = n->model;
   int cur = 0;
-  KPCN_TRY(run_reorder(n, &n->dout_in, dlogits, n->dbuf[cur]));
+  const int direct = native && n->dout_direct;
+  if (!direct)
+    KPCN_TRY(run_reorder(n, native ? &n->dout_native : &n->dout_in, dlogits, n->dbuf[cur]));
   for (int l = n->nl - 1; l >= 0; l--) {
     layer *y = &n->L[l];
     double t0;
-    DN(dnnl_memory_set_data_handle(y->ddst, n->dbuf[cur]));
+    DN(dnnl_memory_set_data_handle(y->ddst,
+                                   direct && l == n->nl - 1 ? (void *)dlogits : n->dbuf[cur]));
     if (y->has_relu) {
       dnnl_exec_arg_t a[4] = {{DNNL_ARG_DST, y->dst},
                               {DNNL_ARG_DIFF_DST, y->ddst},
@@ -688,25 +704,33 @@ static kpcn_status backward(kpcn_net *n, const float *dlogits, float *dinput) {
   return KPCN_OK;
 }
 
-kpcn_status kpcn_net_backward(kpcn_net *n, const float *dlogits, float *dinput) {
-  if (!n || !dlogits)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_backward: NULL argument");
+static kpcn_status backward_checked(kpcn_net *n, const float *dlogits, float *dinput, int native,
+                                    const char *fn) {
+  if (!n || !dlogits) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: NULL argument", fn);
   if (!n->o.training)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "kpcn_net_backward: net was created for inference (options.training = 0)");
+                     "%s: net was created for inference (options.training = 0)", fn);
   if (n->st.n_fwd == 0)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "kpcn_net_backward: no forward pass to differentiate");
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: no forward pass to differentiate", fn);
   if (n->o.input_grad && !dinput)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_backward: dinput is NULL but the net "
-                                                "was created with input_grad");
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "%s: dinput is NULL but the net was created with input_grad", fn);
   thr_guard g = thr_push(n->nt);
   double t0 = now_s();
-  kpcn_status s = backward(n, dlogits, dinput);
+  kpcn_status s = backward(n, dlogits, dinput, native);
   n->st.bwd_s += now_s() - t0;
   n->st.n_bwd++;
   thr_pop(g);
   return s;
+}
+
+kpcn_status kpcn_net_backward(kpcn_net *n, const float *dlogits, float *dinput) {
+  return backward_checked(n, dlogits, dinput, 0, "kpcn_net_backward");
+}
+
+kpcn_status kpcn_net_backward_logits(kpcn_net *n, const float *dlogits, float *dinput) {
+  /* without a native layout, kpcn_net_forward_logits reported planar logits */
+  return backward_checked(n, dlogits, dinput, n && n->native_ok, "kpcn_net_backward_logits");
 }
 
 int kpcn_net_param_count(const kpcn_net *n) { return n ? 2 * n->nl : 0; }

@@ -42,6 +42,9 @@ struct kpcn_trainer {
   /* batch tensors, N x C x P x P */
   int N, P, K2, nfeat;
   float *feat[KT_NB], *noisy[KT_NB], *logits[KT_NB], *out[KT_NB], *target[KT_NB], *grad[KT_NB];
+  /* dlogits in the layout the net left its logits in (lay), allocated at the first forward */
+  float *dlogits[KT_NB];
+  kpcn_logits_layout lay[KT_NB];
   float *albedo, *refc, *comb, *gcomb;
   float *lossbuf; /* margin crops: 3 tensors of N x 3 x (P-2m)^2 */
   /* per-thread scratch for sample assembly: raw S x S patch, crop, augmented, canonical */

@@ -66,7 +66,7 @@ void kpcn_trainer_destroy(kpcn_trainer *t) {
     free(t->params[b]);
     free(t->blocks[b]);
     free(t->feat[b]), free(t->noisy[b]), free(t->logits[b]), free(t->out[b]);
-    free(t->target[b]), free(t->grad[b]);
+    free(t->target[b]), free(t->grad[b]), free(t->dlogits[b]);
   }
   kpcn_model_destroy(t->model);
   if (t->ps) kpcn_patchstore_close(t->ps);
@@ -312,13 +312,19 @@ void kpcn_trainer_get_timing(const kpcn_trainer *t, kpcn_train_timing *out) {
   }
 }
 
-/* forward of one branch: logits -> softmax weights in place -> out */
+/* forward of one branch: logits (read where and as the net left them, no reorder) -> planar
+ * softmax weights in t->logits -> out */
 static kpcn_status branch_forward(kpcn_trainer *t, int b) {
   double t0 = kt_now();
-  KPCN_TRY(kpcn_net_forward(t->net[b], t->feat[b], t->logits[b]));
+  const float *lg;
+  KPCN_TRY(kpcn_net_forward_logits(t->net[b], t->feat[b], &lg, &t->lay[b]));
+  if (!t->dlogits[b]) {
+    t->dlogits[b] = kpcn_alloc(sizeof(float) * (size_t)t->N * t->lay[b].image_stride, "dlogits");
+    if (!t->dlogits[b]) return KPCN_ERR_OUT_OF_MEMORY;
+  }
   double t1 = kt_now();
-  kpcn_status st = kpcn_kpa_forward(t->arch.kernel_size, t->N, 3, t->P, t->P, t->logits[b],
-                                    t->noisy[b], t->out[b], t->logits[b], t->nt);
+  kpcn_status st = kpcn_kpa_forward_layout(t->arch.kernel_size, t->N, 3, t->P, t->P, lg, &t->lay[b],
+                                           t->noisy[b], t->out[b], t->logits[b], t->nt);
   t->timing.net_s += t1 - t0;
   t->timing.kpa_s += kt_now() - t1;
   return st;
@@ -327,10 +333,11 @@ static kpcn_status branch_forward(kpcn_trainer *t, int b) {
 /* backward of one branch from dL/dout in t->grad[b], then its Adam step */
 static kpcn_status branch_backward_step(kpcn_trainer *t, int b) {
   double t0 = kt_now();
-  KPCN_TRY(kpcn_kpa_backward(t->arch.kernel_size, t->N, 3, t->P, t->P, t->logits[b], t->noisy[b],
-                             t->grad[b], t->logits[b], NULL, t->nt));
+  KPCN_TRY(kpcn_kpa_backward_layout(t->arch.kernel_size, t->N, 3, t->P, t->P, t->logits[b],
+                                    t->noisy[b], t->grad[b], t->dlogits[b], &t->lay[b], NULL,
+                                    t->nt));
   double t1 = kt_now();
-  KPCN_TRY(kpcn_net_backward(t->net[b], t->logits[b], NULL));
+  KPCN_TRY(kpcn_net_backward_logits(t->net[b], t->dlogits[b], NULL));
   double t2 = kt_now();
   kpcn_status st = kpcn_adam_step(t->adam[b], t->blocks[b], t->nparams[b], t->nt, NULL);
   t->timing.kpa_s += t1 - t0;
