@@ -188,33 +188,59 @@ __attribute__((target("avx512f"))) static void transpose16x16(const float *src, 
 }
 #endif
 
-/* dst[j * ds + x] = src[x * ps + j] for x < w, j < nb: pixel-major logits to the tap-major
- * rows the softmax and apply loops read. Element by element this was ~40 % of the layer
- * (scattered single-float stores); register transposes leave only the edges scalar: 16 x 16
- * AVX-512 ones for nChw16c blocks where the CPU has AVX-512 (t16), else 8 x 8 AVX2 ones. */
-static void transpose(const float *restrict src, int ps, int w, int nb, float *restrict dst,
-                      size_t ds, int t16) {
-  int x0 = 0;
+static int have_avx512(void) {
 #ifdef KPCN_HAVE_T16
-  if (t16 && ps >= 16 && nb <= 16)
-    for (; x0 + 16 <= w; x0 += 16)
-      transpose16x16(src + (size_t)x0 * ps, (size_t)ps, dst + x0, ds, nb);
+  return __builtin_cpu_supports("avx512f");
 #else
-  (void)t16;
+  return 0;
 #endif
+}
+
+/* dst[j * ds + x] = src[x * ps + j] for x in [xa, xb), j in [ja, jb): 8 x 8 AVX2 register
+ * transposes, scalar edges. */
+static void transpose_8(const float *restrict src, int ps, int xa, int xb, int ja, int jb,
+                        float *restrict dst, size_t ds) {
+  int x0 = xa;
 #ifdef __AVX2__
-  for (; x0 + 8 <= w; x0 += 8) {
-    int j = 0;
-    for (; j + 8 <= nb; j += 8)
+  for (; x0 + 8 <= xb; x0 += 8) {
+    int j = ja;
+    for (; j + 8 <= jb; j += 8)
       transpose8x8(src + (size_t)x0 * ps + j, (size_t)ps, dst + (size_t)j * ds + x0, ds);
-    for (; j < nb; j++)
+    for (; j < jb; j++)
       for (int x = x0; x < x0 + 8; x++)
         dst[(size_t)j * ds + x] = src[(size_t)x * ps + j];
   }
 #endif
-  for (int x = x0; x < w; x++)
-    for (int j = 0; j < nb; j++)
+  for (int x = x0; x < xb; x++)
+    for (int j = ja; j < jb; j++)
       dst[(size_t)j * ds + x] = src[(size_t)x * ps + j];
+}
+
+/* dst[j * ds + x] = src[x * ps + j] for x < w, j < nb: pixel-major logits to the tap-major
+ * rows the softmax and apply loops read, and (backward) tap-major rows back to pixel-major.
+ * Element by element this was ~40 % of the layer (scattered single-float stores); register
+ * transposes leave only the edges scalar. Where the CPU has AVX-512 (t16), 16 x 16 blocks
+ * cover every column block that lies within the row stride ps (so a nChw16c block's last,
+ * partly padded 16 columns too: only its nb rows are stored), 8 x 8 AVX2 ones the rest. */
+static void transpose(const float *restrict src, int ps, int w, int nb, float *restrict dst,
+                      size_t ds, int t16) {
+  int x16 = 0, j16 = 0; /* the 16 x 16 blocks cover x < x16, j < j16 */
+#ifdef KPCN_HAVE_T16
+  if (t16) {
+    while (j16 < nb && j16 + 16 <= ps)
+      j16 += 16;
+    if (j16 > 0) x16 = w & ~15;
+    for (int x0 = 0; x0 < x16; x0 += 16)
+      for (int j0 = 0; j0 < j16; j0 += 16)
+        transpose16x16(src + (size_t)x0 * ps + j0, (size_t)ps, dst + (size_t)j0 * ds + x0, ds,
+                       nb - j0 < 16 ? nb - j0 : 16);
+    if (j16 > nb) j16 = nb;
+  }
+#else
+  (void)t16;
+#endif
+  transpose_8(src, ps, 0, x16, j16, nb, dst, ds);
+  transpose_8(src, ps, x16, w, 0, nb, dst, ds);
 }
 
 #define XC 64 /* pixels per column chunk of gathered logits: its K² weight rows stay in L1/L2 */
@@ -341,11 +367,7 @@ kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const fl
   const size_t scratch = (size_t)K2 * ws + 2 * (size_t)xc_n + (size_t)nc * K * (w + 2 * r) + 64;
   float *buf = kpcn_aligned_alloc((size_t)nt * scratch * sizeof(float), "kpa scratch");
   if (!buf) return KPCN_ERR_OUT_OF_MEMORY;
-#ifdef KPCN_HAVE_T16
-  const int t16 = lay.block == 16 && __builtin_cpu_supports("avx512f");
-#else
-  const int t16 = 0;
-#endif
+  const int t16 = have_avx512();
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++) {
     const int b = (int)(row / h), y = (int)(row % h);
@@ -407,12 +429,12 @@ KPCN_AVX512_CLONES static void bwd_dnoisy_row(int K, int nc, int h, int w, long 
  * the forward does on the way in, reversed (pixel-major rows of the tap-major ones), with the
  * layout's padding slots zeroed (oneDNN requires zero padding in blocked layouts). */
 static void store_dlogits_row(const float *D, int K2, int w, int y, const kpcn_logits_layout *lay,
-                              float *img) {
+                              float *img, int t16) {
   const int bl = lay->block, ps = lay->pixel_stride, slots = bl < K2 ? bl : ps;
   for (int t0 = 0; t0 < K2; t0 += bl) {
     const int nb = K2 - t0 < bl ? K2 - t0 : bl;
     float *dst = img + (size_t)(t0 / bl) * lay->block_stride + (size_t)y * w * ps;
-    transpose(D + (size_t)t0 * w, w, nb, w, dst, (size_t)ps, 0);
+    transpose(D + (size_t)t0 * w, w, nb, w, dst, (size_t)ps, t16);
     if (nb < slots)
       for (int x = 0; x < w; x++)
         memset(dst + (size_t)x * ps + nb, 0, (size_t)(slots - nb) * sizeof(float));
@@ -424,7 +446,8 @@ static void store_dlogits_row(const float *D, int K2, int w, int y, const kpcn_l
 KPCN_AVX512_CLONES static void bwd_dlogits_row(int K, int nc, int h, int w, long row,
                                                const float *weights, const float *noisy,
                                                const float *dout, float *dlogits,
-                                               const kpcn_logits_layout *lay, float *scratch) {
+                                               const kpcn_logits_layout *lay, float *scratch,
+                                               int t16) {
   const int r = K / 2, K2 = K * K;
   const size_t plane = (size_t)h * w;
   float *g = scratch; /* [K2][w]: dL/dw_t */
@@ -455,7 +478,7 @@ KPCN_AVX512_CLONES static void bwd_dlogits_row(int K, int nc, int h, int w, long
     for (int t = 0; t < K2; t++)
       for (int x = 0; x < w; x++)
         g[(size_t)t * w + x] = W[t * plane + x] * (g[(size_t)t * w + x] - dot[x]);
-    store_dlogits_row(g, K2, w, y, lay, dlogits + (size_t)b * lay->image_stride);
+    store_dlogits_row(g, K2, w, y, lay, dlogits + (size_t)b * lay->image_stride, t16);
     return;
   }
   float *D = dlogits + (size_t)b * K2 * plane + (size_t)y * w;
@@ -474,6 +497,7 @@ static kpcn_status kpa_backward(const char *fn, int K, int n, int nc, int h, int
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: NULL buffer", fn);
   const int r = K / 2, K2 = K * K, nt = kpcn_resolve_threads(nthreads);
   if (lay) KPCN_TRY(check_layout(fn, lay, K2));
+  const int t16 = have_avx512();
   const size_t scratch = (size_t)K2 * w + 2 * (size_t)w + (size_t)w + 2 * r + 64;
   float *buf = kpcn_aligned_alloc((size_t)nt * scratch * sizeof(float), "kpa scratch");
   if (!buf) return KPCN_ERR_OUT_OF_MEMORY;
@@ -488,7 +512,7 @@ static kpcn_status kpa_backward(const char *fn, int K, int n, int nc, int h, int
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++)
     bwd_dlogits_row(K, nc, h, w, row, weights, noisy, dout, dlogits, lay,
-                    thread_scratch(buf, scratch));
+                    thread_scratch(buf, scratch), t16);
   kpcn_aligned_free(buf);
   return KPCN_OK;
 }
