@@ -103,17 +103,37 @@ static void forward_vs_naive(int K, int n, int nc, int h, int w, float scale) {
 
 /* L = sum r * out; dL/dlogits and dL/dnoisy vs central differences. Unaffected outputs are
  * bit-identical between the +h and -h evaluations, so summing in double cancels them. */
+/* Random logits, noisy image and dL/dout r (seeded), the forward's softmax weights wt and
+ * the planar backward's dl, dn: what both backward tests start from. */
+typedef struct bwd_case {
+  size_t pl, nl, nn;
+  float *lg, *nz, *out, *wt, *r, *dl, *dn;
+  unsigned rs;
+} bwd_case;
+
+static void bwd_case_init(bwd_case *c, int K, int n, int nc, int h, int w, unsigned seed) {
+  c->pl = (size_t)h * w, c->nl = (size_t)n * K * K * c->pl, c->nn = (size_t)n * nc * c->pl;
+  c->lg = malloc(c->nl * 4), c->nz = malloc(c->nn * 4), c->out = malloc(c->nn * 4);
+  c->wt = malloc(c->nl * 4), c->r = malloc(c->nn * 4), c->dl = malloc(c->nl * 4);
+  c->dn = malloc(c->nn * 4);
+  c->rs = seed;
+  fill(c->lg, c->nl, &c->rs, -2.f, 2.f);
+  fill(c->nz, c->nn, &c->rs, 0.f, 1.f);
+  fill(c->r, c->nn, &c->rs, -1.f, 1.f);
+  CHECK(kpcn_kpa_forward(K, n, nc, h, w, c->lg, c->nz, c->out, c->wt, 0) == KPCN_OK);
+  CHECK(kpcn_kpa_backward(K, n, nc, h, w, c->wt, c->nz, c->r, c->dl, c->dn, 0) == KPCN_OK);
+}
+
+static void bwd_case_free(bwd_case *c) {
+  free(c->lg), free(c->nz), free(c->out), free(c->wt), free(c->r), free(c->dl), free(c->dn);
+}
+
 static void backward_fd(int K, int n, int nc, int h, int w) {
-  const int K2 = K * K;
-  size_t pl = (size_t)h * w, nl = (size_t)n * K2 * pl, nn = (size_t)n * nc * pl;
-  float *lg = malloc(nl * 4), *nz = malloc(nn * 4), *out = malloc(nn * 4), *wt = malloc(nl * 4);
-  float *r = malloc(nn * 4), *dl = malloc(nl * 4), *dn = malloc(nn * 4);
-  unsigned rs = 77u + (unsigned)K;
-  fill(lg, nl, &rs, -2.f, 2.f);
-  fill(nz, nn, &rs, 0.f, 1.f);
-  fill(r, nn, &rs, -1.f, 1.f);
-  CHECK(kpcn_kpa_forward(K, n, nc, h, w, lg, nz, out, wt, 0) == KPCN_OK);
-  CHECK(kpcn_kpa_backward(K, n, nc, h, w, wt, nz, r, dl, dn, 0) == KPCN_OK);
+  bwd_case c;
+  bwd_case_init(&c, K, n, nc, h, w, 77u + (unsigned)K);
+  const size_t pl = c.pl, nl = c.nl, nn = c.nn;
+  float *lg = c.lg, *nz = c.nz, *out = c.out, *wt = c.wt, *r = c.r, *dl = c.dl, *dn = c.dn;
+  unsigned rs = c.rs;
   int bad = 0, tot = 0;
   double emax = 0;
   for (int t = 0; t < 400; t++) {
@@ -164,7 +184,8 @@ static void backward_fd(int K, int n, int nc, int h, int w) {
   CHECK(kpcn_kpa_backward(K, n, nc, h, w, dl2, nz, r, dl2, dn2, 1) == KPCN_OK);
   CHECK(memcmp(dl, dl2, nl * 4) == 0);
   CHECK(memcmp(dn, dn2, nn * 4) == 0);
-  free(lg), free(nz), free(out), free(wt), free(r), free(dl), free(dn), free(dl2), free(dn2);
+  free(dl2), free(dn2);
+  bwd_case_free(&c);
 }
 
 /* kpcn_kpa_backward_layout: dlogits written planar (through the layout), pixel-major (nhwc,
@@ -173,15 +194,11 @@ static void backward_fd(int K, int n, int nc, int h, int w) {
  */
 static void backward_layouts(int K, int n, int nc, int h, int w) {
   const int K2 = K * K;
-  size_t pl = (size_t)h * w, nl = (size_t)n * K2 * pl, nn = (size_t)n * nc * pl;
-  float *lg = malloc(nl * 4), *nz = malloc(nn * 4), *out = malloc(nn * 4), *wt = malloc(nl * 4);
-  float *r = malloc(nn * 4), *dl = malloc(nl * 4), *dn = malloc(nn * 4), *dn2 = malloc(nn * 4);
-  unsigned rs = 501u + (unsigned)K;
-  fill(lg, nl, &rs, -2.f, 2.f);
-  fill(nz, nn, &rs, 0.f, 1.f);
-  fill(r, nn, &rs, -1.f, 1.f);
-  CHECK(kpcn_kpa_forward(K, n, nc, h, w, lg, nz, out, wt, 0) == KPCN_OK);
-  CHECK(kpcn_kpa_backward(K, n, nc, h, w, wt, nz, r, dl, dn, 0) == KPCN_OK);
+  bwd_case c;
+  bwd_case_init(&c, K, n, nc, h, w, 501u + (unsigned)K);
+  const size_t pl = c.pl, nl = c.nl, nn = c.nn;
+  const float *nz = c.nz, *wt = c.wt, *r = c.r, *dl = c.dl, *dn = c.dn;
+  float *dn2 = malloc(nn * 4);
   const int blocks[3] = {1, K2, 16}, pstr[3] = {1, K2 + 3, 16}, nslots[3] = {1, K2 + 3, 16};
   for (int v = 0; v < 3; v++) {
     kpcn_logits_layout lay;
@@ -215,11 +232,12 @@ static void backward_layouts(int K, int n, int nc, int h, int w) {
     CHECK(same == nl);
     CHECK(zero == pad);
     CHECK(memcmp(dn, dn2, nn * 4) == 0);
-    CHECK(kpcn_kpa_backward_layout(K, n, nc, h, w, wt, nz, r, wt, &lay, NULL, 1) ==
+    CHECK(kpcn_kpa_backward_layout(K, n, nc, h, w, wt, nz, r, c.wt, &lay, NULL, 1) ==
           KPCN_ERR_INVALID_ARGUMENT); /* may not alias the weights */
     free(alt);
   }
-  free(lg), free(nz), free(out), free(wt), free(r), free(dl), free(dn), free(dn2);
+  free(dn2);
+  bwd_case_free(&c);
 }
 
 int main(void) {

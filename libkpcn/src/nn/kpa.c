@@ -150,11 +150,11 @@ static inline void transpose8x8(const float *src, size_t ss, float *dst, size_t 
 
 #if defined(__GNUC__) && defined(__x86_64__) && defined(__AVX2__)
 #define KPCN_HAVE_T16 1
-/* dst[j * ds + i] = src[i * ss + j] for i < 16, j < nb <= 16: one 16-pixel block of
- * oneDNN's nChw16c logits (16 whole cache lines) to nb tap rows. Four shuffle stages:
- * 32-bit and 64-bit interleaves leave a 4 x 4 transposed block in each 128-bit lane, two
- * lane shuffles gather the four lanes of each output row. Reads all 16 floats of every
- * pixel (the block's padding too: pixel_stride >= 16), stores only the nb rows asked for. */
+/* dst[j * ds + i] = src[i * ss + j] for i < 16, j < nb <= 16 (for nChw16c logits: 16 pixels'
+ * whole cache lines of one block to nb tap rows). Four shuffle stages: 32-bit and 64-bit
+ * interleaves leave a 4 x 4 transposed block in each 128-bit lane, two lane shuffles gather
+ * the four lanes of each output row. Reads all 16 floats of every source row (a block's
+ * padding too, so the caller keeps them inside the row stride), stores only nb rows. */
 __attribute__((target("avx512f"))) static void transpose16x16(const float *src, size_t ss,
                                                               float *dst, size_t ds, int nb) {
   __m512 r[16], t[16], u[16];
