@@ -1,6 +1,9 @@
 // ImageBuf <-> kpcn_image / kpcn_aov_set conversions (see kpcn/oiio_convert.h).
 #include "kpcn/oiio_convert.h"
 
+#include <algorithm>
+#include <climits>
+
 #include <OpenImageIO/imagebufalgo.h>
 
 #include <cstring>
@@ -33,13 +36,35 @@ static std::string desc(const ImageBuf &b) {
   return n.empty() ? std::string("image (in memory)") : "image '" + n + "'";
 }
 
-// Reads channel `ch` of `src` over `roi` (one channel) into a planar float plane.
-static bool read_plane(const ImageBuf &src, ROI roi, int ch, float *dst, std::string &err) {
-  roi.chbegin = ch;
-  roi.chend = ch + 1;
-  if (!src.get_pixels(roi, TypeDesc::FLOAT, dst)) {
-    err = "cannot read pixels of " + desc(src) + ": " + src.geterror();
-    return false;
+// Reads channels idx[k] of `src` over `roi` into the planar float planes dst[k] (NULL: not
+// wanted) in one pass: blocks of rows, all channels idx spans, into an interleaved scratch,
+// then scattered to the planes. One get_pixels call per channel walked the whole interleaved
+// image once per channel (~0.5 s for a 1-Mpixel, 24-channel AOV file, a tenth of a CLI denoise).
+static bool read_planes(const ImageBuf &src, ROI roi, const std::vector<int> &idx,
+                        const std::vector<float *> &dst, std::string &err) {
+  int c0 = INT_MAX, c1 = -1;
+  for (size_t k = 0; k < idx.size(); ++k)
+    if (dst[k]) c0 = std::min(c0, idx[k]), c1 = std::max(c1, idx[k]);
+  if (c1 < 0) return true;
+  const int nc = c1 - c0 + 1, w = roi.width(), h = roi.height();
+  const int rows = std::max(1, std::min(h, (int)((256u << 10) / (sizeof(float) * nc * w)) + 1));
+  std::vector<float> buf((size_t)rows * w * nc);
+  for (int y0 = 0; y0 < h; y0 += rows) {
+    const int n = std::min(rows, h - y0);
+    ROI r(roi.xbegin, roi.xend, roi.ybegin + y0, roi.ybegin + y0 + n, roi.zbegin, roi.zend, c0,
+          c1 + 1);
+    if (!src.get_pixels(r, TypeDesc::FLOAT, buf.data())) {
+      err = "cannot read pixels of " + desc(src) + ": " + src.geterror();
+      return false;
+    }
+    const size_t px = (size_t)n * w, off = (size_t)y0 * w;
+    for (size_t k = 0; k < idx.size(); ++k) {
+      if (!dst[k]) continue;
+      const float *in = buf.data() + (idx[k] - c0);
+      float *out = dst[k] + off;
+      for (size_t i = 0; i < px; ++i)
+        out[i] = in[i * nc];
+    }
   }
   return true;
 }
@@ -91,8 +116,13 @@ ImagePtr to_kpcn_image(const ImageBuf &src, std::string &err, ROI roi) {
   }
   ImagePtr img = make_image(roi.width(), roi.height(), names, err);
   if (!img) return nullptr;
-  for (int c = roi.chbegin; c < roi.chend; ++c)
-    if (!read_plane(src, roi, c, kpcn_image_plane(img.get(), c - roi.chbegin), err)) return nullptr;
+  std::vector<int> idx;
+  std::vector<float *> dst;
+  for (int c = roi.chbegin; c < roi.chend; ++c) {
+    idx.push_back(c);
+    dst.push_back(kpcn_image_plane(img.get(), c - roi.chbegin));
+  }
+  if (!read_planes(src, roi, idx, dst, err)) return nullptr;
   return img;
 }
 
@@ -114,8 +144,10 @@ ImagePtr to_kpcn_image(const ImageBuf &src, const std::vector<std::string> &chan
   }
   ImagePtr img = make_image(roi.width(), roi.height(), channels, err);
   if (!img) return nullptr;
+  std::vector<float *> dst;
   for (size_t k = 0; k < idx.size(); ++k)
-    if (!read_plane(src, roi, idx[k], kpcn_image_plane(img.get(), (int)k), err)) return nullptr;
+    dst.push_back(kpcn_image_plane(img.get(), (int)k));
+  if (!read_planes(src, roi, idx, dst, err)) return nullptr;
   return img;
 }
 
@@ -145,15 +177,31 @@ ImageBuf from_kpcn_image(const kpcn_image &img) {
 }
 
 AovPtr to_aov_set(const ImageBuf &src, std::string &err) {
-  ImagePtr img = to_kpcn_image(src, err);
-  if (!img) return nullptr;
+  ROI roi;
+  if (!check_source(src, roi, err)) return nullptr;
+  const ImageSpec &spec = src.spec();
+  // Straight into the set's planes (kpcn_aov_create_for_channels maps the names as
+  // kpcn_aov_from_image does), without a whole-image copy in between.
+  std::vector<std::string> names;
+  std::vector<const char *> cn;
+  for (int c = 0; c < spec.nchannels; ++c)
+    names.push_back(spec.channel_name(c).empty() ? std::to_string(c)
+                                                 : std::string(spec.channel_name(c)));
+  for (auto &n : names)
+    cn.push_back(n.c_str());
+  std::vector<float *> dst(names.size() + 1, nullptr);
+  std::vector<int> idx;
+  for (int c = 0; c < spec.nchannels; ++c)
+    idx.push_back(c);
   kpcn_aov_set *set = nullptr;
-  if (kpcn_aov_from_image(&set, img.get()) != KPCN_OK) {
+  if (kpcn_aov_create_for_channels(&set, roi.width(), roi.height(), (int)cn.size(), cn.data(),
+                                   dst.data(), "image") != KPCN_OK) {
     err = desc(src) + ": " + kpcn_last_error();
     return nullptr;
   }
   AovPtr out(set);
-  const ImageSpec &spec = src.spec();
+  dst.resize(idx.size());
+  if (!read_planes(src, roi, idx, dst, err)) return nullptr;
   out->spp = spec.get_int_attribute("kpcn:spp", -1);
   // The seed may exceed an int: accept int attributes and decimal strings.
   const ParamValue *p = spec.find_attribute("kpcn:seed");

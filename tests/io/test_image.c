@@ -247,6 +247,29 @@ static void test_aov_sets(void) {
   }
   kpcn_image_destroy(img);
 
+  /* kpcn_aov_create_for_channels: which plane each source channel belongs in (NULL for a
+   * channel the set does not use), a variance without its buffer kept, a partly present
+   * buffer refused naming the source */
+  {
+    const char *names[6] = {"N.X", "Z.var", "junk", "N.Z", "N.Y", "diffuse.var"};
+    float *dst[6];
+    kpcn_aov_set *fc = NULL;
+    CHECK(kpcn_aov_create_for_channels(&fc, 4, 3, 6, names, dst, "chan-test") == KPCN_OK);
+    if (fc) {
+      CHECK(dst[0] == fc->buf[KPCN_BUF_NORMAL] && dst[4] == fc->buf[KPCN_BUF_NORMAL] + 12 &&
+            dst[3] == fc->buf[KPCN_BUF_NORMAL] + 24);
+      CHECK(dst[2] == NULL && fc->var[KPCN_BUF_NORMAL] == NULL);
+      CHECK(dst[1] == fc->var[KPCN_BUF_DEPTH] && fc->buf[KPCN_BUF_DEPTH] == NULL);
+      CHECK(dst[5] == fc->var[KPCN_BUF_DIFFUSE] && fc->buf[KPCN_BUF_DIFFUSE] == NULL);
+      CHECK(fc->width == 4 && fc->height == 3);
+    }
+    kpcn_aov_destroy(fc);
+    const char *partial[2] = {"N.X", "N.Y"};
+    CHECK(kpcn_aov_create_for_channels(&fc, 4, 3, 2, partial, dst, "chan-test") ==
+          KPCN_ERR_MISSING_CHANNEL);
+    CHECK(fc == NULL && strstr(kpcn_last_error(), "chan-test") != NULL);
+  }
+
   /* non-finite counting */
   const char *first = NULL;
   CHECK(kpcn_aov_count_nonfinite(s, &first) == 0 && first == NULL);

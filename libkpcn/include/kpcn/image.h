@@ -113,6 +113,13 @@ static inline size_t kpcn_aov_plane_size(const kpcn_aov_set *s) {
 kpcn_status kpcn_aov_to_image(kpcn_image **out, const kpcn_aov_set *set);
 /* Recognises canonical names and aliases; channels it does not know are ignored. */
 kpcn_status kpcn_aov_from_image(kpcn_aov_set **out, const kpcn_image *img);
+/* The AOV set kpcn_aov_from_image would make of an image whose `nch` channels carry these
+ * names, with its planes allocated but not filled: dst[c] (nch entries) receives the plane
+ * channel c belongs in, NULL where the set does not use channel c. For readers that fill the
+ * planes straight from a file or another library's buffer. `what` names the source in errors
+ * (a missing channel of a partly present buffer). */
+kpcn_status kpcn_aov_create_for_channels(kpcn_aov_set **out, int width, int height, int nch,
+                                         const char *const *names, float **dst, const char *what);
 
 /* Maps one channel name (canonical or alias, see docs/aov-exr.md) to a buffer and a
  * channel index; *channel is -1 for the buffer's variance plane. *rank (may be NULL) is

@@ -236,24 +236,25 @@ kpcn_status kpcn_aov_to_image(kpcn_image **out, const kpcn_aov_set *set) {
   return KPCN_OK;
 }
 
-kpcn_status kpcn_aov_from_image(kpcn_aov_set **out, const kpcn_image *img) {
-  if (!out || !img)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_aov_from_image: NULL argument");
+kpcn_status kpcn_aov_create_for_channels(kpcn_aov_set **out, int width, int height, int nch,
+                                         const char *const *names, float **dst, const char *what) {
+  if (!out || (nch > 0 && (!names || !dst)))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_aov_create_for_channels: NULL argument");
   *out = NULL;
   int chan[KPCN_BUF_COUNT][3], var[KPCN_BUF_COUNT];
-  KPCN_TRY(
-      kpcn_aov_map_channels((const char *const *)img->names, img->nchannels, chan, var, "image"));
+  KPCN_TRY(kpcn_aov_map_channels(names, nch, chan, var, what ? what : "image"));
   kpcn_aov_set *s;
-  KPCN_TRY(kpcn_aov_create(&s, img->width, img->height));
-  size_t plane = kpcn_aov_plane_size(s);
+  KPCN_TRY(kpcn_aov_create(&s, width, height));
+  const size_t plane = kpcn_aov_plane_size(s);
+  for (int c = 0; c < nch; c++)
+    dst[c] = NULL;
   for (int b = 0; b < KPCN_BUF_COUNT; b++) {
     kpcn_status st = KPCN_OK;
     if (chan[b][0] >= 0) {
       st = kpcn_aov_add(s, (kpcn_buffer)b, var[b] >= 0);
       for (int c = 0; st == KPCN_OK && c < kpcn_buffer_channels((kpcn_buffer)b); c++)
-        memcpy(s->buf[b] + (size_t)c * plane, kpcn_image_plane(img, chan[b][c]),
-               plane * sizeof(float));
-    } else if (var[b] >= 0) {
+        dst[chan[b][c]] = s->buf[b] + (size_t)c * plane;
+    } else if (var[b] >= 0) { /* a variance without its buffer: kept all the same */
       s->var[b] = kpcn_alloc(plane * sizeof(float), g_var_names[b]);
       if (!s->var[b]) st = KPCN_ERR_OUT_OF_MEMORY;
     }
@@ -261,10 +262,25 @@ kpcn_status kpcn_aov_from_image(kpcn_aov_set **out, const kpcn_image *img) {
       kpcn_aov_destroy(s);
       return st;
     }
-    if (var[b] >= 0) memcpy(s->var[b], kpcn_image_plane(img, var[b]), plane * sizeof(float));
+    if (var[b] >= 0) dst[var[b]] = s->var[b];
   }
   *out = s;
   return KPCN_OK;
+}
+
+kpcn_status kpcn_aov_from_image(kpcn_aov_set **out, const kpcn_image *img) {
+  if (!out || !img)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_aov_from_image: NULL argument");
+  *out = NULL;
+  float **dst = kpcn_calloc((size_t)img->nchannels + 1, sizeof(float *), "channel planes");
+  if (!dst) return KPCN_ERR_OUT_OF_MEMORY;
+  kpcn_status s = kpcn_aov_create_for_channels(out, img->width, img->height, img->nchannels,
+                                               (const char *const *)img->names, dst, "image");
+  const size_t plane = (size_t)img->width * (size_t)img->height;
+  for (int c = 0; s == KPCN_OK && c < img->nchannels; c++)
+    if (dst[c]) memcpy(dst[c], kpcn_image_plane(img, c), plane * sizeof(float));
+  free(dst);
+  return s;
 }
 
 size_t kpcn_aov_count_nonfinite(const kpcn_aov_set *set, const char **first_name) {
