@@ -94,6 +94,17 @@ int main() {
   CHECK(back.spec().channelnames == x.spec().channelnames);
   auto cmp = OIIO::ImageBufAlgo::compare(back, x, 0.0f, 0.0f);
   CHECK(cmp.nfail == 0 && cmp.maxerror == 0);
+  // A data window away from 0,0 and a channel list out of order: each plane is its channel.
+  ImageBuf off = make(37, 9, {"A", "R", "G", "B", "Z"}, 11);
+  off.set_origin(3, 5);
+  kpcn::ImagePtr io = ops::to_kpcn_image(off, {"Z", "G"}, err);
+  CHECK(io && io->width == 37 && io->height == 9);
+  int same_px = 0;
+  for (int y = 0; io && y < 9; ++y)
+    for (int x = 0; x < 37; ++x)
+      same_px += kpcn_image_plane(io.get(), 0)[y * 37 + x] == off.getchannel(3 + x, 5 + y, 0, 4) &&
+                 kpcn_image_plane(io.get(), 1)[y * 37 + x] == off.getchannel(3 + x, 5 + y, 0, 2);
+  CHECK(same_px == 37 * 9);
   // AOV set from the Tungsten EXR (through OIIO), and back.
   ImageBuf noisy(std::string(KPCN_TESTDATA) + "/tungsten-cornell/noisy_16spp.exr");
   kpcn::AovPtr set = ops::to_aov_set(noisy, err);
