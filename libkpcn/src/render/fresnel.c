@@ -18,7 +18,7 @@ float kpcn_fresnel_dielectric(float eta, float cos_i, float *cos_t) {
     if (cos_t) *cos_t = 0.0f;
     return 1.0f;
   }
-  float ct = sqrtf(fmaxf(1.0f - sin_t2, 0.0f));
+  float ct = sqrtf(kpcn_maxf(1.0f - sin_t2, 0.0f));
   if (cos_t) *cos_t = ct;
   float rs = (eta * cos_i - ct) / (eta * cos_i + ct);
   float rp = (eta * ct - cos_i) / (eta * ct + cos_i);
@@ -27,11 +27,11 @@ float kpcn_fresnel_dielectric(float eta, float cos_i, float *cos_t) {
 
 float kpcn_fresnel_conductor(float eta, float k, float cos_i) {
   float c2 = cos_i * cos_i;
-  float s2 = fmaxf(1.0f - c2, 0.0f);
+  float s2 = kpcn_maxf(1.0f - c2, 0.0f);
   float s4 = s2 * s2;
   float inner = eta * eta - k * k - s2;
-  float ab2 = sqrtf(fmaxf(inner * inner + 4.0f * eta * eta * k * k, 0.0f));
-  float a = sqrtf(fmaxf(0.5f * (ab2 + inner), 0.0f));
+  float ab2 = sqrtf(kpcn_maxf(inner * inner + 4.0f * eta * eta * k * k, 0.0f));
+  float a = sqrtf(kpcn_maxf(0.5f * (ab2 + inner), 0.0f));
   float rs = ((ab2 + c2) - 2.0f * a * cos_i) / ((ab2 + c2) + 2.0f * a * cos_i);
   float rp = ((c2 * ab2 + s4) - 2.0f * a * cos_i * s2) / ((c2 * ab2 + s4) + 2.0f * a * cos_i * s2);
   return 0.5f * (rs + rs * rp);
@@ -50,7 +50,7 @@ float kpcn_fresnel_diffuse_reflectance(float ior) {
   float fb = kpcn_fresnel_dielectric(ior, 0.0f, NULL);
   for (int i = 1; i <= n; ++i) {
     float c2 = (float)i / (float)n;
-    float fa = kpcn_fresnel_dielectric(ior, fminf(sqrtf(c2), 1.0f), NULL);
+    float fa = kpcn_fresnel_dielectric(ior, kpcn_minf(sqrtf(c2), 1.0f), NULL);
     sum += (double)(fa + fb) * (0.5 / n);
     fb = fa;
   }

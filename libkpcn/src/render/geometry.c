@@ -30,7 +30,7 @@ static inline void mesh_uv(const kpcn_mesh *m, const unsigned *id, float b0, flo
 static inline void sphere_uv(const kpcn_prim *p, kpcn_vec3 n, float *u, float *v) {
   kpcn_vec3 l = kpcn_frame_to_local(&p->frame, n);
   *u = atan2f(l.y, l.x) * KPCN_INV_2PI + 0.5f;
-  *v = acosf(fmaxf(-1.0f, fminf(1.0f, l.z))) * KPCN_INV_PI;
+  *v = acosf(kpcn_maxf(kpcn_minf(l.z, 1.0f), -1.0f)) * KPCN_INV_PI;
 }
 
 void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_vec3 d, float t,
@@ -80,7 +80,7 @@ void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_ve
     r = kv3_sub(x, p->center);
     h->ng = p->n;
     float a = kv3_dot(r, p->frame.b), b = kv3_dot(r, p->frame.t);
-    h->v = fminf(1.0f, kv3_length(r) / p->radius);
+    h->v = kpcn_minf(kv3_length(r) / p->radius, 1.0f);
     h->u = (a == 0.0f && b == 0.0f) ? 0.0f : atan2f(b, a) * KPCN_INV_2PI + 0.5f;
     break;
   }
@@ -158,7 +158,7 @@ void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_p
     lp->p = kv3_add(p->center, kv3_add(kv3_scale(p->frame.b, x * p->radius),
                                        kv3_scale(p->frame.t, y * p->radius)));
     lp->n = p->n;
-    lp->v = fminf(1.0f, sqrtf(x * x + y * y));
+    lp->v = kpcn_minf(sqrtf(x * x + y * y), 1.0f);
     lp->u = (x == 0.0f && y == 0.0f) ? 0.0f : atan2f(y, x) * KPCN_INV_2PI + 0.5f;
     break;
   }
@@ -168,7 +168,7 @@ void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_p
     int tri = kpcn_distrib1d_sample_discrete(&m->area_cdf, u1, &pmf);
     float lo = m->area_cdf.cdf[tri], hi = m->area_cdf.cdf[tri + 1];
     float w = hi > lo ? (u1 - lo) / (hi - lo) : 0.5f;
-    w = fminf(fmaxf(w, 0.0f), 0.99999994f);
+    w = kpcn_minf(kpcn_maxf(w, 0.0f), 0.99999994f);
     float b0, b1;
     kpcn_warp_uniform_triangle(w, u2, &b0, &b1);
     const unsigned *id = m->idx + 3 * tri;
@@ -187,26 +187,4 @@ void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_p
   }
   case KPCN_PRIM_INFINITE_SPHERE: memset(lp, 0, sizeof(*lp)); break;
   }
-}
-
-static inline int f2i(float f) {
-  int i;
-  memcpy(&i, &f, 4);
-  return i;
-}
-static inline float i2f(int i) {
-  float f;
-  memcpy(&f, &i, 4);
-  return f;
-}
-
-kpcn_vec3 kpcn_offset_ray(kpcn_vec3 p, kpcn_vec3 n) {
-  const float origin = 1.0f / 32.0f, float_scale = 1.0f / 65536.0f, int_scale = 256.0f;
-  int ox = (int)(int_scale * n.x), oy = (int)(int_scale * n.y), oz = (int)(int_scale * n.z);
-  kpcn_vec3 pi =
-      kv3(i2f(f2i(p.x) + (p.x < 0.0f ? -ox : ox)), i2f(f2i(p.y) + (p.y < 0.0f ? -oy : oy)),
-          i2f(f2i(p.z) + (p.z < 0.0f ? -oz : oz)));
-  return kv3(fabsf(p.x) < origin ? p.x + float_scale * n.x : pi.x,
-             fabsf(p.y) < origin ? p.y + float_scale * n.y : pi.y,
-             fabsf(p.z) < origin ? p.z + float_scale * n.z : pi.z);
 }

@@ -17,6 +17,11 @@
 
 /* ---- reconstruction filters (importance sampled, Tungsten's shapes and widths) ---- */
 
+/* integrator_gfni.c compiles this file a second time under another name for the pixel
+ * tracer; the filter table is built once, by the first compilation. */
+#ifndef KPCN_TRACE_PIXEL
+#define KPCN_TRACE_PIXEL kpcn_trace_pixel
+
 static double gauss_f(double x) { return fmax(exp(-2.0 * x * x) - exp(-8.0), 0.0); }
 
 void kpcn_filter_table_init(kpcn_filter_table *t, kpcn_filter_type type) {
@@ -48,6 +53,8 @@ void kpcn_filter_table_init(kpcn_filter_table *t, kpcn_filter_type type) {
   t->inv_cdf[0] = -2.0f;
   t->inv_cdf[KPCN_FILTER_TABLE] = 2.0f;
 }
+
+#endif
 
 static float filter_sample(const kpcn_filter_table *t, float u) {
   switch (t->type) {
@@ -373,7 +380,7 @@ static void trace_path(const kpcn_render_ctx *ctx, path_state *path,
   *path = P;
 }
 
-void kpcn_trace_pixel(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler *smp, int n,
+void KPCN_TRACE_PIXEL(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler *smp, int n,
                       kpcn_sample_out *out) {
   /* The camera rays of a pixel's samples differ only by sub-pixel (and lens) offsets, so
    * Embree traverses them as one coherent 16-wide packet at a fraction of the cost of single

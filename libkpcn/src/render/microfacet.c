@@ -7,7 +7,7 @@
 #include <string.h>
 
 float kpcn_mf_roughness_to_alpha(kpcn_microfacet_dist d, float roughness) {
-  roughness = fmaxf(roughness, 1e-3f);
+  roughness = kpcn_maxf(roughness, 1e-3f);
   if (d == KPCN_MF_PHONG) return 2.0f / (roughness * roughness) - 2.0f;
   return roughness;
 }
@@ -18,13 +18,13 @@ float kpcn_mf_D(kpcn_microfacet_dist d, float alpha, kpcn_vec3 m) {
   switch (d) {
   case KPCN_MF_BECKMANN: {
     float a2 = alpha * alpha;
-    float t2 = fmaxf(1.0f - c2, 0.0f) / c2;
+    float t2 = kpcn_maxf(1.0f - c2, 0.0f) / c2;
     return KPCN_INV_PI * expf(-t2 / a2) / (a2 * c2 * c2);
   }
   case KPCN_MF_PHONG: return (alpha + 2.0f) * KPCN_INV_2PI * (float)pow((double)m.z, (double)alpha);
   case KPCN_MF_GGX: {
     float a2 = alpha * alpha;
-    float t2 = fmaxf(1.0f - c2, 0.0f) / c2;
+    float t2 = kpcn_maxf(1.0f - c2, 0.0f) / c2;
     float s = a2 + t2;
     return a2 * KPCN_INV_PI / (c2 * c2 * s * s);
   }
@@ -42,15 +42,15 @@ float kpcn_mf_G1(kpcn_microfacet_dist d, float alpha, kpcn_vec3 v, kpcn_vec3 m) 
   float c2 = v.z * v.z;
   switch (d) {
   case KPCN_MF_BECKMANN: {
-    float tan_t = fabsf(sqrtf(fmaxf(1.0f - c2, 0.0f)) / v.z);
+    float tan_t = fabsf(sqrtf(kpcn_maxf(1.0f - c2, 0.0f)) / v.z);
     return rational_g1(1.0f / (alpha * tan_t));
   }
   case KPCN_MF_PHONG: {
-    float tan_t = fabsf(sqrtf(fmaxf(1.0f - c2, 0.0f)) / v.z);
+    float tan_t = fabsf(sqrtf(kpcn_maxf(1.0f - c2, 0.0f)) / v.z);
     return rational_g1(sqrtf(0.5f * alpha + 1.0f) / tan_t);
   }
   case KPCN_MF_GGX: {
-    float t2 = fmaxf(1.0f - c2, 0.0f) / c2;
+    float t2 = kpcn_maxf(1.0f - c2, 0.0f) / c2;
     return 2.0f / (1.0f + sqrtf(1.0f + alpha * alpha * t2));
   }
   }
@@ -73,7 +73,7 @@ kpcn_vec3 kpcn_mf_sample(kpcn_microfacet_dist d, float alpha, float u1, float u2
     break;
   }
   }
-  float r = sqrtf(fmaxf(1.0f - cos_t * cos_t, 0.0f));
+  float r = sqrtf(kpcn_maxf(1.0f - cos_t * cos_t, 0.0f));
   return kv3(cosf(phi) * r, sinf(phi) * r, cos_t);
 }
 

@@ -71,6 +71,11 @@ kpcn_status kpcn_render_ctx_init(kpcn_render_ctx *ctx, const kpcn_scene *scene,
   ctx->seed = (uint64_t)st->seed;
   kpcn_filter_table_init(&ctx->filter, scene->cam.filter);
   kpcn_sampler_init();
+  ctx->trace = kpcn_trace_pixel;
+#ifdef KPCN_HAVE_GFNI_VARIANT
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("gfni")) ctx->trace = kpcn_trace_pixel_gfni;
+#endif
   return KPCN_OK;
 }
 
@@ -134,7 +139,7 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
           for (int k = 0; k < n; k++)
             kpcn_sampler_start(&smp[k], ctx.seed, (uint32_t)px, (uint32_t)py, (uint32_t)(i0 + k),
                                &cache);
-          kpcn_trace_pixel(&ctx, px, py, smp, n, so);
+          ctx.trace(&ctx, px, py, smp, n, so);
           for (int k = 0; k < n; k++) { /* accumulated in sample order */
             int i = i0 + k;
             total_rays += so[k].rays;

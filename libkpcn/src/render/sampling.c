@@ -7,31 +7,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-void kpcn_warp_concentric_disk(float u1, float u2, float *x, float *y) {
-  float ox = 2.0f * u1 - 1.0f, oy = 2.0f * u2 - 1.0f;
-  if (ox == 0.0f && oy == 0.0f) {
-    *x = *y = 0.0f;
-    return;
-  }
-  float r, theta;
-  if (fabsf(ox) > fabsf(oy)) {
-    r = ox;
-    theta = (KPCN_PI * 0.25f) * (oy / ox);
-  } else {
-    r = oy;
-    theta = KPCN_PI * 0.5f - (KPCN_PI * 0.25f) * (ox / oy);
-  }
-  *x = r * cosf(theta);
-  *y = r * sinf(theta);
-}
-
-kpcn_vec3 kpcn_warp_cosine_hemisphere(float u1, float u2) {
-  float x, y;
-  kpcn_warp_concentric_disk(u1, u2, &x, &y);
-  float z = sqrtf(fmaxf(0.0f, 1.0f - x * x - y * y));
-  return kv3(x, y, z);
-}
-
 kpcn_vec3 kpcn_warp_uniform_hemisphere(float u1, float u2) {
   float z = u1;
   float r = sqrtf(fmaxf(0.0f, 1.0f - z * z));

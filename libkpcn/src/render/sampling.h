@@ -12,8 +12,34 @@
 #define KPCN_INV_2PI 0.15915494309189533577f
 #define KPCN_INV_4PI 0.07957747154594766788f
 
-/* Cosine-weighted hemisphere around +z: pdf = cos(theta)/pi. */
-kpcn_vec3 kpcn_warp_cosine_hemisphere(float u1, float u2);
+/* Shirley-Chiu concentric map to the unit disk: returns (x, y). pdf = 1/pi. Inline, with the
+ * cosine warp below: they run at every diffuse bounce and on the lens. */
+static inline void kpcn_warp_concentric_disk(float u1, float u2, float *x, float *y) {
+  float ox = 2.0f * u1 - 1.0f, oy = 2.0f * u2 - 1.0f;
+  if (ox == 0.0f && oy == 0.0f) {
+    *x = *y = 0.0f;
+    return;
+  }
+  float r, theta;
+  if (fabsf(ox) > fabsf(oy)) {
+    r = ox;
+    theta = (KPCN_PI * 0.25f) * (oy / ox);
+  } else {
+    r = oy;
+    theta = KPCN_PI * 0.5f - (KPCN_PI * 0.25f) * (ox / oy);
+  }
+  *x = r * cosf(theta);
+  *y = r * sinf(theta);
+}
+
+/* Cosine-weighted hemisphere around +z (the concentric disk, lifted): pdf = cos(theta)/pi. */
+static inline kpcn_vec3 kpcn_warp_cosine_hemisphere(float u1, float u2) {
+  float x, y;
+  kpcn_warp_concentric_disk(u1, u2, &x, &y);
+  float z = sqrtf(kpcn_maxf(1.0f - x * x - y * y, 0.0f));
+  return kv3(x, y, z);
+}
+
 static inline float kpcn_warp_cosine_hemisphere_pdf(kpcn_vec3 w) {
   return w.z > 0.0f ? w.z * KPCN_INV_PI : 0.0f;
 }
@@ -26,8 +52,6 @@ kpcn_vec3 kpcn_warp_uniform_cone(float u1, float u2, float cos_max);
 static inline float kpcn_warp_uniform_cone_pdf(float cos_max) {
   return 1.0f / (2.0f * KPCN_PI * (1.0f - cos_max));
 }
-/* Shirley-Chiu concentric map to the unit disk: returns (x, y). pdf = 1/pi. */
-void kpcn_warp_concentric_disk(float u1, float u2, float *x, float *y);
 /* Uniform barycentrics (b0, b1) on a triangle (b2 = 1-b0-b1). pdf = 1/area. */
 void kpcn_warp_uniform_triangle(float u1, float u2, float *b0, float *b1);
 

@@ -42,16 +42,21 @@ static inline kpcn_vec3 kv3_normalize(kpcn_vec3 a) {
   float l = kv3_length(a);
   return l > 0.0f ? kv3_scale(a, 1.0f / l) : a;
 }
+/* max/min as one compare-select instruction: fmaxf/fminf are library calls unless NaN rules
+ * are relaxed. These return b when either operand is NaN, so with the possibly-NaN value
+ * first and a constant second they clamp a NaN like fmaxf/fminf do. */
+static inline float kpcn_maxf(float a, float b) { return a > b ? a : b; }
+static inline float kpcn_minf(float a, float b) { return a < b ? a : b; }
 static inline kpcn_vec3 kv3_min(kpcn_vec3 a, kpcn_vec3 b) {
-  return kv3(fminf(a.x, b.x), fminf(a.y, b.y), fminf(a.z, b.z));
+  return kv3(kpcn_minf(a.x, b.x), kpcn_minf(a.y, b.y), kpcn_minf(a.z, b.z));
 }
 static inline kpcn_vec3 kv3_max(kpcn_vec3 a, kpcn_vec3 b) {
-  return kv3(fmaxf(a.x, b.x), fmaxf(a.y, b.y), fmaxf(a.z, b.z));
+  return kv3(kpcn_maxf(a.x, b.x), kpcn_maxf(a.y, b.y), kpcn_maxf(a.z, b.z));
 }
 static inline kpcn_vec3 kv3_exp(kpcn_vec3 a) { return kv3(expf(a.x), expf(a.y), expf(a.z)); }
 static inline kpcn_vec3 kv3_sqrt(kpcn_vec3 a) { return kv3(sqrtf(a.x), sqrtf(a.y), sqrtf(a.z)); }
-static inline float kv3_max_comp(kpcn_vec3 a) { return fmaxf(a.x, fmaxf(a.y, a.z)); }
-static inline float kv3_min_comp(kpcn_vec3 a) { return fminf(a.x, fminf(a.y, a.z)); }
+static inline float kv3_max_comp(kpcn_vec3 a) { return kpcn_maxf(a.x, kpcn_maxf(a.y, a.z)); }
+static inline float kv3_min_comp(kpcn_vec3 a) { return kpcn_minf(a.x, kpcn_minf(a.y, a.z)); }
 static inline float kv3_avg(kpcn_vec3 a) { return (a.x + a.y + a.z) * (1.0f / 3.0f); }
 static inline float kv3_luminance(kpcn_vec3 a) {
   return 0.2126f * a.x + 0.7152f * a.y + 0.0722f * a.z;
