@@ -344,13 +344,21 @@ static inline void ray_set(struct RTCRay *r, kpcn_vec3 o, kpcn_vec3 d, float tfa
   r->id = 0;
 }
 
-/* Traces one path to its end with its state in a local copy, which the compiler keeps in
- * registers (the same loop over an array of paths in memory measured ~13 % slower). The
- * first extension ray was already answered by the caller's packet (first). */
-static void trace_path(const kpcn_render_ctx *ctx, path_state *path,
-                       const struct RTCRayHit *first) {
+/* Traces one path to its end, its state in a local the compiler keeps in registers (the same
+ * loop over an array of paths in memory measured ~13 % slower). The camera ray (o, d) was
+ * already answered by the caller's packet (first); the colour split lands in *out. */
+static void trace_path(const kpcn_render_ctx *ctx, kpcn_sampler *smp, kpcn_sample_out *out,
+                       kpcn_vec3 o, kpcn_vec3 d, const struct RTCRayHit *first) {
   RTCScene scene = (RTCScene)ctx->scene->rtc_scene;
-  path_state P = *path;
+  path_state P;
+  memset(&P, 0, sizeof(P));
+  P.smp = smp;
+  P.out = out;
+  P.o = P.prev_p = o;
+  P.d = d;
+  P.tp_s = kv3s(1.0f);
+  P.prev_delta = 1;
+  P.alive = 1;
   struct RTCIntersectContext ic;
   rtcInitIntersectContext(&ic);
   struct RTCRayHit rh = *first;
@@ -377,7 +385,8 @@ static void trace_path(const kpcn_render_ctx *ctx, path_state *path,
     P.Ls = kv3_add(P.Ls, P.add_s);
     if (P.shadow_sets_vis) P.out->visibility = 1.0f;
   }
-  *path = P;
+  out->diffuse = P.Ld;
+  out->specular = P.Ls;
 }
 
 void KPCN_TRACE_PIXEL(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler *smp, int n,
@@ -390,25 +399,17 @@ void KPCN_TRACE_PIXEL(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler *
    * arithmetic is the scalar path's and samples never interact, so the result does not
    * depend on how samples are grouped. */
   const kpcn_scene *s = ctx->scene;
-  path_state paths[16];
   struct RTCRayHit16 rh __attribute__((aligned(64)));
   int valid[16] __attribute__((aligned(64)));
   if (n > 16) n = 16;
   for (int k = 0; k < 16; k++) {
     valid[k] = k < n ? -1 : 0;
     if (k >= n) continue;
-    path_state *P = &paths[k];
-    memset(P, 0, sizeof(*P));
     memset(&out[k], 0, sizeof(out[k]));
-    P->smp = &smp[k];
-    P->out = &out[k];
-    camera_ray(ctx, px, py, &smp[k], &P->o, &P->d);
-    P->tp_s = kv3s(1.0f);
-    P->prev_delta = 1;
-    P->prev_p = P->o;
-    P->alive = 1;
-    rh.ray.org_x[k] = P->o.x, rh.ray.org_y[k] = P->o.y, rh.ray.org_z[k] = P->o.z;
-    rh.ray.dir_x[k] = P->d.x, rh.ray.dir_y[k] = P->d.y, rh.ray.dir_z[k] = P->d.z;
+    kpcn_vec3 o, d;
+    camera_ray(ctx, px, py, &smp[k], &o, &d);
+    rh.ray.org_x[k] = o.x, rh.ray.org_y[k] = o.y, rh.ray.org_z[k] = o.z;
+    rh.ray.dir_x[k] = d.x, rh.ray.dir_y[k] = d.y, rh.ray.dir_z[k] = d.z;
     rh.ray.tnear[k] = 0.0f;
     rh.ray.tfar[k] = INFINITY;
     rh.ray.mask[k] = 0xffffffffU;
@@ -429,8 +430,7 @@ void KPCN_TRACE_PIXEL(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler *
     first.hit.primID = rh.hit.primID[k];
     first.hit.u = rh.hit.u[k];
     first.hit.v = rh.hit.v[k];
-    trace_path(ctx, &paths[k], &first);
-    out[k].diffuse = paths[k].Ld;
-    out[k].specular = paths[k].Ls;
+    trace_path(ctx, &smp[k], &out[k], kv3(rh.ray.org_x[k], rh.ray.org_y[k], rh.ray.org_z[k]),
+               kv3(rh.ray.dir_x[k], rh.ray.dir_y[k], rh.ray.dir_z[k]), &first);
   }
 }
