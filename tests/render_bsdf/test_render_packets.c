@@ -78,11 +78,13 @@ static void check_scene(const char *name) {
   kpcn_scene_destroy(s);
 }
 
-/* Waechter & Binder's offset as scalar code, one coordinate at a time */
+/* Waechter & Binder's offset as scalar code, one coordinate at a time (the bits added in
+ * unsigned arithmetic: for p = -0 the sum wraps, and that result is not the one selected) */
 static float offset_ref(float p, float n) {
-  int i, o = (int)(256.0f * n);
+  int o = (int)(256.0f * n);
+  uint32_t i;
   memcpy(&i, &p, 4);
-  i += p < 0.0f ? -o : o;
+  i += (uint32_t)(p < 0.0f ? -o : o);
   float far;
   memcpy(&far, &i, 4);
   return fabsf(p) < 1.0f / 32.0f ? p + n * (1.0f / 65536.0f) : far;
