@@ -5,10 +5,10 @@
 #define KPCN_RENDER_INTERNAL_H
 
 #include "kpcn/render.h"
-
-#include <emmintrin.h>
 #include "render/sampler.h"
 #include "scene/scene_internal.h"
+
+#include <emmintrin.h> /* kpcn_offset_ray: SSE2, part of every x86-64 */
 
 /* Everything known about a surface hit. */
 typedef struct kpcn_hit {
