@@ -10,11 +10,16 @@
 #include "synth.h"
 #include "testutil.h"
 
-/* Tiny arch with a wider receptive field than the preset so tiles really overlap. */
-static kpcn_model *make_model(uint64_t seed) {
+/* Tiny arch with a wider receptive field than the preset so tiles really overlap; its
+ * kernels applied `passes` times. */
+static kpcn_model *make_model_passes(uint64_t seed, int passes) {
   kpcn_arch arch;
   if (kpcn_arch_preset("tiny", &arch) != KPCN_OK) return NULL;
   arch.dilation[1] = 2; /* conv radius 1 + 2 + 1 = 4, K = 5 */
+  arch.kpa_passes = passes;
+  /* more passes: K = 7, so the tile pad the one-pass overlap max(4, 3) would give (6) is
+   * short of the two-pass one, max(4 + 3, 3 + 3) = 7, and the tiling test would see it */
+  if (passes > 1) arch.kernel_size = 7;
   if (kpcn_features_set_arch(&arch) != KPCN_OK) return NULL;
   kpcn_model *m = NULL;
   if (kpcn_model_create(&arch, seed, &m) != KPCN_OK) return NULL;
@@ -33,6 +38,7 @@ static kpcn_model *make_model(uint64_t seed) {
     }
   return m;
 }
+static kpcn_model *make_model(uint64_t seed) { return make_model_passes(seed, 1); }
 
 /* Naive reference: out[3][H][W] (double). */
 static void reference(kpcn_model *m, const kpcn_aov_set *a, double *out) {
@@ -44,6 +50,7 @@ static void reference(kpcn_model *m, const kpcn_aov_set *a, double *out) {
   float *feat = malloc(sizeof(float) * P * KPCN_FEATURES_COUNT);
   double *act = malloc(sizeof(double) * P * 64), *nxt = malloc(sizeof(double) * P * 64);
   double *filt[2] = {malloc(sizeof(double) * 3 * P), malloc(sizeof(double) * 3 * P)};
+  double *src = malloc(sizeof(double) * 3 * P);
   for (int b = 0; b < 2; b++) {
     kpcn_features_build(a, b, arch->eps, &n, feat, NULL, 1);
     for (size_t i = 0; i < P * KPCN_FEATURES_COUNT; i++)
@@ -70,25 +77,31 @@ static void reference(kpcn_model *m, const kpcn_aov_set *a, double *out) {
       act = nxt;
       nxt = t;
     }
-    /* act = logits [K²][H][W]; softmax + kernel apply with clamped reads */
-    for (int y = 0; y < H; y++)
-      for (int x = 0; x < W; x++) {
-        size_t i = (size_t)y * W + x;
-        double mx = -1e300, z = 0, acc[3] = {0, 0, 0};
-        for (int t = 0; t < K * K; t++)
-          mx = fmax(mx, act[(size_t)t * P + i]);
-        for (int t = 0; t < K * K; t++) {
-          double w = exp(act[(size_t)t * P + i] - mx);
-          int yy = y + t / K - R, xx = x + t % K - R;
-          yy = yy < 0 ? 0 : yy >= H ? H - 1 : yy;
-          xx = xx < 0 ? 0 : xx >= W ? W - 1 : xx;
+    /* act = logits [K²][H][W]; softmax + kernel apply with clamped reads, each pass on the
+     * previous pass's result */
+    for (size_t i = 0; i < 3 * P; i++)
+      src[i] = feat[i];
+    for (int pass = 0; pass < kpcn_arch_kpa_passes(arch); pass++) {
+      if (pass > 0) memcpy(src, filt[b], sizeof(double) * 3 * P);
+      for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+          size_t i = (size_t)y * W + x;
+          double mx = -1e300, z = 0, acc[3] = {0, 0, 0};
+          for (int t = 0; t < K * K; t++)
+            mx = fmax(mx, act[(size_t)t * P + i]);
+          for (int t = 0; t < K * K; t++) {
+            double w = exp(act[(size_t)t * P + i] - mx);
+            int yy = y + t / K - R, xx = x + t % K - R;
+            yy = yy < 0 ? 0 : yy >= H ? H - 1 : yy;
+            xx = xx < 0 ? 0 : xx >= W ? W - 1 : xx;
+            for (int c = 0; c < 3; c++)
+              acc[c] += w * src[(size_t)c * P + (size_t)yy * W + xx];
+            z += w;
+          }
           for (int c = 0; c < 3; c++)
-            acc[c] += w * feat[(size_t)c * P + (size_t)yy * W + xx];
-          z += w;
+            filt[b][c * P + i] = acc[c] / z;
         }
-        for (int c = 0; c < 3; c++)
-          filt[b][c * P + i] = acc[c] / z;
-      }
+    }
   }
   for (size_t i = 0; i < 3 * P; i++)
     out[i] = filt[0][i] * ((double)a->buf[KPCN_BUF_ALBEDO][i] + arch->eps) + expm1(filt[1][i]);
@@ -97,6 +110,7 @@ static void reference(kpcn_model *m, const kpcn_aov_set *a, double *out) {
   free(nxt);
   free(filt[0]);
   free(filt[1]);
+  free(src);
 }
 
 /* One denoiser with options o (and progress callback fn, may be NULL) on a: out [3][H][W]. */
@@ -128,8 +142,8 @@ static double max_rel(const float *x, const float *y, size_t n) {
   return w;
 }
 
-static void test_reference_and_tiling(void) {
-  kpcn_model *m = make_model(42);
+static void test_reference_and_tiling(int passes) {
+  kpcn_model *m = make_model_passes(42, passes);
   CHECK(m != NULL);
   if (!m) return;
   kpcn_aov_set *a = synth_aov(29, 23, 3);
@@ -141,9 +155,10 @@ static void test_reference_and_tiling(void) {
   double worst = 0;
   for (size_t i = 0; i < 3 * P; i++)
     worst = fmax(worst, fabs(out[i] - ref[i]) / (1e-3 + fabs(ref[i])));
-  printf("pipeline vs naive reference: max rel err %.3g\n", worst);
+  printf("pipeline (%d kernel passes) vs naive reference: max rel err %.3g\n", passes, worst);
   CHECK(worst < 1e-4);
-  /* tiles of 8 (overlap 4 < tile) and 13 (uneven edge tiles) equal the untiled result */
+  /* tiles of 8 (overlap 4, or 7 with two passes, < tile) and 13 (uneven edge tiles) equal the
+   * untiled result */
   const int tiles[] = {8, 13};
   for (int k = 0; k < 2; k++) {
     CHECK(run(m, a, tiles[k], 0, til) == KPCN_OK);
@@ -511,7 +526,8 @@ static void test_ensemble(void) {
 }
 
 int main(void) {
-  test_reference_and_tiling();
+  test_reference_and_tiling(1);
+  test_reference_and_tiling(2);
   test_bf16_and_larger_tiling();
   test_reuse_between_executes();
   test_api();

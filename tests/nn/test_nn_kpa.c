@@ -1,6 +1,6 @@
 /* Kernel-prediction layer: forward vs a naive per-pixel double loop (softmax + clamped
  * K x K weighted sum), backward (dlogits, dnoisy) vs central finite differences, thread-count
- * independence, in-place use and argument checks. */
+ * independence, in-place use and argument checks; the same for several passes. */
 #include "kpcn/nn.h"
 #include "testutil.h"
 
@@ -240,6 +240,92 @@ static void backward_layouts(int K, int n, int nc, int h, int w) {
   bwd_case_free(&c);
 }
 
+/* kpcn_kpa_forward_passes / backward_passes (arch.kpa_passes): the forward equals the naive
+ * reference applied `passes` times with the same logits; dL/dlogits of the whole chain
+ * equals central differences; a channel-blocked layout gives the planar dlogits slot for
+ * slot with zero padding. */
+static void passes_check(int K, int passes, int n, int nc, int h, int w) {
+  const int K2 = K * K;
+  const size_t pl = (size_t)h * w, nl = (size_t)n * K2 * pl, nn = (size_t)n * nc * pl;
+  const kpcn_logits_layout planar = kpcn_logits_layout_planar(K2, h, w);
+  float *lg = malloc(nl * 4), *nz = malloc(nn * 4), *out = malloc(nn * 4), *wt = malloc(nl * 4);
+  float *mid = malloc((size_t)(passes - 1) * nn * 4 + 4), *r = malloc(nn * 4);
+  float *dl = malloc(nl * 4), *a = malloc(nn * 4), *bb = malloc(nn * 4);
+  float *scr = malloc(kpcn_kpa_passes_scratch_floats(passes, n, nc, h, w, &planar) * 4 + 4);
+  unsigned rs = 900u + (unsigned)(K * passes);
+  fill(lg, nl, &rs, -2.f, 2.f);
+  fill(nz, nn, &rs, 0.f, 1.f);
+  fill(r, nn, &rs, -1.f, 1.f);
+  CHECK(kpcn_kpa_forward_passes(K, passes, n, nc, h, w, lg, &planar, nz, mid, out, wt, 2) ==
+        KPCN_OK);
+  /* naive: each pass through ref_pixel, the intermediate rounded to float as the layer does */
+  memcpy(a, nz, nn * 4);
+  for (int p = 0; p < passes; p++) {
+    for (int b = 0; b < n; b++)
+      for (int c = 0; c < nc; c++)
+        for (int y = 0; y < h; y++)
+          for (int x = 0; x < w; x++)
+            bb[((size_t)b * nc + c) * pl + (size_t)y * w + x] =
+                (float)ref_pixel(K, nc, h, w, lg, a, b, c, y, x);
+    memcpy(a, bb, nn * 4);
+  }
+  double e = 0;
+  for (size_t i = 0; i < nn; i++) {
+    double d = fabs(out[i] - a[i]) / (fabs(a[i]) + 1e-3);
+    e = d > e ? d : e;
+  }
+  CHECK(e <= 1e-5);
+  CHECK(kpcn_kpa_backward_passes(K, passes, n, nc, h, w, wt, nz, mid, r, dl, &planar, scr, 2) ==
+        KPCN_OK);
+  int bad = 0;
+  double emax = 0;
+  for (int t = 0; t < 150; t++) {
+    size_t i = (size_t)(kt_randf(&rs) * nl) % nl;
+    float v = lg[i];
+    const float hh = 1e-2f;
+    double L[2];
+    for (int sg = 0; sg < 2; sg++) {
+      lg[i] = v + (sg ? -hh : hh);
+      CHECK(kpcn_kpa_forward_passes(K, passes, n, nc, h, w, lg, &planar, nz, mid, bb, NULL, 1) ==
+            KPCN_OK);
+      L[sg] = 0;
+      for (size_t j = 0; j < nn; j++)
+        L[sg] += (double)r[j] * bb[j];
+    }
+    lg[i] = v;
+    double fd = (L[0] - L[1]) / ((double)(float)(v + hh) - (double)(float)(v - hh));
+    double err = fabs(fd - dl[i]);
+    emax = err > emax ? err : emax;
+    if (err > 2e-4 + 2e-3 * fabs(dl[i])) bad++;
+  }
+  /* the forward above left mid as the unperturbed forward's: redo it for the layout check */
+  CHECK(kpcn_kpa_forward_passes(K, passes, n, nc, h, w, lg, &planar, nz, mid, out, wt, 2) ==
+        KPCN_OK);
+  kpcn_logits_layout blk = {0, 0, 16, 16};
+  blk.block_stride = pl * 16;
+  blk.image_stride = (size_t)((K2 + 15) / 16) * blk.block_stride;
+  float *dlb = malloc((size_t)n * blk.image_stride * 4);
+  float *scr2 = malloc(kpcn_kpa_passes_scratch_floats(passes, n, nc, h, w, &blk) * 4 + 4);
+  CHECK(kpcn_kpa_backward_passes(K, passes, n, nc, h, w, wt, nz, mid, r, dlb, &blk, scr2, 1) ==
+        KPCN_OK);
+  int lay_bad = 0;
+  for (int b = 0; b < n; b++)
+    for (int t = 0; t < (K2 + 15) / 16 * 16; t++)
+      for (size_t q = 0; q < pl; q++) {
+        float v = dlb[b * blk.image_stride + (size_t)(t / 16) * blk.block_stride + q * 16 + t % 16];
+        lay_bad += t < K2 ? v != dl[((size_t)b * K2 + t) * pl + q] : v != 0.f;
+      }
+  printf("kpa %d passes K=%d n=%d nc=%d %dx%d: fwd rel err %.2e, %d/150 fd mismatches (max %.2e), "
+         "%d blocked-layout mismatches\n",
+         passes, K, n, nc, h, w, e, bad, emax, lay_bad);
+  CHECK(bad == 0);
+  CHECK(lay_bad == 0);
+  CHECK(kpcn_kpa_forward_passes(K, passes, n, nc, h, w, lg, &planar, nz, NULL, out, NULL, 1) ==
+        (passes > 1 ? KPCN_ERR_INVALID_ARGUMENT : KPCN_OK));
+  free(lg), free(nz), free(out), free(wt), free(mid), free(r), free(dl), free(a), free(bb);
+  free(scr), free(dlb), free(scr2);
+}
+
 int main(void) {
   forward_vs_naive(3, 1, 3, 5, 4, 2.f);
   forward_vs_naive(5, 2, 3, 9, 13, 4.f);
@@ -253,6 +339,10 @@ int main(void) {
   backward_layouts(3, 2, 3, 6, 5);
   backward_layouts(7, 1, 3, 4, 11);  /* K2 = 49: three whole blocks of 16 and one tap */
   backward_layouts(11, 2, 3, 5, 37); /* the cpu preset's K, 8 x 8 transposes plus edges */
+  passes_check(3, 1, 1, 3, 6, 5);
+  passes_check(3, 2, 2, 3, 6, 5);
+  passes_check(5, 3, 1, 3, 7, 9);
+  passes_check(11, 2, 1, 3, 9, 13); /* K larger than the image: clamped reads every pass */
   float x = 0;
   CHECK(kpcn_kpa_forward(4, 1, 3, 4, 4, &x, &x, &x, NULL, 1) == KPCN_ERR_INVALID_ARGUMENT);
   CHECK(kpcn_kpa_forward(3, 1, 3, 0, 4, &x, &x, &x, NULL, 1) != KPCN_OK);

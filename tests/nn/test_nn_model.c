@@ -126,6 +126,15 @@ static void m_arch_k(cJSON *h) {
   free(s);
   cJSON_Delete(a);
 }
+static void m_arch_passes(cJSON *h) {
+  cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
+  cJSON *a = cJSON_Parse(cJSON_GetObjectItem(meta, "kpcn.architecture")->valuestring);
+  cJSON_AddNumberToObject(a, "kpa_passes", 0);
+  char *s = cJSON_PrintUnformatted(a);
+  cJSON_ReplaceItemInObject(meta, "kpcn.architecture", cJSON_CreateString(s));
+  free(s);
+  cJSON_Delete(a);
+}
 static void m_inputs(cJSON *h) {
   cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
   cJSON_ReplaceItemInObject(meta, "kpcn.inputs", cJSON_CreateString("[\"R\",\"G\"]"));
@@ -194,6 +203,29 @@ static void test_arch(void) {
   kpcn_arch_set_inputs(&a, 2, dup);
   CHECK(kpcn_arch_validate(&a) == KPCN_ERR_INVALID_ARGUMENT);
   CHECK(kpcn_arch_preset("huge", &a) == KPCN_ERR_INVALID_ARGUMENT);
+  /* kpa_passes: 1 in presets and absent from their JSON (files written before the field
+   * keep loading as one pass); 2 round-trips; the receptive radius grows by K/2 a pass */
+  kpcn_arch_preset("cpu", &a);
+  kpcn_arch_set_inputs(&a, 3, names);
+  CHECK(a.kpa_passes == 1 && kpcn_arch_receptive_radius(&a) == 22);
+  js = kpcn_arch_to_json(&a);
+  CHECK(js && !strstr(js, "kpa_passes"));
+  free(js);
+  a.kpa_passes = 2;
+  CHECK(kpcn_arch_receptive_radius(&a) == 27); /* conv 22 + one K/2 of the first pass */
+  js = kpcn_arch_to_json(&a);
+  CHECK(js && strstr(js, "\"kpa_passes\":2") && kpcn_arch_from_json(js, &b) == KPCN_OK);
+  CHECK(memcmp(&a, &b, sizeof a) == 0);
+  free(js);
+  a.kpa_passes = KPCN_NN_MAX_KPA_PASSES + 1;
+  CHECK(kpcn_arch_validate(&a) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "kpa_passes") != NULL);
+  kpcn_arch_preset("tiny", &a); /* conv radius 3 */
+  kpcn_arch_set_inputs(&a, 3, names);
+  a.kpa_passes = 3;
+  CHECK(kpcn_arch_receptive_radius(&a) == 7); /* logits 2 + 2 from the output: 3 + 4 */
+  a.kernel_size = 9;                          /* K/2 = 4 > 3: the noisy reads decide, 3 x 4 */
+  CHECK(kpcn_arch_receptive_radius(&a) == 12);
   CHECK(kpcn_arch_from_json("{}", &a) == KPCN_ERR_FORMAT);
   CHECK(kpcn_arch_from_json("nope", &a) == KPCN_ERR_FORMAT);
 }
@@ -250,6 +282,17 @@ static void test_roundtrip(blob *good) {
           !strcmp(kpcn_model_get_meta(r, "train.iterations"), "1200"));
     kpcn_model_destroy(r);
   }
+  /* a two-pass model saves and loads as one */
+  CHECK(kpcn_model_set_kpa_passes(m, 0) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_model_set_kpa_passes(m, 2) == KPCN_OK);
+  const char *p2 = kt_tmpfile("two-pass.safetensors");
+  CHECK(kpcn_model_save(m, p2) == KPCN_OK);
+  CHECK(kpcn_model_load(p2, &r) == KPCN_OK);
+  if (r) {
+    CHECK(kpcn_model_arch(r)->kpa_passes == 2);
+    kpcn_model_destroy(r);
+  }
+  CHECK(kpcn_model_set_kpa_passes(m, 1) == KPCN_OK);
   *good = slurp(path);
   CHECK(good->n > 8 && hlen(good) % 8 == 0);
   /* independent check of the layout: data section size = 4 bytes x parameter count x 2 */
@@ -306,6 +349,7 @@ static void test_malformed(const blob *good) {
   mutated(good, "arch channels vs shapes", m_arch_channels, "shape");
   mutated(good, "arch not JSON", m_arch_bad, "architecture");
   mutated(good, "arch even K", m_arch_k, "kernel_size");
+  mutated(good, "arch kpa_passes 0", m_arch_passes, "kpa_passes");
   mutated(good, "inputs disagree", m_inputs, "kpcn.inputs");
   mutated(good, "no __metadata__", m_nometa, "__metadata__");
   mutated(good, "unknown format version", m_format, "kpcn.format");

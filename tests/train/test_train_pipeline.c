@@ -18,7 +18,8 @@
 #include <unistd.h>
 
 static const char *g_store;
-static int g_bf16; /* settings(): mixed-precision training */
+static int g_bf16;       /* settings(): mixed-precision training */
+static int g_passes = 1; /* settings(): arch.kpa_passes */
 /* kt_tmpfile rotates 8 static buffers; the tests keep many paths alive */
 /* kt_tmpfile cycles through 8 buffers; this test holds more paths at once, so it copies them
  * into its own pool (static, so nothing is left to free). */
@@ -45,6 +46,7 @@ static void settings(kpcn_train_settings *s, const char *out) {
   s->adam.lr = 1e-2;
   s->log_every = 2;
   s->bf16 = g_bf16;
+  s->arch.kpa_passes = g_passes;
 }
 
 /* All parameters of both branches, concatenated (malloc'ed). */
@@ -126,8 +128,11 @@ static void test_determinism_and_resume(void) {
   float *w3 = weights(t, &n3);
   CHECK(n3 == n1 && memcmp(w3, w1, n1 * sizeof(float)) == 0);
   kpcn_trainer_destroy(t);
-  printf("determinism and resume (%s): bit-identical\n", g_bf16 ? "bf16" : "f32");
-  if (g_bf16) CHECK(f32_weights && f32_n == n1 && memcmp(f32_weights, w1, n1 * sizeof(float)) != 0);
+  printf("determinism and resume (%s, %d kernel passes): bit-identical\n", g_bf16 ? "bf16" : "f32",
+         g_passes);
+  /* bf16, or two kernel passes, really change the training (the run without either is first) */
+  if (g_bf16 || g_passes > 1)
+    CHECK(f32_weights && f32_n == n1 && memcmp(f32_weights, w1, n1 * sizeof(float)) != 0);
   /* a checkpoint written in the other precision is refused, naming the key */
   settings(&s, tf_tmp("c.safetensors"));
   s.bf16 = !g_bf16;
@@ -179,7 +184,14 @@ static void test_determinism_and_resume(void) {
   s.ckpt_path = tf_tmp("trunc.ckpt");
   s.resume = 1;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
-  if (!g_bf16) {
+  if (g_passes > 1) {
+    /* the checkpoint of a two-pass run does not resume as a one-pass one */
+    settings(&s, tf_tmp("c.safetensors"));
+    s.arch.kpa_passes = 1;
+    s.resume = 1;
+    CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
+    CHECK(strstr(kpcn_last_error(), "architecture") != NULL);
+  } else if (!g_bf16) {
     free(f32_weights);
     f32_weights = w1, f32_n = n1, w1 = NULL;
   } else {
@@ -267,6 +279,41 @@ static void test_validation_geomean(void) {
 
 /* --widen: a 16-channel model widened to 32 validates to the same relMSE (same function),
  * trains, and ends with 32 channels; without an init model, or narrower, it is an error. */
+/* --init with kpa_passes: the one-pass model's weights go on as a two-pass model, saved as
+ * one; its validation differs from the same weights in one pass. */
+static void test_init_passes(void) {
+  const char *vn[1], *vr[1];
+  kpcn_train_settings s;
+  settings(&s, tf_tmp("p1.safetensors"));
+  with_val_pair(&s, "p", vn, vr);
+  kpcn_trainer *t = NULL;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (!t) return;
+  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
+  kpcn_val_result one, two;
+  CHECK(kpcn_trainer_validate(t, &one) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+  settings(&s, tf_tmp("p2.safetensors"));
+  with_val_pair(&s, "p", vn, vr);
+  s.init_model = tf_tmp("p1.safetensors");
+  s.kpa_passes = 2;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (!t) return;
+  CHECK(kpcn_model_arch(kpcn_trainer_model(t))->kpa_passes == 2);
+  CHECK(kpcn_trainer_validate(t, &two) == KPCN_OK);
+  printf("one-pass model as two passes: validation relMSE %.6g -> %.6g\n", one.relmse, two.relmse);
+  CHECK(two.relmse != one.relmse);
+  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+  kpcn_model *m = NULL;
+  CHECK(kpcn_model_load(tf_tmp("p2.safetensors"), &m) == KPCN_OK);
+  CHECK(m && kpcn_model_arch(m)->kpa_passes == 2);
+  kpcn_model_destroy(m);
+  s.kpa_passes = KPCN_NN_MAX_KPA_PASSES + 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "kpa_passes") != NULL);
+}
+
 static void test_widen(void) {
   kpcn_aov_set *n, *r;
   CHECK(tf_make_pair(&n, &r, 40, 32, 41, 0) == 0);
@@ -643,9 +690,13 @@ int main(void) {
   }
   test_batch_wiring();
   test_determinism_and_resume();
+  g_passes = 2;
+  test_determinism_and_resume();
+  g_passes = 1;
   g_bf16 = 1;
   test_determinism_and_resume();
   g_bf16 = 0;
+  test_init_passes();
   test_validation();
   test_widen();
   test_validation_geomean();

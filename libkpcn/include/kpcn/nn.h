@@ -55,7 +55,16 @@ typedef struct kpcn_arch {
   char inputs[KPCN_NN_MAX_INPUTS][KPCN_NN_NAME_LEN]; /* input channel names, in order */
   float eps;                         /* albedo epsilon of the diffuse demodulation */
   char preprocess[KPCN_NN_NAME_LEN]; /* preprocessing version string (denoise module) */
+  /* Times the predicted kernel is applied (1..KPCN_NN_MAX_KPA_PASSES; 0 reads as 1). 1 is
+   * Bako 2017; 2 applies the same per-pixel kernels to the first pass's output, so each
+   * output pixel averages a (2K-1)² footprint at no extra network cost (docs/nn.md). */
+  int kpa_passes;
 } kpcn_arch;
+#define KPCN_NN_MAX_KPA_PASSES 3
+/* a->kpa_passes with 0 read as 1 */
+static inline int kpcn_arch_kpa_passes(const kpcn_arch *a) {
+  return a->kpa_passes > 0 ? a->kpa_passes : 1;
+}
 
 /* Zeroes *a and sets a valid small default (the "cpu" shape, no inputs named). */
 void kpcn_arch_defaults(kpcn_arch *a);
@@ -79,8 +88,13 @@ int kpcn_arch_layer_in(const kpcn_arch *a, int l);
 int kpcn_arch_layer_out(const kpcn_arch *a, int l);
 /* Receptive-field radius of the conv stack in pixels: sum_l dilation*(size-1)/2. A pixel's
  * logits depend on inputs within this radius; the kernel-prediction output additionally
- * reads the noisy image within K/2. Tiles need overlap >= conv radius + K/2. */
+ * reads the noisy image within K/2 per pass. */
 int kpcn_arch_conv_radius(const kpcn_arch *a);
+/* Pixels around an output pixel that its value depends on, per input kind: the features
+ * (through the logits of every pixel a later pass reads: conv radius + (passes-1)·K/2) and
+ * the noisy colour (passes·K/2). A tile computed on its core grown by the larger of the two
+ * gives the untiled result. */
+int kpcn_arch_receptive_radius(const kpcn_arch *a);
 /* Convolution FLOPs (2 per multiply-add) per output pixel of ONE branch, forward only. */
 double kpcn_arch_flops_per_pixel(const kpcn_arch *a);
 /* Parameter count of one branch. */
@@ -118,6 +132,10 @@ kpcn_status kpcn_model_clone(const kpcn_model *m, kpcn_model **out);
  * logits are unchanged (up to summation order), and training can use the added capacity
  * from the first step (the zero weights receive gradients). Metadata is copied. */
 kpcn_status kpcn_model_widen(const kpcn_model *m, int channels, uint64_t seed, kpcn_model **out);
+/* Sets how many times the model's kernels are applied (arch.kpa_passes, 1..
+ * KPCN_NN_MAX_KPA_PASSES): the weights are kept, so a fine-tune can start a multi-pass model
+ * from a single-pass one. */
+kpcn_status kpcn_model_set_kpa_passes(kpcn_model *m, int passes);
 void kpcn_model_destroy(kpcn_model *m);
 
 const kpcn_arch *kpcn_model_arch(const kpcn_model *m);
@@ -275,6 +293,25 @@ kpcn_status kpcn_kpa_backward(int K, int n, int nc, int h, int w, const float *w
 kpcn_status kpcn_kpa_backward_layout(int K, int n, int nc, int h, int w, const float *weights,
                                      const float *noisy, const float *dout, float *dlogits,
                                      const kpcn_logits_layout *layout, float *dnoisy, int nthreads);
+
+/* Several passes with one set of kernels (arch.kpa_passes): pass p filters pass p-1's result,
+ * the first the noisy image; out = the last pass. mid ([passes-1][N][nc][H][W], unused for one
+ * pass) receives the results before the last, which the backward needs; weights as above
+ * (planar softmax, optional). */
+kpcn_status kpcn_kpa_forward_passes(int K, int passes, int n, int nc, int h, int w,
+                                    const float *logits, const kpcn_logits_layout *layout,
+                                    const float *noisy, float *mid, float *out, float *weights,
+                                    int nthreads);
+/* Its backward: dL/dlogits (in `layout`, as kpcn_kpa_backward_layout writes them) of the
+ * whole chain, from the forward's weights, noisy and mid. scratch: at least
+ * kpcn_kpa_passes_scratch_floats() floats (none for one pass). No dL/dnoisy. */
+kpcn_status kpcn_kpa_backward_passes(int K, int passes, int n, int nc, int h, int w,
+                                     const float *weights, const float *noisy, const float *mid,
+                                     const float *dout, float *dlogits,
+                                     const kpcn_logits_layout *layout, float *scratch,
+                                     int nthreads);
+size_t kpcn_kpa_passes_scratch_floats(int passes, int n, int nc, int h, int w,
+                                      const kpcn_logits_layout *layout);
 
 #ifdef __cplusplus
 }

@@ -225,6 +225,9 @@ typedef struct kpcn_train_settings {
   int widen_channels;      /* > 0 (needs init_model): widen it to this many hidden channels
                               first (kpcn_model_widen with `seed`: same function, more
                               capacity); 0 = as it is */
+  int kpa_passes;          /* > 0 (needs init_model): apply its kernels this many times
+                              (kpcn_model_set_kpa_passes); 0 = as the model says. Without
+                              init_model, arch.kpa_passes decides */
   kpcn_loss_kind loss1;    /* stage-1 loss, default l1 (seed §4.4) */
   kpcn_loss_kind loss2;    /* stage-2 loss, default l1 (seed fine-tunes with ssim) */
   kpcn_loss_settings loss; /* defaults */

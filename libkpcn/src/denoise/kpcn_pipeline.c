@@ -23,9 +23,7 @@ static double now_s(void) {
 }
 
 int kpcn_denoise_tile_overlap(const kpcn_arch *arch) {
-  if (!arch) return 0;
-  int r = kpcn_arch_conv_radius(arch), k = arch->kernel_size / 2;
-  return r > k ? r : k;
+  return arch ? kpcn_arch_receptive_radius(arch) : 0;
 }
 
 typedef struct tile_t {
@@ -193,6 +191,7 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
   KPCN_TRY(kpcn_features_check_arch(arch));
   KPCN_TRY(require_all(aov));
   const int W = aov->width, H = aov->height, K = arch->kernel_size;
+  const int passes = kpcn_arch_kpa_passes(arch);
   const int pad = tile_pad(arch);
   const float eps = arch->eps;
   const size_t P = kpcn_aov_plane_size(aov);
@@ -263,8 +262,16 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
       s = kpcn_net_forward_logits(net, feat, &logits, &lay);
       if (s != KPCN_OK) goto done;
       double tc = now_s();
-      s = kpcn_kpa_forward_layout(K, 1, 3, t->ph, t->pw, logits, &lay, noisy, filt, NULL, nthreads);
-      if (s != KPCN_OK) goto done;
+      /* every pass filters the previous one's result with the same kernels; the noisy
+       * colour is not needed after the first, so the passes ping-pong between the two */
+      float *src = noisy, *res = filt;
+      for (int pass = 0; pass < passes; pass++) {
+        s = kpcn_kpa_forward_layout(K, 1, 3, t->ph, t->pw, logits, &lay, src, res, NULL, nthreads);
+        if (s != KPCN_OK) goto done;
+        float *tmp = src;
+        src = res, res = tmp;
+      }
+      res = src;
       double td = now_s();
       st->features_s += tb - ta;
       st->net_s += tc - tb;
@@ -274,7 +281,7 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
 #pragma omp parallel for num_threads(nthr) schedule(static)
       for (int y = t->y0; y < t->y1; y++) {
         for (int c = 0; c < 3; c++) {
-          const float *f = filt + c * Q + (size_t)(y - t->py0) * t->pw - t->px0;
+          const float *f = res + c * Q + (size_t)(y - t->py0) * t->pw - t->px0;
           const size_t go = (size_t)c * P + (size_t)y * W;
           if (b == KPCN_BRANCH_DIFFUSE)
             for (int x = t->x0; x < t->x1; x++)

@@ -47,6 +47,7 @@ kpcn_status kpcn_arch_preset(const char *name, kpcn_arch *a) {
   snprintf(t.name, sizeof t.name, "%s", name);
   t.eps = 0.00316f; /* Bako 2017's albedo epsilon */
   snprintf(t.preprocess, sizeof t.preprocess, "kpcn-pre-1");
+  t.kpa_passes = 1;
   /* keep inputs already set by the caller */
   t.n_inputs = a->n_inputs > 0 && a->n_inputs <= KPCN_NN_MAX_INPUTS ? a->n_inputs : 0;
   memcpy(t.inputs, a->inputs, sizeof t.inputs);
@@ -113,6 +114,9 @@ kpcn_status kpcn_arch_validate(const kpcn_arch *a) {
   }
   if (!(a->eps >= 0.0f && a->eps < 1.0f))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.eps = %g not in [0, 1)", (double)a->eps);
+  if (a->kpa_passes < 0 || a->kpa_passes > KPCN_NN_MAX_KPA_PASSES)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.kpa_passes = %d not in [1, %d]",
+                     a->kpa_passes, KPCN_NN_MAX_KPA_PASSES);
   if (!name_ok(a->name, KPCN_NN_NAME_LEN))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.name is empty or too long");
   if (!name_ok(a->preprocess, KPCN_NN_NAME_LEN))
@@ -130,6 +134,12 @@ int kpcn_arch_conv_radius(const kpcn_arch *a) {
   for (int l = 0; l <= a->n_hidden; l++)
     r += a->dilation[l] * (a->conv_size[l] - 1) / 2;
   return r;
+}
+
+int kpcn_arch_receptive_radius(const kpcn_arch *a) {
+  const int k = a->kernel_size / 2, extra = (kpcn_arch_kpa_passes(a) - 1) * k;
+  const int r_feat = kpcn_arch_conv_radius(a) + extra, r_noisy = k + extra;
+  return r_feat > r_noisy ? r_feat : r_noisy;
 }
 
 double kpcn_arch_flops_per_pixel(const kpcn_arch *a) {
@@ -170,6 +180,8 @@ char *kpcn_arch_to_json(const kpcn_arch *a) {
   snprintf(eps, sizeof eps, "%.9g", (double)a->eps);
   cJSON_AddRawToObject(o, "eps", eps);
   cJSON_AddStringToObject(o, "preprocess", a->preprocess);
+  /* written only when not 1, so single-pass models keep the bytes they always had */
+  if (kpcn_arch_kpa_passes(a) != 1) cJSON_AddNumberToObject(o, "kpa_passes", a->kpa_passes);
   char *s = cJSON_PrintUnformatted(o);
   cJSON_Delete(o);
   return s;
@@ -236,6 +248,13 @@ static kpcn_status from_json_obj(const cJSON *o, kpcn_arch *t) {
   if (!cJSON_IsNumber(eps)) return kpcn_fail(KPCN_ERR_FORMAT, "architecture.eps: missing");
   t->eps = (float)eps->valuedouble;
   KPCN_TRY(get_str(o, "preprocess", t->preprocess, sizeof t->preprocess));
+  t->kpa_passes = 1; /* absent in files written before the field existed */
+  if (cJSON_GetObjectItemCaseSensitive(o, "kpa_passes")) {
+    KPCN_TRY(get_int(o, "kpa_passes", &t->kpa_passes));
+    if (t->kpa_passes < 1)
+      return kpcn_fail(KPCN_ERR_FORMAT, "architecture.kpa_passes = %d: must be >= 1",
+                       t->kpa_passes);
+  }
   kpcn_status s = kpcn_arch_validate(t);
   if (s != KPCN_OK) {
     char msg[512]; /* kpcn_fail must not format from its own buffer */

@@ -132,6 +132,15 @@ kpcn_status kpcn_model_widen(const kpcn_model *src, int channels, uint64_t seed,
   return KPCN_OK;
 }
 
+kpcn_status kpcn_model_set_kpa_passes(kpcn_model *m, int passes) {
+  if (!m) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_set_kpa_passes: NULL model");
+  if (passes < 1 || passes > KPCN_NN_MAX_KPA_PASSES)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpa_passes = %d not in [1, %d]", passes,
+                     KPCN_NN_MAX_KPA_PASSES);
+  m->arch.kpa_passes = passes;
+  return KPCN_OK;
+}
+
 void kpcn_model_destroy(kpcn_model *m) {
   if (!m) return;
   kpcn_aligned_free(m->block);

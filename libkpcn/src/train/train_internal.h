@@ -44,6 +44,11 @@ struct kpcn_trainer {
   float *feat[KT_NB], *noisy[KT_NB], *logits[KT_NB], *out[KT_NB], *target[KT_NB], *grad[KT_NB];
   /* dlogits in the layout the net left its logits in (lay), allocated at the first forward */
   float *dlogits[KT_NB];
+  /* arch.kpa_passes > 1: each branch's results of the passes before the last (input of the
+   * next), [passes-1][N][3][P][P], and the backward's scratch (kpcn_kpa_backward_passes) */
+  float *mid[KT_NB], *kpa_scratch;
+  size_t kpa_scratch_n;
+  int passes;
   kpcn_logits_layout lay[KT_NB];
   float *albedo, *refc, *comb, *gcomb;
   float *lossbuf; /* margin crops: 3 tensors of N x 3 x (P-2m)^2 */

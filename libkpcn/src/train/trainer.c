@@ -66,8 +66,9 @@ void kpcn_trainer_destroy(kpcn_trainer *t) {
     free(t->params[b]);
     free(t->blocks[b]);
     free(t->feat[b]), free(t->noisy[b]), free(t->logits[b]), free(t->out[b]);
-    free(t->target[b]), free(t->grad[b]), free(t->dlogits[b]);
+    free(t->target[b]), free(t->grad[b]), free(t->dlogits[b]), free(t->mid[b]);
   }
+  free(t->kpa_scratch);
   kpcn_model_destroy(t->model);
   if (t->ps) kpcn_patchstore_close(t->ps);
   free(t->albedo), free(t->refc), free(t->comb), free(t->gcomb), free(t->lossbuf);
@@ -236,6 +237,7 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
       kpcn_model_destroy(t->model);
       t->model = wide;
     }
+    if (s->kpa_passes > 0) GO(kpcn_model_set_kpa_passes(t->model, s->kpa_passes));
     t->arch = *kpcn_model_arch(t->model);
     char what[600];
     snprintf(what, sizeof what, "model '%s'", t->init_model);
@@ -246,6 +248,7 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   }
   t->nfeat = t->arch.n_inputs;
   t->K2 = t->arch.kernel_size * t->arch.kernel_size;
+  t->passes = kpcn_arch_kpa_passes(&t->arch);
   GO(kpcn_patchstore_open(&t->ps, t->store_path, NULL, 0));
   GO(kt_batch_setup(t));
   GO(load_validation(t));
@@ -259,6 +262,7 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
       t->out[b] = talloc(N * 3 * pp, &st);
       t->target[b] = talloc(N * 3 * pp, &st);
       t->grad[b] = talloc(N * 3 * pp, &st);
+      if (t->passes > 1) t->mid[b] = talloc((size_t)(t->passes - 1) * N * 3 * pp, &st);
     }
     t->albedo = talloc(N * 3 * pp, &st);
     t->refc = talloc(N * 3 * pp, &st);
@@ -322,9 +326,18 @@ static kpcn_status branch_forward(kpcn_trainer *t, int b) {
     t->dlogits[b] = kpcn_alloc(sizeof(float) * (size_t)t->N * t->lay[b].image_stride, "dlogits");
     if (!t->dlogits[b]) return KPCN_ERR_OUT_OF_MEMORY;
   }
+  const size_t ns = kpcn_kpa_passes_scratch_floats(t->passes, t->N, 3, t->P, t->P, &t->lay[b]);
+  if (ns > t->kpa_scratch_n) {
+    free(t->kpa_scratch);
+    t->kpa_scratch = kpcn_alloc(sizeof(float) * ns, "kernel-pass scratch");
+    if (!t->kpa_scratch) return KPCN_ERR_OUT_OF_MEMORY;
+    t->kpa_scratch_n = ns;
+  }
   double t1 = kt_now();
-  kpcn_status st = kpcn_kpa_forward_layout(t->arch.kernel_size, t->N, 3, t->P, t->P, lg, &t->lay[b],
-                                           t->noisy[b], t->out[b], t->logits[b], t->nt);
+  /* the first pass leaves the planar softmax weights in t->logits for the backward */
+  kpcn_status st =
+      kpcn_kpa_forward_passes(t->arch.kernel_size, t->passes, t->N, 3, t->P, t->P, lg, &t->lay[b],
+                              t->noisy[b], t->mid[b], t->out[b], t->logits[b], t->nt);
   t->timing.net_s += t1 - t0;
   t->timing.kpa_s += kt_now() - t1;
   return st;
@@ -333,9 +346,9 @@ static kpcn_status branch_forward(kpcn_trainer *t, int b) {
 /* backward of one branch from dL/dout in t->grad[b], then its Adam step */
 static kpcn_status branch_backward_step(kpcn_trainer *t, int b) {
   double t0 = kt_now();
-  KPCN_TRY(kpcn_kpa_backward_layout(t->arch.kernel_size, t->N, 3, t->P, t->P, t->logits[b],
-                                    t->noisy[b], t->grad[b], t->dlogits[b], &t->lay[b], NULL,
-                                    t->nt));
+  KPCN_TRY(kpcn_kpa_backward_passes(t->arch.kernel_size, t->passes, t->N, 3, t->P, t->P,
+                                    t->logits[b], t->noisy[b], t->mid[b], t->grad[b], t->dlogits[b],
+                                    &t->lay[b], t->kpa_scratch, t->nt));
   double t1 = kt_now();
   KPCN_TRY(kpcn_net_backward_logits(t->net[b], t->dlogits[b], NULL));
   double t2 = kt_now();
