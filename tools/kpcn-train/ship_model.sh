@@ -25,7 +25,8 @@
 #   BEST_BY (mean: default; geomean: the best model, the SWA comparison and SHIP_IF_BELOW use
 #   the geometric mean of the per-pair relMSE instead, kpcn-train --best-by), WIDEN (with
 #   INIT: widen it to this many hidden channels first, kpcn-train --widen), BF16 (1: mixed-
-#   precision training, kpcn-train --bf16).
+#   precision training, kpcn-train --bf16), KPA_PASSES (apply the predicted kernels this many
+#   times, kpcn-train --kpa-passes; with INIT it converts the model).
 # With a time budget the iteration count is unknown in advance, so the script first measures
 # the speed (20 iterations) and sets --iters to fit MINUTES, --stage1-iters to STAGE1_FRACTION.
 # Resumable: if the run is interrupted, re-running continues from its checkpoint.
@@ -72,6 +73,7 @@ case $BEST_BY in mean) vcol=7 ;; geomean) vcol=10 ;; *) echo "ship_model.sh: BES
 [ -n "${INIT:-}" ] && args+=(--init "$INIT")
 [ -n "${WIDEN:-}" ] && args+=(--widen "$WIDEN")
 [ "${BF16:-0}" = 1 ] && args+=(--bf16)
+[ -n "${KPA_PASSES:-}" ] && args+=(--kpa-passes "$KPA_PASSES")
 [ -n "${TIME_LIMIT:-}" ] && args+=(--time-limit "$TIME_LIMIT")
 snapdir=${SNAPSHOT_DIR:-$work/snapshots}
 [ -n "${SWA_FROM:-}" ] && [ -z "${SNAPSHOT_DIR:-}" ] && args+=(--snapshots "$snapdir")
@@ -156,6 +158,7 @@ cpu=$(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -1)
   echo "| dataset recipe | ${DATASET_RECIPE:-see docs/dataset.md} |"
   [ -n "${INIT:-}" ] && echo "| initialised from | \`$(basename "$INIT")\` (${INIT_NOTE:-the previously shipped model; its own README is in git history}) |"
   [ -n "${WIDEN:-}" ] && echo "| widened | to $WIDEN hidden channels before training (\`kpcn-train --widen\`: same function, new units start with zero outgoing weights) |"
+  [ -n "${KPA_PASSES:-}" ] && echo "| kernel passes | $KPA_PASSES (\`kpcn-train --kpa-passes\`: the predicted kernels applied $KPA_PASSES times, each pass on the previous one's result; docs/nn.md) |"
   [ "${BF16:-0}" = 1 ] && echo "| precision | bf16 mixed precision (\`kpcn-train --bf16\`: bf16 convolutions, f32 weights, gradients and Adam) |"
   echo "| iterations | $done_iters of $iters planned (stage 1: $stage1, stage-2 loss $LOSS2) |"
   echo "| training time | ${secs} s |"
