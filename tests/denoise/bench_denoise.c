@@ -9,6 +9,8 @@
  *                                 its bundled reference (also part of the default run)
  *   --threads N  --tile N  --preset NAME (only that preset)  --no-baselines
  *   --direct-conv                 fp32 without Winograd convolutions (the pre-Winograd path)
+ *   --kpa-passes N                the presets' kernels applied N times (arch.kpa_passes):
+ *                                 what a multi-pass model costs (the kernel layer runs N times)
  *   --ensemble N                  self-ensemble of N (2, 4, 8) members: ms/Mpx of the whole
  *                                 ensemble; GFLOP/s count the members' FLOPs
  *   --max-tiles N                 stop (through the progress callback) after N tiles of the
@@ -45,6 +47,7 @@ static double peak_rss_mib(void) {
 
 static int g_max_tiles = 0, g_calls = 0, g_direct = 0;
 static int g_ensemble = 0; /* --ensemble N: kpcn_denoiser_options.ensemble */
+static int g_passes = 1;   /* --kpa-passes N: arch.kpa_passes of the presets */
 static int stop_after(void *user, double f) {
   (void)user;
   (void)f;
@@ -78,7 +81,7 @@ static void bench_kpcn(kpcn_aov_set *a, const char *preset, int bf16, int tile, 
   kpcn_arch arch;
   kpcn_model *m = NULL;
   if (kpcn_arch_preset(preset, &arch) != KPCN_OK || kpcn_features_set_arch(&arch) != KPCN_OK ||
-      kpcn_model_create(&arch, 1, &m) != KPCN_OK) {
+      (arch.kpa_passes = g_passes, kpcn_model_create(&arch, 1, &m)) != KPCN_OK) {
     printf("preset %s: %s\n", preset, kpcn_last_error());
     return;
   }
@@ -241,12 +244,14 @@ int main(int argc, char **argv) {
       quality_only = 1;
     } else if (!strcmp(argv[i], "--direct-conv")) {
       g_direct = 1;
+    } else if (!strcmp(argv[i], "--kpa-passes") && i + 1 < argc) {
+      g_passes = atoi(argv[++i]);
     } else if (!strcmp(argv[i], "--ensemble") && i + 1 < argc) {
       g_ensemble = atoi(argv[++i]);
     } else {
       fprintf(stderr, "usage: bench_denoise [--size WxH] [--4k] [--threads N] [--tile N] "
                       "[--preset NAME] [--no-baselines] [--max-tiles N] [--bf16-quality] "
-                      "[--direct-conv] [--ensemble N]\n");
+                      "[--direct-conv] [--ensemble N] [--kpa-passes N]\n");
       return 2;
     }
   }
