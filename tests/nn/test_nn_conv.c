@@ -517,6 +517,45 @@ static void presets_fast(void) {
   }
 }
 
+/* The cpu preset's fp32 inference net on a 1024x540 tile: oneDNN 2.6's Winograd logits layer
+ * would schedule its transform over the whole tile there (a scratchpad of ~3x the logits);
+ * the net must take the direct convolution instead and hold little more than its
+ * activations. The 1024x536 tile keeps Winograd with a small scratchpad. */
+static void winograd_scratch_bounded(void) {
+  char nm[36][16];
+  const char *names[36];
+  for (int i = 0; i < 36; i++)
+    snprintf(nm[i], 16, "f%d", i), names[i] = nm[i];
+  kpcn_arch a;
+  kpcn_arch_preset("cpu", &a);
+  kpcn_arch_set_inputs(&a, 36, names);
+  kpcn_model *m = NULL;
+  CHECK(kpcn_model_create(&a, 1, &m) == KPCN_OK);
+  const int heights[2] = {536, 540};
+  for (int i = 0; i < 2; i++) {
+    kpcn_net_options o;
+    kpcn_net_options_defaults(&o);
+    o.width = 1024, o.height = heights[i];
+    kpcn_net *n = NULL;
+    CHECK(kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &n) == KPCN_OK);
+    if (!n) continue;
+    kpcn_net_stats st;
+    kpcn_net_get_stats(n, &st);
+    /* the largest activations alive at once: two hidden of 48 channels and the logits, 121
+     * padded to 128 (nChw16c) */
+    const double act = 4.0 * 1024 * heights[i] * (48 + 48 + 128);
+    printf("cpu preset 1024x%d inference net: %.0f MiB held (activations %.0f MiB), logits "
+           "layer %s\n",
+           heights[i], st.bytes / 1048576.0, act / 1048576.0, kpcn_net_impl_name(n, a.n_hidden));
+    CHECK(st.bytes < 2.0 * act);
+    /* the guard keeps Winograd where its scratchpad is small (oneDNN has it on AVX-512) */
+    if (i == 0 && __builtin_cpu_supports("avx512f"))
+      CHECK(strstr(kpcn_net_impl_name(n, a.n_hidden), "wino") != NULL);
+    kpcn_net_destroy(n);
+  }
+  kpcn_model_destroy(m);
+}
+
 /* kpcn_model_widen: the widened model computes the same logits (exactly in the double
  * reference, to rounding in oneDNN), its zero weights from the new channels receive non-zero
  * gradients (the added capacity is trainable), and narrowing is refused. */
@@ -597,6 +636,7 @@ static void widen(void) {
 
 int main(void) {
   presets_fast();
+  winograd_scratch_bounded();
   widen();
   const cfg cs[] = {
       {3, 1, 16, 3, 2, 12, 10, {3, 3}, {1, 1}},

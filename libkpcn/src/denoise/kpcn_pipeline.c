@@ -52,12 +52,16 @@ static size_t floats_per_pixel(const kpcn_arch *a) {
  * origin is then rounded down to even (so up to pad + 1 on the left/top). The Winograd logits
  * layer (net.c) computes 2x2 output blocks anchored at the tile's origin and its rounding
  * depends on each block's whole 4x4 input window; aligned blocks with correct inputs keep
- * the result independent of the tile size bit for bit. The pad is rounded up to even: with
- * even core edges the padded origins then need no rounding, so the first and last tile of a row or
- * column (each padded on one side only) get the same size and one network serves both (the cpu
- * preset's 1024² frame then runs two 1024x536 tiles, not a 535-row and a 536-row one needing a
- * second network). */
-static int tile_pad(const kpcn_arch *a) { return (kpcn_denoise_tile_overlap(a) + 2) & ~1; }
+ * the result independent of the tile size bit for bit. The pad is rounded up to a multiple of
+ * 8: with even core edges the padded origins then need no rounding, so the first and last tile
+ * of a row or column (each padded on one side only) get the same size and one network serves
+ * both (the cpu preset's 1024² frame then runs two 1024x536 tiles, not a 535-row and a 536-row
+ * one needing a second network); and a padded edge of core + pad stays a multiple of 8 where
+ * the core is one, for which oneDNN 2.6's Winograd kernel keeps its per-tile schedule: with a
+ * two-kernel-pass model the pad rounded to even gave 1024x540 tiles, and for those it switched
+ * to transforming the whole tile into an 885 MB scratchpad (peak RSS 1.0 -> 1.9 GB on a 1024²
+ * frame; net.c now also refuses such a Winograd primitive). */
+static int tile_pad(const kpcn_arch *a) { return (kpcn_denoise_tile_overlap(a) + 8) & ~7; }
 
 /* Padded extent [*p0, *p1) of the core [c0, c1) in an image of size n. */
 static void pad_range(int c0, int c1, int n, int pad, int *p0, int *p1) {
