@@ -5,7 +5,6 @@
 #include "core/internal.h"
 #include "kpcn/nn.h"
 
-
 size_t kpcn_kpa_passes_scratch_floats(int passes, int n, int nc, int h, int w,
                                       const kpcn_logits_layout *layout) {
   if (passes <= 1) return 0;
