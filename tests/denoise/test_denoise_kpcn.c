@@ -11,12 +11,16 @@
 #include "testutil.h"
 
 /* Tiny arch with a wider receptive field than the preset so tiles really overlap; its
- * kernels applied `passes` times. */
-static kpcn_model *make_model_passes(uint64_t seed, int passes) {
+ * kernels applied `passes` times, the first with source weights when sw. The pipeline rounds
+ * the overlap up to a multiple of 8 plus one (tile_pad); with sw the conv radius is 7, so the
+ * one-pass overlap 7 + K/2 = 9 needs a pad of 16 where one without the sources' K/2 gets 8. */
+static kpcn_model *make_model_chain(uint64_t seed, int passes, int sw) {
   kpcn_arch arch;
   if (kpcn_arch_preset("tiny", &arch) != KPCN_OK) return NULL;
   arch.dilation[1] = 2; /* conv radius 1 + 2 + 1 = 4, K = 5 */
   arch.kpa_passes = passes;
+  arch.source_weight = sw;
+  if (sw) arch.dilation[1] = 5;
   /* more passes: K = 7, so the tile pad the one-pass overlap max(4, 3) would give (6) is
    * short of the two-pass one, max(4 + 3, 3 + 3) = 7, and the tiling test would see it */
   if (passes > 1) arch.kernel_size = 7;
@@ -38,7 +42,7 @@ static kpcn_model *make_model_passes(uint64_t seed, int passes) {
     }
   return m;
 }
-static kpcn_model *make_model(uint64_t seed) { return make_model_passes(seed, 1); }
+static kpcn_model *make_model(uint64_t seed) { return make_model_chain(seed, 1, 0); }
 
 /* Naive reference: out[3][H][W] (double). */
 static void reference(kpcn_model *m, const kpcn_aov_set *a, double *out) {
@@ -83,6 +87,7 @@ static void reference(kpcn_model *m, const kpcn_aov_set *a, double *out) {
       src[i] = feat[i];
     for (int pass = 0; pass < kpcn_arch_kpa_passes(arch); pass++) {
       if (pass > 0) memcpy(src, filt[b], sizeof(double) * 3 * P);
+      const int weighted = pass == 0 && arch->source_weight;
       for (int y = 0; y < H; y++)
         for (int x = 0; x < W; x++) {
           size_t i = (size_t)y * W + x;
@@ -94,6 +99,9 @@ static void reference(kpcn_model *m, const kpcn_aov_set *a, double *out) {
             int yy = y + t / K - R, xx = x + t % K - R;
             yy = yy < 0 ? 0 : yy >= H ? H - 1 : yy;
             xx = xx < 0 ? 0 : xx >= W ? W - 1 : xx;
+            /* source weight of the neighbour: logit channel K² there */
+            if (weighted)
+              w *= 1e-3 + (1 - 1e-3) / (1 + exp(-act[(size_t)K * K * P + (size_t)yy * W + xx]));
             for (int c = 0; c < 3; c++)
               acc[c] += w * src[(size_t)c * P + (size_t)yy * W + xx];
             z += w;
@@ -142,8 +150,8 @@ static double max_rel(const float *x, const float *y, size_t n) {
   return w;
 }
 
-static void test_reference_and_tiling(int passes) {
-  kpcn_model *m = make_model_passes(42, passes);
+static void test_reference_and_tiling(int passes, int sw) {
+  kpcn_model *m = make_model_chain(42, passes, sw);
   CHECK(m != NULL);
   if (!m) return;
   kpcn_aov_set *a = synth_aov(29, 23, 3);
@@ -155,8 +163,22 @@ static void test_reference_and_tiling(int passes) {
   double worst = 0;
   for (size_t i = 0; i < 3 * P; i++)
     worst = fmax(worst, fabs(out[i] - ref[i]) / (1e-3 + fabs(ref[i])));
-  printf("pipeline (%d kernel passes) vs naive reference: max rel err %.3g\n", passes, worst);
+  printf("pipeline (%d kernel passes%s) vs naive reference: max rel err %.3g\n", passes,
+         sw ? ", source weights" : "", worst);
   CHECK(worst < 1e-4);
+  if (!sw) {
+    /* the same model with a zero source score channel added computes the same function */
+    kpcn_model *m2 = NULL;
+    CHECK(kpcn_model_add_source_weight(m, &m2) == KPCN_OK);
+    CHECK(m2 && kpcn_model_arch(m2)->source_weight == 1);
+    if (m2) {
+      CHECK(run(m2, a, 4096, 0, til) == KPCN_OK);
+      double e = max_rel(til, out, 3 * P);
+      printf("with a zero source score added: max rel diff %.3g\n", e);
+      CHECK(e < 1e-5);
+      kpcn_model_destroy(m2);
+    }
+  }
   /* tiles of 8 (overlap 4, or 7 with two passes, < tile) and 13 (uneven edge tiles) equal the
    * untiled result */
   const int tiles[] = {8, 13};
@@ -526,8 +548,10 @@ static void test_ensemble(void) {
 }
 
 int main(void) {
-  test_reference_and_tiling(1);
-  test_reference_and_tiling(2);
+  test_reference_and_tiling(1, 0);
+  test_reference_and_tiling(2, 0);
+  test_reference_and_tiling(1, 1);
+  test_reference_and_tiling(2, 1);
   test_bf16_and_larger_tiling();
   test_reuse_between_executes();
   test_api();

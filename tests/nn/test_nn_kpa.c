@@ -9,26 +9,36 @@
 
 static int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
 
-/* Naive reference: out[b][c][y][x] = sum_t softmax(l)[t] * noisy[clamp(y+dy-r)][clamp(x+dx-r)] */
-static double ref_pixel(int K, int nc, int h, int w, const float *lg, const float *nz, int b, int c,
-                        int y, int x) {
-  const int K2 = K * K, r = K / 2;
+/* Naive reference: out[b][c][y][x] = sum_t softmax(l)[t] * noisy[clamp(y+dy-r)][clamp(x+dx-r)].
+ * With a non-NULL sw ([n][h][w] source weights), the weighted form: sum_t k_t w(q) noisy(q) /
+ * sum_t k_t w(q). lc: logit channels per image (K² or K² + 1). */
+static double ref_pixel_sw(int K, int lc, int nc, int h, int w, const float *lg, const double *sw,
+                           const float *nz, int b, int c, int y, int x) {
+  const int K2 = lc, r = K / 2;
   const size_t pl = (size_t)h * w;
   double mx = -1e300, s = 0, o = 0;
-  for (int t = 0; t < K2; t++) {
+  for (int t = 0; t < K * K; t++) {
     double v = lg[((size_t)b * K2 + t) * pl + (size_t)y * w + x];
     mx = v > mx ? v : mx;
   }
-  for (int t = 0; t < K2; t++)
+  for (int t = 0; t < K * K; t++)
     s += exp(lg[((size_t)b * K2 + t) * pl + (size_t)y * w + x] - mx);
+  double den = 0;
   for (int dy = 0; dy < K; dy++)
     for (int dx = 0; dx < K; dx++) {
       int t = dy * K + dx;
       double wt = exp(lg[((size_t)b * K2 + t) * pl + (size_t)y * w + x] - mx) / s;
       int yy = clampi(y + dy - r, 0, h - 1), xx = clampi(x + dx - r, 0, w - 1);
-      o += wt * nz[((size_t)b * nc + c) * pl + (size_t)yy * w + xx];
+      double sq = sw ? sw[(size_t)b * pl + (size_t)yy * w + xx] : 1.0;
+      o += wt * sq * nz[((size_t)b * nc + c) * pl + (size_t)yy * w + xx];
+      den += wt * sq;
     }
-  return o;
+  return o / den;
+}
+
+static double ref_pixel(int K, int nc, int h, int w, const float *lg, const float *nz, int b, int c,
+                        int y, int x) {
+  return ref_pixel_sw(K, K * K, nc, h, w, lg, NULL, nz, b, c, y, x);
 }
 
 static void fill(float *p, size_t n, unsigned *rs, float lo, float hi) {
@@ -240,25 +250,36 @@ static void backward_layouts(int K, int n, int nc, int h, int w) {
   bwd_case_free(&c);
 }
 
-/* kpcn_kpa_forward_passes / backward_passes (arch.kpa_passes): the forward equals the naive
- * reference applied `passes` times with the same logits; dL/dlogits of the whole chain
- * equals central differences; a channel-blocked layout gives the planar dlogits slot for
- * slot with zero padding. */
-static void passes_check(int K, int passes, int n, int nc, int h, int w) {
-  const int K2 = K * K;
-  const size_t pl = (size_t)h * w, nl = (size_t)n * K2 * pl, nn = (size_t)n * nc * pl;
-  const kpcn_logits_layout planar = kpcn_logits_layout_planar(K2, h, w);
-  float *lg = malloc(nl * 4), *nz = malloc(nn * 4), *out = malloc(nn * 4), *wt = malloc(nl * 4);
-  float *mid = malloc((size_t)(passes - 1) * nn * 4 + 4), *r = malloc(nn * 4);
-  float *dl = malloc(nl * 4), *a = malloc(nn * 4), *bb = malloc(nn * 4);
-  float *scr = malloc(kpcn_kpa_passes_scratch_floats(passes, n, nc, h, w, &planar) * 4 + 4);
-  unsigned rs = 900u + (unsigned)(K * passes);
+/* kpcn_kpa_forward_passes / backward_passes (arch.kpa_passes, arch.source_weight): the forward
+ * equals the naive reference applied `passes` times with the same logits (the first pass
+ * weighted by w = e + (1-e)·sigmoid(score) when sw); dL/dlogits of the whole chain, the score
+ * channel included, equals central differences; a channel-blocked layout gives the planar
+ * dlogits slot for slot with zero padding. */
+static void passes_check(int K, int passes, int sw, int n, int nc, int h, int w) {
+  const int K2 = K * K, LC = K2 + sw;
+  const size_t pl = (size_t)h * w, nl = (size_t)n * LC * pl, nn = (size_t)n * nc * pl;
+  const size_t nwt = (size_t)n * K2 * pl;
+  const kpcn_logits_layout planar = kpcn_logits_layout_planar(LC, h, w);
+  float *lg = malloc(nl * 4), *nz = malloc(nn * 4), *out = malloc(nn * 4), *wt = malloc(nwt * 4);
+  float *mid = malloc(kpcn_kpa_passes_mid_floats(passes, sw, n, nc, h, w) * 4 + 4);
+  float *r = malloc(nn * 4), *dl = malloc(nl * 4), *a = malloc(nn * 4), *bb = malloc(nn * 4);
+  float *scr = malloc(kpcn_kpa_passes_scratch_floats(passes, sw, n, nc, h, w, &planar) * 4 + 4);
+  double *swv = malloc((size_t)n * pl * sizeof(double));
+  unsigned rs = 900u + (unsigned)(K * passes + 7 * sw);
   fill(lg, nl, &rs, -2.f, 2.f);
   fill(nz, nn, &rs, 0.f, 1.f);
   fill(r, nn, &rs, -1.f, 1.f);
-  CHECK(kpcn_kpa_forward_passes(K, passes, n, nc, h, w, lg, &planar, nz, mid, out, wt, 2) ==
+  if (sw) {
+    nz[nn / 2] = 8.f; /* an outlier the score can drop */
+    for (int b = 0; b < n; b++)
+      for (size_t q = 0; q < pl; q++) {
+        double s = lg[((size_t)b * LC + K2) * pl + q];
+        swv[(size_t)b * pl + q] = 1e-3 + (1 - 1e-3) / (1 + exp(-s));
+      }
+  }
+  CHECK(kpcn_kpa_forward_passes(K, passes, sw, n, nc, h, w, lg, &planar, nz, mid, out, wt, 2) ==
         KPCN_OK);
-  /* naive: each pass through ref_pixel, the intermediate rounded to float as the layer does */
+  /* naive: each pass through ref_pixel_sw, the intermediate rounded to float as the layer does */
   memcpy(a, nz, nn * 4);
   for (int p = 0; p < passes; p++) {
     for (int b = 0; b < n; b++)
@@ -266,7 +287,7 @@ static void passes_check(int K, int passes, int n, int nc, int h, int w) {
         for (int y = 0; y < h; y++)
           for (int x = 0; x < w; x++)
             bb[((size_t)b * nc + c) * pl + (size_t)y * w + x] =
-                (float)ref_pixel(K, nc, h, w, lg, a, b, c, y, x);
+                (float)ref_pixel_sw(K, LC, nc, h, w, lg, p == 0 && sw ? swv : NULL, a, b, c, y, x);
     memcpy(a, bb, nn * 4);
   }
   double e = 0;
@@ -275,19 +296,24 @@ static void passes_check(int K, int passes, int n, int nc, int h, int w) {
     e = d > e ? d : e;
   }
   CHECK(e <= 1e-5);
-  CHECK(kpcn_kpa_backward_passes(K, passes, n, nc, h, w, wt, nz, mid, r, dl, &planar, scr, 2) ==
+  CHECK(kpcn_kpa_backward_passes(K, passes, sw, n, nc, h, w, wt, nz, mid, r, dl, &planar, scr, 2) ==
         KPCN_OK);
-  int bad = 0;
+  /* 150 random logits, then (with sw) 40 source scores */
+  int bad = 0, nfd = 150 + (sw ? 40 : 0);
   double emax = 0;
-  for (int t = 0; t < 150; t++) {
+  for (int t = 0; t < nfd; t++) {
     size_t i = (size_t)(kt_randf(&rs) * nl) % nl;
+    if (t >= 150) {
+      size_t q = (size_t)(kt_randf(&rs) * (double)(n * pl)) % (n * pl);
+      i = ((q / pl) * LC + K2) * pl + q % pl;
+    }
     float v = lg[i];
     const float hh = 1e-2f;
     double L[2];
     for (int sg = 0; sg < 2; sg++) {
       lg[i] = v + (sg ? -hh : hh);
-      CHECK(kpcn_kpa_forward_passes(K, passes, n, nc, h, w, lg, &planar, nz, mid, bb, NULL, 1) ==
-            KPCN_OK);
+      CHECK(kpcn_kpa_forward_passes(K, passes, sw, n, nc, h, w, lg, &planar, nz, mid, bb, NULL,
+                                    1) == KPCN_OK);
       L[sg] = 0;
       for (size_t j = 0; j < nn; j++)
         L[sg] += (double)r[j] * bb[j];
@@ -296,34 +322,47 @@ static void passes_check(int K, int passes, int n, int nc, int h, int w) {
     double fd = (L[0] - L[1]) / ((double)(float)(v + hh) - (double)(float)(v - hh));
     double err = fabs(fd - dl[i]);
     emax = err > emax ? err : emax;
-    if (err > 2e-4 + 2e-3 * fabs(dl[i])) bad++;
+    if (err > 2e-4 + 2e-3 * fabs(dl[i])) {
+      bad++;
+      printf("  fd mismatch at %zu (t %zu): fd %.6e analytic %.6e\n", i, (i / pl) % LC, fd, dl[i]);
+    }
   }
   /* the forward above left mid as the unperturbed forward's: redo it for the layout check */
-  CHECK(kpcn_kpa_forward_passes(K, passes, n, nc, h, w, lg, &planar, nz, mid, out, wt, 2) ==
+  CHECK(kpcn_kpa_forward_passes(K, passes, sw, n, nc, h, w, lg, &planar, nz, mid, out, wt, 2) ==
         KPCN_OK);
   kpcn_logits_layout blk = {0, 0, 16, 16};
   blk.block_stride = pl * 16;
-  blk.image_stride = (size_t)((K2 + 15) / 16) * blk.block_stride;
+  blk.image_stride = (size_t)((LC + 15) / 16) * blk.block_stride;
+  float *lgb = malloc((size_t)n * blk.image_stride * 4), *outb = malloc(nn * 4);
+  for (int b = 0; b < n; b++)
+    for (int t = 0; t < (LC + 15) / 16 * 16; t++)
+      for (size_t q = 0; q < pl; q++)
+        lgb[b * blk.image_stride + (size_t)(t / 16) * blk.block_stride + q * 16 + t % 16] =
+            t < LC ? lg[((size_t)b * LC + t) * pl + q] : 0.f;
+  CHECK(kpcn_kpa_forward_passes(K, passes, sw, n, nc, h, w, lgb, &blk, nz, mid, outb, wt, 1) ==
+        KPCN_OK);
+  CHECK(memcmp(out, outb, nn * 4) == 0);
   float *dlb = malloc((size_t)n * blk.image_stride * 4);
-  float *scr2 = malloc(kpcn_kpa_passes_scratch_floats(passes, n, nc, h, w, &blk) * 4 + 4);
-  CHECK(kpcn_kpa_backward_passes(K, passes, n, nc, h, w, wt, nz, mid, r, dlb, &blk, scr2, 1) ==
+  float *scr2 = malloc(kpcn_kpa_passes_scratch_floats(passes, sw, n, nc, h, w, &blk) * 4 + 4);
+  CHECK(kpcn_kpa_backward_passes(K, passes, sw, n, nc, h, w, wt, nz, mid, r, dlb, &blk, scr2, 1) ==
         KPCN_OK);
   int lay_bad = 0;
   for (int b = 0; b < n; b++)
-    for (int t = 0; t < (K2 + 15) / 16 * 16; t++)
+    for (int t = 0; t < (LC + 15) / 16 * 16; t++)
       for (size_t q = 0; q < pl; q++) {
         float v = dlb[b * blk.image_stride + (size_t)(t / 16) * blk.block_stride + q * 16 + t % 16];
-        lay_bad += t < K2 ? v != dl[((size_t)b * K2 + t) * pl + q] : v != 0.f;
+        float ref = dl[((size_t)b * LC + t) * pl + q];
+        lay_bad += t < LC ? fabsf(v - ref) > 1e-6f * (1 + fabsf(ref)) : v != 0.f;
       }
-  printf("kpa %d passes K=%d n=%d nc=%d %dx%d: fwd rel err %.2e, %d/150 fd mismatches (max %.2e), "
-         "%d blocked-layout mismatches\n",
-         passes, K, n, nc, h, w, e, bad, emax, lay_bad);
+  printf("kpa %d passes%s K=%d n=%d nc=%d %dx%d: fwd rel err %.2e, %d/%d fd mismatches (max "
+         "%.2e), %d blocked-layout mismatches\n",
+         passes, sw ? " + source weights" : "", K, n, nc, h, w, e, bad, nfd, emax, lay_bad);
   CHECK(bad == 0);
   CHECK(lay_bad == 0);
-  CHECK(kpcn_kpa_forward_passes(K, passes, n, nc, h, w, lg, &planar, nz, NULL, out, NULL, 1) ==
-        (passes > 1 ? KPCN_ERR_INVALID_ARGUMENT : KPCN_OK));
+  CHECK(kpcn_kpa_forward_passes(K, passes, sw, n, nc, h, w, lg, &planar, nz, NULL, out, NULL, 1) ==
+        (passes > 1 || sw ? KPCN_ERR_INVALID_ARGUMENT : KPCN_OK));
   free(lg), free(nz), free(out), free(wt), free(mid), free(r), free(dl), free(a), free(bb);
-  free(scr), free(dlb), free(scr2);
+  free(scr), free(dlb), free(scr2), free(swv), free(lgb), free(outb);
 }
 
 int main(void) {
@@ -339,10 +378,13 @@ int main(void) {
   backward_layouts(3, 2, 3, 6, 5);
   backward_layouts(7, 1, 3, 4, 11);  /* K2 = 49: three whole blocks of 16 and one tap */
   backward_layouts(11, 2, 3, 5, 37); /* the cpu preset's K, 8 x 8 transposes plus edges */
-  passes_check(3, 1, 1, 3, 6, 5);
-  passes_check(3, 2, 2, 3, 6, 5);
-  passes_check(5, 3, 1, 3, 7, 9);
-  passes_check(11, 2, 1, 3, 9, 13); /* K larger than the image: clamped reads every pass */
+  passes_check(3, 1, 0, 1, 3, 6, 5);
+  passes_check(3, 2, 0, 2, 3, 6, 5);
+  passes_check(5, 3, 0, 1, 3, 7, 9);
+  passes_check(11, 2, 0, 1, 3, 9, 13); /* K larger than the image: clamped reads every pass */
+  passes_check(3, 1, 1, 2, 3, 6, 5);   /* source weights: one pass, two images */
+  passes_check(5, 2, 1, 1, 3, 7, 9);   /* source weights, then a plain second pass */
+  passes_check(11, 2, 1, 2, 3, 9, 13); /* the cpu preset's K: score in a 16-block's padding */
   float x = 0;
   CHECK(kpcn_kpa_forward(4, 1, 3, 4, 4, &x, &x, &x, NULL, 1) == KPCN_ERR_INVALID_ARGUMENT);
   CHECK(kpcn_kpa_forward(3, 1, 3, 0, 4, &x, &x, &x, NULL, 1) != KPCN_OK);

@@ -126,15 +126,20 @@ static void m_arch_k(cJSON *h) {
   free(s);
   cJSON_Delete(a);
 }
-static void m_arch_passes(cJSON *h) {
+/* adds "key": v to the stored architecture */
+static void arch_add(cJSON *h, const char *key, double v) {
   cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
   cJSON *a = cJSON_Parse(cJSON_GetObjectItem(meta, "kpcn.architecture")->valuestring);
-  cJSON_AddNumberToObject(a, "kpa_passes", 0);
+  cJSON_AddNumberToObject(a, key, v);
   char *s = cJSON_PrintUnformatted(a);
   cJSON_ReplaceItemInObject(meta, "kpcn.architecture", cJSON_CreateString(s));
   free(s);
   cJSON_Delete(a);
 }
+static void m_arch_passes(cJSON *h) { arch_add(h, "kpa_passes", 0); }
+static void m_arch_sw2(cJSON *h) { arch_add(h, "source_weight", 2); }
+/* a source score channel the tensors do not have */
+static void m_arch_sw1(cJSON *h) { arch_add(h, "source_weight", 1); }
 static void m_inputs(cJSON *h) {
   cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
   cJSON_ReplaceItemInObject(meta, "kpcn.inputs", cJSON_CreateString("[\"R\",\"G\"]"));
@@ -220,6 +225,24 @@ static void test_arch(void) {
   a.kpa_passes = KPCN_NN_MAX_KPA_PASSES + 1;
   CHECK(kpcn_arch_validate(&a) == KPCN_ERR_INVALID_ARGUMENT);
   CHECK(strstr(kpcn_last_error(), "kpa_passes") != NULL);
+  /* source_weight: absent from the JSON when 0; 1 round-trips, adds an output channel and
+   * K/2 to the radius (scores are read where the first pass reads); 2 is rejected */
+  kpcn_arch_preset("cpu", &a);
+  kpcn_arch_set_inputs(&a, 3, names);
+  const size_t params1 = kpcn_arch_param_count(&a);
+  a.source_weight = 1;
+  CHECK(kpcn_arch_layer_out(&a, a.n_hidden) == 122 && kpcn_arch_logit_channels(&a) == 122);
+  CHECK(kpcn_arch_param_count(&a) == params1 + 48 * 9 + 1);
+  CHECK(kpcn_arch_receptive_radius(&a) == 27);
+  a.kpa_passes = 2;
+  CHECK(kpcn_arch_receptive_radius(&a) == 32);
+  js = kpcn_arch_to_json(&a);
+  CHECK(js && strstr(js, "\"source_weight\":1") && kpcn_arch_from_json(js, &b) == KPCN_OK);
+  CHECK(memcmp(&a, &b, sizeof a) == 0);
+  free(js);
+  a.source_weight = 2;
+  CHECK(kpcn_arch_validate(&a) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "source_weight") != NULL);
   kpcn_arch_preset("tiny", &a); /* conv radius 3 */
   kpcn_arch_set_inputs(&a, 3, names);
   a.kpa_passes = 3;
@@ -293,6 +316,36 @@ static void test_roundtrip(blob *good) {
     kpcn_model_destroy(r);
   }
   CHECK(kpcn_model_set_kpa_passes(m, 1) == KPCN_OK);
+  /* a source score channel added: old tensors are prefixes, the new row and bias are zero,
+   * and the model saves and loads with it */
+  kpcn_model *sw = NULL;
+  CHECK(kpcn_model_add_source_weight(m, &sw) == KPCN_OK);
+  if (sw) {
+    const kpcn_arch *as = kpcn_model_arch(sw);
+    const int L = as->n_hidden, K2 = as->kernel_size * as->kernel_size;
+    kpcn_layer_view vo, vn;
+    kpcn_model_layer(m, KPCN_BRANCH_SPECULAR, L, &vo);
+    kpcn_model_layer(sw, KPCN_BRANCH_SPECULAR, L, &vn);
+    const size_t row = (size_t)vo.in_ch * vo.size * vo.size;
+    CHECK(as->source_weight == 1 && vn.out_ch == K2 + 1 && vo.out_ch == K2);
+    CHECK(memcmp(vo.weight, vn.weight, sizeof(float) * row * K2) == 0);
+    CHECK(memcmp(vo.bias, vn.bias, sizeof(float) * K2) == 0);
+    int nz = vn.bias[K2] != 0.f;
+    for (size_t i = 0; i < row; i++)
+      nz += vn.weight[row * K2 + i] != 0.f;
+    CHECK(nz == 0);
+    vn.bias[K2] = 0.25f;
+    const char *p3 = kt_tmpfile("source-weight.safetensors");
+    CHECK(kpcn_model_save(sw, p3) == KPCN_OK);
+    CHECK(kpcn_model_load(p3, &r) == KPCN_OK);
+    if (r) {
+      kpcn_layer_view vr;
+      kpcn_model_layer(r, KPCN_BRANCH_SPECULAR, L, &vr);
+      CHECK(kpcn_model_arch(r)->source_weight == 1 && vr.bias[K2] == 0.25f);
+      kpcn_model_destroy(r);
+    }
+    kpcn_model_destroy(sw);
+  }
   *good = slurp(path);
   CHECK(good->n > 8 && hlen(good) % 8 == 0);
   /* independent check of the layout: data section size = 4 bytes x parameter count x 2 */
@@ -350,6 +403,8 @@ static void test_malformed(const blob *good) {
   mutated(good, "arch not JSON", m_arch_bad, "architecture");
   mutated(good, "arch even K", m_arch_k, "kernel_size");
   mutated(good, "arch kpa_passes 0", m_arch_passes, "kpa_passes");
+  mutated(good, "arch source_weight 2", m_arch_sw2, "source_weight");
+  mutated(good, "arch source_weight vs shapes", m_arch_sw1, "shape");
   mutated(good, "inputs disagree", m_inputs, "kpcn.inputs");
   mutated(good, "no __metadata__", m_nometa, "__metadata__");
   mutated(good, "unknown format version", m_format, "kpcn.format");

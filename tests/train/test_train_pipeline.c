@@ -20,6 +20,7 @@
 static const char *g_store;
 static int g_bf16;       /* settings(): mixed-precision training */
 static int g_passes = 1; /* settings(): arch.kpa_passes */
+static int g_sw;         /* settings(): arch.source_weight */
 /* kt_tmpfile rotates 8 static buffers; the tests keep many paths alive */
 /* kt_tmpfile cycles through 8 buffers; this test holds more paths at once, so it copies them
  * into its own pool (static, so nothing is left to free). */
@@ -47,6 +48,7 @@ static void settings(kpcn_train_settings *s, const char *out) {
   s->log_every = 2;
   s->bf16 = g_bf16;
   s->arch.kpa_passes = g_passes;
+  s->arch.source_weight = g_sw;
 }
 
 /* All parameters of both branches, concatenated (malloc'ed). */
@@ -128,11 +130,12 @@ static void test_determinism_and_resume(void) {
   float *w3 = weights(t, &n3);
   CHECK(n3 == n1 && memcmp(w3, w1, n1 * sizeof(float)) == 0);
   kpcn_trainer_destroy(t);
-  printf("determinism and resume (%s, %d kernel passes): bit-identical\n", g_bf16 ? "bf16" : "f32",
-         g_passes);
-  /* bf16, or two kernel passes, really change the training (the run without either is first) */
-  if (g_bf16 || g_passes > 1)
-    CHECK(f32_weights && f32_n == n1 && memcmp(f32_weights, w1, n1 * sizeof(float)) != 0);
+  printf("determinism and resume (%s, %d kernel passes%s): bit-identical\n",
+         g_bf16 ? "bf16" : "f32", g_passes, g_sw ? ", source weights" : "");
+  /* bf16, two kernel passes or source weights really change the training (the run without
+   * any is first); source weights also add parameters */
+  if (g_bf16 || g_passes > 1 || g_sw)
+    CHECK(f32_weights && (f32_n != n1 || memcmp(f32_weights, w1, n1 * sizeof(float)) != 0));
   /* a checkpoint written in the other precision is refused, naming the key */
   settings(&s, tf_tmp("c.safetensors"));
   s.bf16 = !g_bf16;
@@ -184,10 +187,11 @@ static void test_determinism_and_resume(void) {
   s.ckpt_path = tf_tmp("trunc.ckpt");
   s.resume = 1;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
-  if (g_passes > 1) {
-    /* the checkpoint of a two-pass run does not resume as a one-pass one */
+  if (g_passes > 1 || g_sw) {
+    /* the checkpoint of a two-pass or source-weighted run does not resume as a plain one */
     settings(&s, tf_tmp("c.safetensors"));
     s.arch.kpa_passes = 1;
+    s.arch.source_weight = 0;
     s.resume = 1;
     CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
     CHECK(strstr(kpcn_last_error(), "architecture") != NULL);
@@ -312,6 +316,53 @@ static void test_init_passes(void) {
   s.kpa_passes = KPCN_NN_MAX_KPA_PASSES + 1;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT);
   CHECK(strstr(kpcn_last_error(), "kpa_passes") != NULL);
+}
+
+/* --init with source_weight: the model gains a zero source-score channel, so it validates to
+ * the same relMSE (same function up to rounding), trains, and the score channel's weights
+ * move (its gradient reaches them). */
+static void test_init_source_weight(void) {
+  const char *vn[1], *vr[1];
+  kpcn_train_settings s;
+  settings(&s, tf_tmp("s1.safetensors"));
+  with_val_pair(&s, "s", vn, vr);
+  kpcn_trainer *t = NULL;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (!t) return;
+  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
+  kpcn_val_result plain, sw;
+  CHECK(kpcn_trainer_validate(t, &plain) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+  settings(&s, tf_tmp("s2.safetensors"));
+  with_val_pair(&s, "s", vn, vr);
+  s.init_model = tf_tmp("s1.safetensors");
+  s.source_weight = 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (!t) return;
+  CHECK(kpcn_model_arch(kpcn_trainer_model(t))->source_weight == 1);
+  CHECK(kpcn_trainer_validate(t, &sw) == KPCN_OK);
+  printf("plain model with a zero source score: validation relMSE %.9g -> %.9g\n", plain.relmse,
+         sw.relmse);
+  CHECK(fabs(sw.relmse - plain.relmse) <= 1e-5 * plain.relmse);
+  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+  kpcn_model *m = NULL;
+  CHECK(kpcn_model_load(tf_tmp("s2.safetensors"), &m) == KPCN_OK);
+  if (!m) return;
+  const kpcn_arch *a = kpcn_model_arch(m);
+  CHECK(a->source_weight == 1);
+  int moved = 0;
+  for (int b = 0; b < 2; b++) {
+    kpcn_layer_view v;
+    kpcn_model_layer(m, (kpcn_branch)b, a->n_hidden, &v);
+    const size_t row = (size_t)v.in_ch * v.size * v.size, K2 = (size_t)v.out_ch - 1;
+    moved += v.bias[K2] != 0.f;
+    for (size_t i = 0; i < row; i++)
+      moved += v.weight[row * K2 + i] != 0.f;
+  }
+  printf("source-score weights moved by training: %d\n", moved);
+  CHECK(moved > 0);
+  kpcn_model_destroy(m);
 }
 
 static void test_widen(void) {
@@ -692,11 +743,15 @@ int main(void) {
   test_determinism_and_resume();
   g_passes = 2;
   test_determinism_and_resume();
+  g_sw = 1;
+  test_determinism_and_resume();
   g_passes = 1;
+  g_sw = 0;
   g_bf16 = 1;
   test_determinism_and_resume();
   g_bf16 = 0;
   test_init_passes();
+  test_init_source_weight();
   test_validation();
   test_widen();
   test_validation_geomean();

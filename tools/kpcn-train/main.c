@@ -29,6 +29,8 @@ static void usage(FILE *f) {
         "                            function: new units get zero outgoing weights)\n"
         "  --kpa-passes N            apply the predicted kernels N times (1..3, default 1;\n"
         "                            with --init: the model's own unless given)\n"
+        "  --source-weight           predict a per-pixel source weight too (arch.source_weight;\n"
+        "                            with --init: added with zero weights, same function)\n"
         "  --loss l1|l2|relmse|rell1|ssim|relmse-sg|rell1-sg   stage-1 loss (default l1)\n"
         "  --loss2 NAME              stage-2 loss (default: same as --loss)\n"
         "  --ssim-window N           SSIM window (odd, default 11), --loss-margin M\n"
@@ -230,6 +232,7 @@ int main(int argc, char **argv) {
   kpcn_train_settings_defaults(&s);
   const char *preset = "cpu", *dil = NULL, *loss2 = NULL, *best_by = NULL;
   long long layers = -1, channels = -1, conv = -1, kernel = -1, ssim_win = -1, kpa_passes = -1, v;
+  int source_weight = 0;
   int from_store = 0;
   double d;
   for (int i = 1; i < argc; i++) {
@@ -280,6 +283,7 @@ int main(int argc, char **argv) {
     INT("--channels", 1, 1024, channels)
     INT("--widen", 1, 1024, s.widen_channels)
     INT("--kpa-passes", 1, KPCN_NN_MAX_KPA_PASSES, kpa_passes)
+    else if (!strcmp(a, "--source-weight")) source_weight = 1;
     INT("--conv", 1, 11, conv)
     INT("--kernel", 3, KPCN_NN_MAX_KERNEL, kernel)
     INT("--ssim-window", 1, 63, ssim_win)
@@ -368,6 +372,7 @@ int main(int argc, char **argv) {
       s.arch.conv_size[l] = (int)conv;
   if (kernel > 0) s.arch.kernel_size = (int)kernel;
   if (kpa_passes > 0) s.arch.kpa_passes = s.kpa_passes = (int)kpa_passes;
+  if (source_weight) s.arch.source_weight = s.source_weight = 1;
   if (dil) {
     const char *p = dil;
     for (int l = 0; l <= s.arch.n_hidden; l++) {

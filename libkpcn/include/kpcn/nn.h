@@ -13,7 +13,8 @@
  *
  * Network (one branch), for layer l = 0 .. n_hidden (n_layers = n_hidden + 1 convs):
  *   in_ch(0) = n_inputs, in_ch(l>0) = channels,
- *   out_ch(l < n_hidden) = channels (ReLU), out_ch(n_hidden) = K*K (linear logits).
+ *   out_ch(l < n_hidden) = channels (ReLU), out_ch(n_hidden) = K*K (linear logits), plus one
+ *   source score channel when arch.source_weight.
  *   Conv l has size conv_size[l] (odd) and dilation dilation[l]; padding is "same"
  *   (zero padding of dilation*(size-1)/2), stride 1, so logits are N x K² x H x W.
  *
@@ -59,11 +60,22 @@ typedef struct kpcn_arch {
    * Bako 2017; 2 applies the same per-pixel kernels to the first pass's output, so each
    * output pixel averages a (2K-1)² footprint at no extra network cost (docs/nn.md). */
   int kpa_passes;
+  /* 1: the output layer predicts one more channel, a source score s per pixel, and the first
+   * kernel pass weights every neighbour q by w(q) = e + (1 - e)·sigmoid(s(q)) (e =
+   * KPCN_KPA_SOURCE_EPS), renormalising: out(p) = sum k(p,q) w(q) c(q) / sum k(p,q) w(q).
+   * The network can so mark an outlier once and every kernel that reaches it drops it
+   * (docs/nn.md, "Source weights"). 0 (default): Bako 2017's kernels. */
+  int source_weight;
 } kpcn_arch;
 #define KPCN_NN_MAX_KPA_PASSES 3
+#define KPCN_KPA_SOURCE_EPS 1e-3f
 /* a->kpa_passes with 0 read as 1 */
 static inline int kpcn_arch_kpa_passes(const kpcn_arch *a) {
   return a->kpa_passes > 0 ? a->kpa_passes : 1;
+}
+/* Channels of the output layer: K² logits, then the source score when a->source_weight. */
+static inline int kpcn_arch_logit_channels(const kpcn_arch *a) {
+  return a->kernel_size * a->kernel_size + (a->source_weight ? 1 : 0);
 }
 
 /* Zeroes *a and sets a valid small default (the "cpu" shape, no inputs named). */
@@ -136,6 +148,11 @@ kpcn_status kpcn_model_widen(const kpcn_model *m, int channels, uint64_t seed, k
  * KPCN_NN_MAX_KPA_PASSES): the weights are kept, so a fine-tune can start a multi-pass model
  * from a single-pass one. */
 kpcn_status kpcn_model_set_kpa_passes(kpcn_model *m, int passes);
+/* A copy of m with arch.source_weight = 1 that computes the same function: the new source
+ * score channel of each branch's output layer gets zero weights and bias, so every weight
+ * w(q) starts equal and the normalised kernels are unchanged (up to rounding); training then
+ * moves it. m may already have source weights (a plain copy). Metadata is copied. */
+kpcn_status kpcn_model_add_source_weight(const kpcn_model *m, kpcn_model **out);
 void kpcn_model_destroy(kpcn_model *m);
 
 const kpcn_arch *kpcn_model_arch(const kpcn_model *m);
@@ -294,23 +311,37 @@ kpcn_status kpcn_kpa_backward_layout(int K, int n, int nc, int h, int w, const f
                                      const float *noisy, const float *dout, float *dlogits,
                                      const kpcn_logits_layout *layout, float *dnoisy, int nthreads);
 
+/* The first kernel pass with source weights (arch.source_weight): channel K² of `logits`
+ * (same layout) holds the source score s, w = KPCN_KPA_SOURCE_EPS + (1 - eps)·sigmoid(s), and
+ *   out[c](p) = sum_t k_t(p) w(q) noisy[c](q) / sum_t k_t(p) w(q),  q = clamp(p + off(t)).
+ * It runs the plain layer on nc + 1 channels: src1 ([N][nc+1][H][W], written) receives
+ * w·noisy and w, acc1 ([N][nc+1][H][W], written) their filtered values (numerators and the
+ * weight sum), out ([N][nc][H][W]) the quotient. With N = 1, src1 may alias noisy and out
+ * may alias acc1 (planes line up). weights as kpcn_kpa_forward_layout. */
+kpcn_status kpcn_kpa_forward_weighted(int K, int n, int nc, int h, int w, const float *logits,
+                                      const kpcn_logits_layout *layout, const float *noisy,
+                                      float *src1, float *acc1, float *out, float *weights,
+                                      int nthreads);
+
 /* Several passes with one set of kernels (arch.kpa_passes): pass p filters pass p-1's result,
- * the first the noisy image; out = the last pass. mid ([passes-1][N][nc][H][W], unused for one
- * pass) receives the results before the last, which the backward needs; weights as above
- * (planar softmax, optional). */
-kpcn_status kpcn_kpa_forward_passes(int K, int passes, int n, int nc, int h, int w,
-                                    const float *logits, const kpcn_logits_layout *layout,
+ * the first the noisy image (with source weights when source_weight, above); out = the last
+ * pass. mid (kpcn_kpa_passes_mid_floats()) receives what the backward needs: the results
+ * before the last, then with source weights src1 and acc1; weights as above (planar softmax,
+ * optional). */
+kpcn_status kpcn_kpa_forward_passes(int K, int passes, int source_weight, int n, int nc, int h,
+                                    int w, const float *logits, const kpcn_logits_layout *layout,
                                     const float *noisy, float *mid, float *out, float *weights,
                                     int nthreads);
-/* Its backward: dL/dlogits (in `layout`, as kpcn_kpa_backward_layout writes them) of the
- * whole chain, from the forward's weights, noisy and mid. scratch: at least
- * kpcn_kpa_passes_scratch_floats() floats (none for one pass). No dL/dnoisy. */
-kpcn_status kpcn_kpa_backward_passes(int K, int passes, int n, int nc, int h, int w,
-                                     const float *weights, const float *noisy, const float *mid,
-                                     const float *dout, float *dlogits,
+/* Its backward: dL/dlogits (in `layout`, as kpcn_kpa_backward_layout writes them, the source
+ * score channel included) of the whole chain, from the forward's weights, noisy and mid.
+ * scratch: at least kpcn_kpa_passes_scratch_floats() floats. No dL/dnoisy. */
+kpcn_status kpcn_kpa_backward_passes(int K, int passes, int source_weight, int n, int nc, int h,
+                                     int w, const float *weights, const float *noisy,
+                                     const float *mid, const float *dout, float *dlogits,
                                      const kpcn_logits_layout *layout, float *scratch,
                                      int nthreads);
-size_t kpcn_kpa_passes_scratch_floats(int passes, int n, int nc, int h, int w,
+size_t kpcn_kpa_passes_mid_floats(int passes, int source_weight, int n, int nc, int h, int w);
+size_t kpcn_kpa_passes_scratch_floats(int passes, int source_weight, int n, int nc, int h, int w,
                                       const kpcn_logits_layout *layout);
 
 #ifdef __cplusplus

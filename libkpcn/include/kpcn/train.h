@@ -228,6 +228,9 @@ typedef struct kpcn_train_settings {
   int kpa_passes;          /* > 0 (needs init_model): apply its kernels this many times
                               (kpcn_model_set_kpa_passes); 0 = as the model says. Without
                               init_model, arch.kpa_passes decides */
+  int source_weight;       /* 1 (needs init_model): add the source score channel to it
+                              (kpcn_model_add_source_weight: same function at the start).
+                              Without init_model, arch.source_weight decides */
   kpcn_loss_kind loss1;    /* stage-1 loss, default l1 (seed §4.4) */
   kpcn_loss_kind loss2;    /* stage-2 loss, default l1 (seed fine-tunes with ssim) */
   kpcn_loss_settings loss; /* defaults */

@@ -41,11 +41,11 @@ static int tile_cmp(const void *a, const void *b) {
   return s->x0 < t->x0 ? -1 : s->x0 > t->x0;
 }
 
-/* Floats a padded tile pixel costs while its net runs: features, noisy and filtered colour,
- * two hidden activations (ping-pong) and the K² logits. Matches peak RSS within ~10 %. */
+/* Floats a padded tile pixel costs while its net runs: features, noisy and filtered colour
+ * (four planes each, for source weights), two hidden activations (ping-pong) and the logits.
+ * Matches peak RSS within ~10 %. */
 static size_t floats_per_pixel(const kpcn_arch *a) {
-  return KPCN_FEATURES_COUNT + 6 + 2 * (size_t)a->channels +
-         (size_t)a->kernel_size * a->kernel_size;
+  return KPCN_FEATURES_COUNT + 8 + 2 * (size_t)a->channels + (size_t)kpcn_arch_logit_channels(a);
 }
 
 /* Pixels a tile is grown by on each side: at least one more than the overlap, and the padded
@@ -147,8 +147,9 @@ static kpcn_status cache_buffers(kpcn_pipeline_cache *c, size_t mp) {
    * reorder 2x slower (bench_denoise --size 1024x1024 --tile 1024) */
   c->feat = kpcn_aligned_alloc(sizeof(float) * kpcn_plane_stride(mp) * KPCN_FEATURES_COUNT,
                                "denoiser features");
-  c->noisy = kpcn_aligned_alloc(sizeof(float) * mp * 3, "denoiser noisy tile");
-  c->filt = kpcn_aligned_alloc(sizeof(float) * mp * 3, "denoiser filtered tile");
+  /* 4 planes: a source-weighted first pass filters w·RGB and w (kpcn_kpa_forward_weighted) */
+  c->noisy = kpcn_aligned_alloc(sizeof(float) * mp * 4, "denoiser noisy tile");
+  c->filt = kpcn_aligned_alloc(sizeof(float) * mp * 4, "denoiser filtered tile");
   if (!c->feat || !c->noisy || !c->filt) return KPCN_ERR_OUT_OF_MEMORY;
   c->capacity = mp;
   return KPCN_OK;
@@ -270,7 +271,13 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
        * colour is not needed after the first, so the passes ping-pong between the two */
       float *src = noisy, *res = filt;
       for (int pass = 0; pass < passes; pass++) {
-        s = kpcn_kpa_forward_layout(K, 1, 3, t->ph, t->pw, logits, &lay, src, res, NULL, nthreads);
+        if (pass == 0 && arch->source_weight) /* in place: w·noisy over noisy, the quotient
+                                                 over the filtered sums */
+          s = kpcn_kpa_forward_weighted(K, 1, 3, t->ph, t->pw, logits, &lay, src, src, res, res,
+                                        NULL, nthreads);
+        else
+          s = kpcn_kpa_forward_layout(K, 1, 3, t->ph, t->pw, logits, &lay, src, res, NULL,
+                                      nthreads);
         if (s != KPCN_OK) goto done;
         float *tmp = src;
         src = res, res = tmp;

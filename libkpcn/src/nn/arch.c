@@ -117,6 +117,9 @@ kpcn_status kpcn_arch_validate(const kpcn_arch *a) {
   if (a->kpa_passes < 0 || a->kpa_passes > KPCN_NN_MAX_KPA_PASSES)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.kpa_passes = %d not in [1, %d]",
                      a->kpa_passes, KPCN_NN_MAX_KPA_PASSES);
+  if (a->source_weight != 0 && a->source_weight != 1)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.source_weight = %d: must be 0 or 1",
+                     a->source_weight);
   if (!name_ok(a->name, KPCN_NN_NAME_LEN))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.name is empty or too long");
   if (!name_ok(a->preprocess, KPCN_NN_NAME_LEN))
@@ -126,7 +129,7 @@ kpcn_status kpcn_arch_validate(const kpcn_arch *a) {
 
 int kpcn_arch_layer_in(const kpcn_arch *a, int l) { return l == 0 ? a->n_inputs : a->channels; }
 int kpcn_arch_layer_out(const kpcn_arch *a, int l) {
-  return l == a->n_hidden ? a->kernel_size * a->kernel_size : a->channels;
+  return l == a->n_hidden ? kpcn_arch_logit_channels(a) : a->channels;
 }
 
 int kpcn_arch_conv_radius(const kpcn_arch *a) {
@@ -137,8 +140,10 @@ int kpcn_arch_conv_radius(const kpcn_arch *a) {
 }
 
 int kpcn_arch_receptive_radius(const kpcn_arch *a) {
+  /* source scores are read at every pixel the first pass reads: K/2 further out */
   const int k = a->kernel_size / 2, extra = (kpcn_arch_kpa_passes(a) - 1) * k;
-  const int r_feat = kpcn_arch_conv_radius(a) + extra, r_noisy = k + extra;
+  const int r_feat = kpcn_arch_conv_radius(a) + extra + (a->source_weight ? k : 0);
+  const int r_noisy = k + extra;
   return r_feat > r_noisy ? r_feat : r_noisy;
 }
 
@@ -182,6 +187,7 @@ char *kpcn_arch_to_json(const kpcn_arch *a) {
   cJSON_AddStringToObject(o, "preprocess", a->preprocess);
   /* written only when not 1, so single-pass models keep the bytes they always had */
   if (kpcn_arch_kpa_passes(a) != 1) cJSON_AddNumberToObject(o, "kpa_passes", a->kpa_passes);
+  if (a->source_weight) cJSON_AddNumberToObject(o, "source_weight", a->source_weight);
   char *s = cJSON_PrintUnformatted(o);
   cJSON_Delete(o);
   return s;
@@ -255,6 +261,9 @@ static kpcn_status from_json_obj(const cJSON *o, kpcn_arch *t) {
       return kpcn_fail(KPCN_ERR_FORMAT, "architecture.kpa_passes = %d: must be >= 1",
                        t->kpa_passes);
   }
+  t->source_weight = 0; /* likewise */
+  if (cJSON_GetObjectItemCaseSensitive(o, "source_weight"))
+    KPCN_TRY(get_int(o, "source_weight", &t->source_weight));
   kpcn_status s = kpcn_arch_validate(t);
   if (s != KPCN_OK) {
     char msg[512]; /* kpcn_fail must not format from its own buffer */

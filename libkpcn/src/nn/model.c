@@ -141,6 +141,26 @@ kpcn_status kpcn_model_set_kpa_passes(kpcn_model *m, int passes) {
   return KPCN_OK;
 }
 
+kpcn_status kpcn_model_add_source_weight(const kpcn_model *src, kpcn_model **out) {
+  if (!src || !out)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_add_source_weight: NULL argument");
+  *out = NULL;
+  kpcn_arch a = src->arch;
+  a.source_weight = 1;
+  kpcn_model *m;
+  KPCN_TRY(kpcn_model_alloc(&a, &m)); /* zeroed */
+  /* OIHW: the source score is the last output row, so every old tensor is a prefix of the
+   * new one and the added row stays zero */
+  for (int b = 0; b < KPCN_N_BRANCHES; b++)
+    for (int l = 0; l <= a.n_hidden; l++) {
+      memcpy(m->w[b][l], src->w[b][l], sizeof(float) * kpcn_model_weight_count(&src->arch, l));
+      memcpy(m->b[b][l], src->b[b][l], sizeof(float) * (size_t)kpcn_arch_layer_out(&src->arch, l));
+    }
+  KPCN_TRY(copy_meta(m, src));
+  *out = m;
+  return KPCN_OK;
+}
+
 void kpcn_model_destroy(kpcn_model *m) {
   if (!m) return;
   kpcn_aligned_free(m->block);

@@ -238,6 +238,12 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
       t->model = wide;
     }
     if (s->kpa_passes > 0) GO(kpcn_model_set_kpa_passes(t->model, s->kpa_passes));
+    if (s->source_weight && !kpcn_model_arch(t->model)->source_weight) {
+      kpcn_model *sw = NULL;
+      GO(kpcn_model_add_source_weight(t->model, &sw));
+      kpcn_model_destroy(t->model);
+      t->model = sw;
+    }
     t->arch = *kpcn_model_arch(t->model);
     char what[600];
     snprintf(what, sizeof what, "model '%s'", t->init_model);
@@ -262,7 +268,9 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
       t->out[b] = talloc(N * 3 * pp, &st);
       t->target[b] = talloc(N * 3 * pp, &st);
       t->grad[b] = talloc(N * 3 * pp, &st);
-      if (t->passes > 1) t->mid[b] = talloc((size_t)(t->passes - 1) * N * 3 * pp, &st);
+      const size_t nm =
+          kpcn_kpa_passes_mid_floats(t->passes, t->arch.source_weight, t->N, 3, t->P, t->P);
+      if (nm) t->mid[b] = talloc(nm, &st);
     }
     t->albedo = talloc(N * 3 * pp, &st);
     t->refc = talloc(N * 3 * pp, &st);
@@ -326,7 +334,8 @@ static kpcn_status branch_forward(kpcn_trainer *t, int b) {
     t->dlogits[b] = kpcn_alloc(sizeof(float) * (size_t)t->N * t->lay[b].image_stride, "dlogits");
     if (!t->dlogits[b]) return KPCN_ERR_OUT_OF_MEMORY;
   }
-  const size_t ns = kpcn_kpa_passes_scratch_floats(t->passes, t->N, 3, t->P, t->P, &t->lay[b]);
+  const size_t ns = kpcn_kpa_passes_scratch_floats(t->passes, t->arch.source_weight, t->N, 3, t->P,
+                                                   t->P, &t->lay[b]);
   if (ns > t->kpa_scratch_n) {
     free(t->kpa_scratch);
     t->kpa_scratch = kpcn_alloc(sizeof(float) * ns, "kernel-pass scratch");
@@ -335,9 +344,9 @@ static kpcn_status branch_forward(kpcn_trainer *t, int b) {
   }
   double t1 = kt_now();
   /* the first pass leaves the planar softmax weights in t->logits for the backward */
-  kpcn_status st =
-      kpcn_kpa_forward_passes(t->arch.kernel_size, t->passes, t->N, 3, t->P, t->P, lg, &t->lay[b],
-                              t->noisy[b], t->mid[b], t->out[b], t->logits[b], t->nt);
+  kpcn_status st = kpcn_kpa_forward_passes(t->arch.kernel_size, t->passes, t->arch.source_weight,
+                                           t->N, 3, t->P, t->P, lg, &t->lay[b], t->noisy[b],
+                                           t->mid[b], t->out[b], t->logits[b], t->nt);
   t->timing.net_s += t1 - t0;
   t->timing.kpa_s += kt_now() - t1;
   return st;
@@ -346,9 +355,9 @@ static kpcn_status branch_forward(kpcn_trainer *t, int b) {
 /* backward of one branch from dL/dout in t->grad[b], then its Adam step */
 static kpcn_status branch_backward_step(kpcn_trainer *t, int b) {
   double t0 = kt_now();
-  KPCN_TRY(kpcn_kpa_backward_passes(t->arch.kernel_size, t->passes, t->N, 3, t->P, t->P,
-                                    t->logits[b], t->noisy[b], t->mid[b], t->grad[b], t->dlogits[b],
-                                    &t->lay[b], t->kpa_scratch, t->nt));
+  KPCN_TRY(kpcn_kpa_backward_passes(t->arch.kernel_size, t->passes, t->arch.source_weight, t->N, 3,
+                                    t->P, t->P, t->logits[b], t->noisy[b], t->mid[b], t->grad[b],
+                                    t->dlogits[b], &t->lay[b], t->kpa_scratch, t->nt));
   double t1 = kt_now();
   KPCN_TRY(kpcn_net_backward_logits(t->net[b], t->dlogits[b], NULL));
   double t2 = kt_now();
