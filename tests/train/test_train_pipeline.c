@@ -318,6 +318,30 @@ static void test_init_passes(void) {
   CHECK(strstr(kpcn_last_error(), "kpa_passes") != NULL);
 }
 
+/* L1 norm of both branches' source-score weights and biases in a model file; *nonzero counts
+ * the entries that are not zero. */
+static double score_l1(const char *path, int *nonzero) {
+  kpcn_model *m = NULL;
+  *nonzero = 0;
+  CHECK(kpcn_model_load(path, &m) == KPCN_OK);
+  if (!m) return 0;
+  const kpcn_arch *a = kpcn_model_arch(m);
+  CHECK(a->source_weight == 1);
+  double l1 = 0;
+  for (int b = 0; b < 2; b++) {
+    kpcn_layer_view v;
+    kpcn_model_layer(m, (kpcn_branch)b, a->n_hidden, &v);
+    const size_t row = (size_t)v.in_ch * v.size * v.size, K2 = (size_t)v.out_ch - 1;
+    for (size_t i = 0; i <= row; i++) {
+      const float x = i < row ? v.weight[row * K2 + i] : v.bias[K2];
+      *nonzero += x != 0.f;
+      l1 += fabs(x);
+    }
+  }
+  kpcn_model_destroy(m);
+  return l1;
+}
+
 /* --init with source_weight: the model gains a zero source-score channel, so it validates to
  * the same relMSE (same function up to rounding), trains, and the score channel's weights
  * move (its gradient reaches them). */
@@ -346,23 +370,23 @@ static void test_init_source_weight(void) {
   CHECK(fabs(sw.relmse - plain.relmse) <= 1e-5 * plain.relmse);
   CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
   kpcn_trainer_destroy(t);
-  kpcn_model *m = NULL;
-  CHECK(kpcn_model_load(tf_tmp("s2.safetensors"), &m) == KPCN_OK);
-  if (!m) return;
-  const kpcn_arch *a = kpcn_model_arch(m);
-  CHECK(a->source_weight == 1);
   int moved = 0;
-  for (int b = 0; b < 2; b++) {
-    kpcn_layer_view v;
-    kpcn_model_layer(m, (kpcn_branch)b, a->n_hidden, &v);
-    const size_t row = (size_t)v.in_ch * v.size * v.size, K2 = (size_t)v.out_ch - 1;
-    moved += v.bias[K2] != 0.f;
-    for (size_t i = 0; i < row; i++)
-      moved += v.weight[row * K2 + i] != 0.f;
-  }
-  printf("source-score weights moved by training: %d\n", moved);
+  const double l1 = score_l1(tf_tmp("s2.safetensors"), &moved);
+  printf("source-score weights moved by training: %d, L1 %.4g\n", moved, l1);
   CHECK(moved > 0);
-  kpcn_model_destroy(m);
+  /* --source-lr-scale: the same run with the score learning at 20x moves it much further */
+  settings(&s, tf_tmp("s3.safetensors"));
+  with_val_pair(&s, "s", vn, vr);
+  s.init_model = tf_tmp("s1.safetensors");
+  s.source_weight = 1;
+  s.source_lr_scale = 20;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (!t) return;
+  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+  const double l20 = score_l1(tf_tmp("s3.safetensors"), &moved);
+  printf("with --source-lr-scale 20: L1 %.4g (%.1fx)\n", l20, l20 / l1);
+  CHECK(l20 > 8 * l1);
 }
 
 static void test_widen(void) {

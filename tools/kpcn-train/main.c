@@ -31,6 +31,7 @@ static void usage(FILE *f) {
         "                            with --init: the model's own unless given)\n"
         "  --source-weight           predict a per-pixel source weight too (arch.source_weight;\n"
         "                            with --init: added with zero weights, same function)\n"
+        "  --source-lr-scale X       the source score's weights learn at X times the rate\n"
         "  --loss l1|l2|relmse|rell1|ssim|relmse-sg|rell1-sg   stage-1 loss (default l1)\n"
         "  --loss2 NAME              stage-2 loss (default: same as --loss)\n"
         "  --ssim-window N           SSIM window (odd, default 11), --loss-margin M\n"
@@ -298,6 +299,7 @@ int main(int argc, char **argv) {
     INT("--ckpt-every", 0, (long long)1e12, s.ckpt_every)
     INT("--log-every", 1, (long long)1e12, s.log_every)
     INT("--decay-every", 0, (long long)1e12, s.adam.decay_every)
+    DBL("--source-lr-scale", 1e-3, 1e4, s.source_lr_scale)
     DBL("--lr", 1e-12, 10, s.adam.lr)
     DBL("--lr2", 1e-12, 1, s.stage2_lr)
     DBL("--lr-decay", 1e-6, 1, s.adam.lr_decay)

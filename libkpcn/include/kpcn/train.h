@@ -118,6 +118,7 @@ typedef struct kpcn_param_block {
   float *param;
   const float *grad;
   size_t count;
+  float lr_scale; /* this block's learning rate = the schedule's x lr_scale (0 reads as 1) */
 } kpcn_param_block;
 
 /* Opaque optimizer for `count` parameters in total (the blocks passed to every step
@@ -231,6 +232,9 @@ typedef struct kpcn_train_settings {
   int source_weight;       /* 1 (needs init_model): add the source score channel to it
                               (kpcn_model_add_source_weight: same function at the start).
                               Without init_model, arch.source_weight decides */
+  double source_lr_scale;  /* > 0: the source score's weights and bias learn at this multiple
+                              of the learning rate (a zero-initialised channel added to a
+                              trained model moves ~lr per step under Adam); 0 = 1 */
   kpcn_loss_kind loss1;    /* stage-1 loss, default l1 (seed §4.4) */
   kpcn_loss_kind loss2;    /* stage-2 loss, default l1 (seed fine-tunes with ssim) */
   kpcn_loss_settings loss; /* defaults */

@@ -167,13 +167,14 @@ kpcn_status kpcn_adam_step(kpcn_adam *a, const kpcn_param_block *blocks, int nbl
     float *p = blocks[b].param, *m = a->m + off, *v = a->v + off;
     const float *g = blocks[b].grad;
     long long n = (long long)blocks[b].count;
+    const float sb = step * (blocks[b].lr_scale > 0 ? blocks[b].lr_scale : 1.0f);
 #pragma omp parallel for num_threads(nt) schedule(static) if (n >= 65536)
     for (long long i = 0; i < n; i++) {
       float gi = g[i] * gs;
       m[i] = b1 * m[i] + (1.0f - b1) * gi;
       v[i] = b2 * v[i] + (1.0f - b2) * gi * gi;
       /* p -= lr * m_hat / (sqrt(v_hat) + eps), Kingma & Ba Algorithm 1 */
-      p[i] -= step * m[i] / (sqrtf(v[i] * ibc2) + eps);
+      p[i] -= sb * m[i] / (sqrtf(v[i] * ibc2) + eps);
     }
     off += blocks[b].count;
   }

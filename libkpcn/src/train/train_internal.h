@@ -31,7 +31,7 @@ struct kpcn_trainer {
   kpcn_net *net[KT_NB];
   kpcn_param *params[KT_NB];
   kpcn_param_block *blocks[KT_NB];
-  int nparams[KT_NB];
+  int nparams[KT_NB], nblocks[KT_NB]; /* blocks: params, the source score's split off */
   kpcn_adam *adam[KT_NB];
 
   /* progress state (all of it is in the checkpoint) */

@@ -147,17 +147,34 @@ static kpcn_status setup_nets(kpcn_trainer *t) {
     KPCN_TRY(kpcn_net_create(t->model, (kpcn_branch)b, &no, &t->net[b]));
     int np = kpcn_net_param_count(t->net[b]);
     t->params[b] = kpcn_calloc((size_t)np, sizeof(kpcn_param), "parameter list");
-    t->blocks[b] = kpcn_calloc((size_t)np, sizeof(kpcn_param_block), "parameter blocks");
+    /* two spare blocks: the source score's row and bias split off the output layer's */
+    t->blocks[b] = kpcn_calloc((size_t)np + 2, sizeof(kpcn_param_block), "parameter blocks");
     if (!t->params[b] || !t->blocks[b]) return kpcn_last_status();
     KPCN_TRY(kpcn_net_params(t->net[b], t->params[b], np));
     size_t total = 0;
+    int nb = 0;
+    const int split = t->arch.source_weight && t->s.source_lr_scale > 0;
     for (int i = 0; i < np; i++) {
-      t->blocks[b][i].param = t->params[b][i].value;
-      t->blocks[b][i].grad = t->params[b][i].grad;
-      t->blocks[b][i].count = t->params[b][i].count;
-      total += t->params[b][i].count;
+      kpcn_param_block blk = {t->params[b][i].value, t->params[b][i].grad, t->params[b][i].count,
+                              0.0f};
+      total += blk.count;
+      /* the output layer (weight 2·n_hidden, bias 2·n_hidden + 1): its last row (OIHW) or
+       * element is the source score's; same order, so Adam's state lines up either way */
+      if (split && (i == 2 * t->arch.n_hidden || i == 2 * t->arch.n_hidden + 1)) {
+        const size_t row =
+            i == 2 * t->arch.n_hidden ? blk.count / (size_t)kpcn_arch_logit_channels(&t->arch) : 1;
+        kpcn_param_block head = blk, score = blk;
+        head.count = blk.count - row;
+        score.param += head.count, score.grad += head.count, score.count = row;
+        score.lr_scale = (float)t->s.source_lr_scale;
+        t->blocks[b][nb++] = head;
+        t->blocks[b][nb++] = score;
+      } else {
+        t->blocks[b][nb++] = blk;
+      }
     }
     t->nparams[b] = np;
+    t->nblocks[b] = nb;
     KPCN_TRY(kpcn_adam_create(&t->adam[b], &t->s.adam, total));
   }
   return KPCN_OK;
@@ -361,7 +378,7 @@ static kpcn_status branch_backward_step(kpcn_trainer *t, int b) {
   double t1 = kt_now();
   KPCN_TRY(kpcn_net_backward_logits(t->net[b], t->dlogits[b], NULL));
   double t2 = kt_now();
-  kpcn_status st = kpcn_adam_step(t->adam[b], t->blocks[b], t->nparams[b], t->nt, NULL);
+  kpcn_status st = kpcn_adam_step(t->adam[b], t->blocks[b], t->nblocks[b], t->nt, NULL);
   t->timing.kpa_s += t1 - t0;
   t->timing.net_s += t2 - t1;
   t->timing.adam_s += kt_now() - t2;
