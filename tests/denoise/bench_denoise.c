@@ -11,6 +11,8 @@
  *   --direct-conv                 fp32 without Winograd convolutions (the pre-Winograd path)
  *   --kpa-passes N                the presets' kernels applied N times (arch.kpa_passes):
  *                                 what a multi-pass model costs (the kernel layer runs N times)
+ *   --source-weight               the presets with a source score (arch.source_weight): what
+ *                                 a source-weighted first pass costs
  *   --ensemble N                  self-ensemble of N (2, 4, 8) members: ms/Mpx of the whole
  *                                 ensemble; GFLOP/s count the members' FLOPs
  *   --max-tiles N                 stop (through the progress callback) after N tiles of the
@@ -48,6 +50,7 @@ static double peak_rss_mib(void) {
 static int g_max_tiles = 0, g_calls = 0, g_direct = 0;
 static int g_ensemble = 0; /* --ensemble N: kpcn_denoiser_options.ensemble */
 static int g_passes = 1;   /* --kpa-passes N: arch.kpa_passes of the presets */
+static int g_sw;           /* --source-weight: arch.source_weight of the presets */
 static int stop_after(void *user, double f) {
   (void)user;
   (void)f;
@@ -81,7 +84,8 @@ static void bench_kpcn(kpcn_aov_set *a, const char *preset, int bf16, int tile, 
   kpcn_arch arch;
   kpcn_model *m = NULL;
   if (kpcn_arch_preset(preset, &arch) != KPCN_OK || kpcn_features_set_arch(&arch) != KPCN_OK ||
-      (arch.kpa_passes = g_passes, kpcn_model_create(&arch, 1, &m)) != KPCN_OK) {
+      (arch.kpa_passes = g_passes, arch.source_weight = g_sw, kpcn_model_create(&arch, 1, &m)) !=
+          KPCN_OK) {
     printf("preset %s: %s\n", preset, kpcn_last_error());
     return;
   }
@@ -246,12 +250,14 @@ int main(int argc, char **argv) {
       g_direct = 1;
     } else if (!strcmp(argv[i], "--kpa-passes") && i + 1 < argc) {
       g_passes = atoi(argv[++i]);
+    } else if (!strcmp(argv[i], "--source-weight")) {
+      g_sw = 1;
     } else if (!strcmp(argv[i], "--ensemble") && i + 1 < argc) {
       g_ensemble = atoi(argv[++i]);
     } else {
       fprintf(stderr, "usage: bench_denoise [--size WxH] [--4k] [--threads N] [--tile N] "
                       "[--preset NAME] [--no-baselines] [--max-tiles N] [--bf16-quality] "
-                      "[--direct-conv] [--ensemble N] [--kpa-passes N]\n");
+                      "[--direct-conv] [--ensemble N] [--kpa-passes N] [--source-weight]\n");
       return 2;
     }
   }
