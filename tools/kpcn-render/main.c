@@ -1,6 +1,6 @@
 /* kpcn-render: renders a Tungsten scene.json into an AOV EXR (DESIGN.md §4).
  *   kpcn-render scene.json -o out.exr [--spp N] [--seed S] [--threads N] [--resolution WxH]
- *               [--crop x,y,w,h] [--color-only] [--max-bounces N] [--quiet]
+ *               [--crop x,y,w,h] [--color-only] [--max-bounces N] [--albedo-spp N] [--quiet]
  * A progress line (percent, samples/s, time left) is shown only when stderr is a terminal.
  * The output is written atomically; on any error nothing is written and the exit code is 1
  * (2 for usage errors). */
@@ -18,7 +18,9 @@ static void usage(FILE *f) {
   fprintf(
       f, "usage: kpcn-render scene.json -o out.exr [--spp N] [--seed S] [--threads N (0=all)]\n"
          "                   [--resolution WxH] [--crop x,y,w,h] [--color-only] [--max-bounces N]\n"
-         "                   [--half] [--quiet]\n");
+         "                   [--albedo-spp N] [--half] [--quiet]\n"
+         "  --albedo-spp N   the albedo buffer from N >= spp camera samples of a features-only\n"
+         "                   pass (less edge noise for the denoiser's remodulation)\n");
 }
 
 typedef struct progress_state {
@@ -81,6 +83,11 @@ int main(int argc, char **argv) {
     } else if (strcmp(a, "--threads") == 0) {
       NEED_VALUE if (!parse_int(v, 0, 4096, &rs.nthreads)) {
         fprintf(stderr, "kpcn-render: --threads: expected an integer >= 0, got '%s'\n", v);
+        return 2;
+      }
+    } else if (strcmp(a, "--albedo-spp") == 0) {
+      NEED_VALUE if (!parse_int(v, 1, 1 << 24, &rs.albedo_spp)) {
+        fprintf(stderr, "kpcn-render: --albedo-spp: expected an integer >= 1, got '%s'\n", v);
         return 2;
       }
     } else if (strcmp(a, "--max-bounces") == 0) {

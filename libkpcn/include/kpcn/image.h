@@ -87,6 +87,7 @@ typedef struct kpcn_aov_set {
   float *var[KPCN_BUF_COUNT];
   /* Header metadata (kpcn:spp, kpcn:seed, kpcn:scene, kpcn:version); spp/seed -1 if unknown. */
   int spp;
+  int albedo_spp; /* kpcn:albedoSpp: samples of the albedo buffer when not spp; 0 = spp */
   int64_t seed;
   char scene[256];
   char version[32];

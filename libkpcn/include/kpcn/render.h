@@ -45,6 +45,12 @@ typedef struct kpcn_render_settings {
   int crop_w, crop_h; /*   crop_w/crop_h 0 = whole image. Output is crop-sized. */
   int color_only;     /* 1: only color + color.var (fast references) */
   int max_bounces;    /* -1 = scene's integrator.max_bounces */
+  /* > spp: the albedo buffer (and its variance) comes from this many camera samples of a
+   * features-only pass (camera ray, delta bounces to the feature surface, its albedo: no
+   * shading, no shadow rays), the first spp of them the colour's own. The albedo's sub-pixel
+   * coverage noise at edges is what the denoiser's remodulation multiplies its result by
+   * (docs/renderer.md). 0 = the colour's samples. */
+  int albedo_spp;
   kpcn_light_strategy lights;
   kpcn_progress_fn progress; /* called from the calling thread; non-zero return cancels */
   void *progress_user;

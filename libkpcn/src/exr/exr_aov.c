@@ -18,11 +18,13 @@ kpcn_status kpcn_exr_read_aov_mt(const char *path, int nthreads, kpcn_aov_set **
   KPCN_TRY(kpcn_exr_open_read(path, &ctx));
   kpcn_image *img = NULL;
   kpcn_status s = kpcn_exr_read_context(ctx, path, nthreads, &img);
-  int spp = -1;
+  int spp = -1, albedo_spp = 0;
   int64_t seed = -1;
   char scene[256], version[32];
-  if (s == KPCN_OK)
+  if (s == KPCN_OK) {
     kpcn_exr_read_meta(ctx, &spp, &seed, scene, sizeof scene, version, sizeof version);
+    albedo_spp = kpcn_exr_read_albedo_spp(ctx);
+  }
   exr_finish(&ctx);
   if (s != KPCN_OK) return s;
   /* Map names first so a partial buffer is reported with the file name. */
@@ -32,6 +34,7 @@ kpcn_status kpcn_exr_read_aov_mt(const char *path, int nthreads, kpcn_aov_set **
   kpcn_image_destroy(img);
   if (s != KPCN_OK) return s;
   (*out)->spp = spp;
+  (*out)->albedo_spp = albedo_spp;
   (*out)->seed = seed;
   snprintf((*out)->scene, sizeof(*out)->scene, "%s", scene);
   snprintf((*out)->version, sizeof(*out)->version, "%s", version);
@@ -61,6 +64,8 @@ kpcn_status kpcn_exr_write_aov(const char *path, const kpcn_aov_set *set,
                      path ? path : "");
   kpcn_exr_write_options o = opt ? *opt : kpcn_exr_write_options_defaults();
   if (set->spp >= 0) KPCN_TRY(kpcn_exr_options_add_int(&o, "kpcn:spp", set->spp));
+  if (set->albedo_spp > 0)
+    KPCN_TRY(kpcn_exr_options_add_int(&o, "kpcn:albedoSpp", set->albedo_spp));
   if (set->seed >= 0) {
     /* EXR has no 64-bit int attribute: int when it fits, decimal string otherwise. */
     if (set->seed <= INT32_MAX) {

@@ -169,6 +169,7 @@ kpcn_status kpcn_aov_clone(kpcn_aov_set **out, const kpcn_aov_set *src) {
   KPCN_TRY(kpcn_aov_create(out, src->width, src->height));
   kpcn_aov_set *d = *out;
   d->spp = src->spp;
+  d->albedo_spp = src->albedo_spp;
   d->seed = src->seed;
   memcpy(d->scene, src->scene, sizeof d->scene);
   memcpy(d->version, src->version, sizeof d->version);

@@ -271,6 +271,9 @@ static void shade_hit(const kpcn_render_ctx *ctx, path_state *L, unsigned geom_i
     kpcn_vec3 nf = kv3_dot(ns, wo) < 0.0f ? kv3_neg(ns) : ns;
     out->normal = kv3(kv3_dot(nf, cam->right), kv3_dot(nf, cam->up), -kv3_dot(nf, cam->fwd));
     out->depth = L->path_len;
+    /* the albedo pass stops here: everything before this point is the colour pass's own
+     * arithmetic, so its features are the same bits */
+    if (ctx->features_only) return;
   }
   /* three dimension pairs per bounce: (light choice, lobe choice), light point, direction */
   kpcn_sampler_set_pair(smp, 2 + 3 * (uint32_t)L->bounce);

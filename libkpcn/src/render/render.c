@@ -48,6 +48,45 @@ static void sample_to_channels(const kpcn_sample_out *so, float *v) {
   v[16] = so->visibility;
 }
 
+/* The albedo pass of one pixel (settings.albedo_spp): aspp samples of the same sequence as the
+ * colour's (so its first spp are the colour pass's camera rays), traced features-only, their
+ * albedo averaged (Welford, in sample order, as the colour pass does) into the albedo buffer
+ * and its variance at pixel index pi. Returns the rays traced. */
+static uint64_t albedo_pass(const kpcn_render_ctx *fctx, int px, int py, int aspp,
+                            kpcn_sampler_cache *cache, kpcn_aov_set *set, size_t pi) {
+  const size_t plane = (size_t)set->width * (size_t)set->height;
+  double mean[3] = {0, 0, 0}, m2[3] = {0, 0, 0};
+  uint64_t rays = 0;
+  kpcn_sampler_cache_reset(cache, kpcn_pixel_seed(fctx->seed, (uint32_t)px, (uint32_t)py));
+  for (int i0 = 0; i0 < aspp; i0 += 16) {
+    int n = aspp - i0 < 16 ? aspp - i0 : 16;
+    kpcn_sampler smp[16];
+    kpcn_sample_out so[16];
+    for (int k = 0; k < n; k++)
+      kpcn_sampler_start(&smp[k], fctx->seed, (uint32_t)px, (uint32_t)py, (uint32_t)(i0 + k),
+                         cache);
+    fctx->trace(fctx, px, py, smp, n, so);
+    for (int k = 0; k < n; k++) {
+      rays += so[k].rays;
+      const float v[3] = {so[k].albedo.x, so[k].albedo.y, so[k].albedo.z};
+      const int ok = isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
+      const double inv_n = 1.0 / (double)(i0 + k + 1);
+      for (int c = 0; c < 3; c++) {
+        const double x = ok ? (double)v[c] : 0.0, delta = x - mean[c];
+        mean[c] += delta * inv_n;
+        m2[c] += delta * (x - mean[c]);
+      }
+    }
+  }
+  double var = 0.0;
+  for (int c = 0; c < 3; c++) {
+    set->buf[KPCN_BUF_ALBEDO][(size_t)c * plane + pi] = (float)mean[c];
+    var += m2[c] / ((double)(aspp - 1) * (double)aspp);
+  }
+  if (set->var[KPCN_BUF_ALBEDO]) set->var[KPCN_BUF_ALBEDO][pi] = (float)(var / 3);
+  return rays;
+}
+
 kpcn_status kpcn_render_ctx_init(kpcn_render_ctx *ctx, const kpcn_scene *scene,
                                  const kpcn_render_settings *settings) {
   const kpcn_render_settings *st = settings;
@@ -89,6 +128,15 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   int spp = st.spp > 0 ? st.spp : scene->spp;
   if (st.spp < 0 || spp > (1 << 24))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "spp: %d is out of range [1, 2^24]", st.spp);
+  if (st.albedo_spp < 0 || st.albedo_spp > (1 << 24) || (st.albedo_spp > 0 && st.albedo_spp < spp))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "albedo_spp: %d is out of range (0, or spp = %d .. 2^24)", st.albedo_spp, spp);
+  if (st.albedo_spp > 0 && st.color_only)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "albedo_spp: a colour-only render has no albedo buffer");
+  const int aspp = st.albedo_spp > spp ? st.albedo_spp : 0; /* 0: no albedo pass */
+  kpcn_render_ctx fctx = ctx;                               /* the albedo pass: features only */
+  fctx.features_only = 1;
   int cx = 0, cy = 0, cw = ctx.width, chh = ctx.height;
   if (st.crop_w > 0 || st.crop_h > 0 || st.crop_x || st.crop_y) {
     cx = st.crop_x, cy = st.crop_y, cw = st.crop_w, chh = st.crop_h;
@@ -108,6 +156,7 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
     }
   }
   set->spp = spp;
+  set->albedo_spp = aspp;
   set->seed = st.seed;
   snprintf(set->scene, sizeof(set->scene), "%s", scene->name);
   snprintf(set->version, sizeof(set->version), "%s", KPCN_VERSION_STRING);
@@ -172,6 +221,7 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
           }
           if (set->var[b]) set->var[b][pi] = (float)(var / nc);
         }
+        if (aspp) total_rays += albedo_pass(&fctx, px, py, aspp, &cache, set, pi);
       }
 #pragma omp atomic
       rows_done++;

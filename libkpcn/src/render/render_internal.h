@@ -49,6 +49,7 @@ typedef struct kpcn_render_ctx {
   int nee, bsdf_emission; /* what direct light estimators are active */
   int mis;                /* power-heuristic weights (both estimators on) */
   int color_only;
+  int features_only; /* 1: a path ends once it has recorded its features (albedo pass) */
   uint64_t seed;
   kpcn_filter_table filter;
   /* kpcn_trace_pixel or its GFNI build, whichever this CPU runs (kpcn_render_ctx_init) */
