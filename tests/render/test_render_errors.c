@@ -72,6 +72,20 @@ static void test_tool(void) {
            KPCN_TESTDATA "/scenes/cornell-box/scene.json", out);
   CHECK(run(cmd) == 1);
   CHECK(!file_exists(out));
+  /* an albedo pass with fewer samples than the colour, or on a colour-only render: refused,
+   * nothing written; a non-number: usage */
+  snprintf(cmd, sizeof(cmd), "%s %s -o %s --spp 8 --albedo-spp 4 --resolution 16x16 2>/dev/null",
+           exe, KPCN_TESTDATA "/scenes/cornell-box/scene.json", out);
+  CHECK(run(cmd) == 1);
+  CHECK(!file_exists(out));
+  snprintf(cmd, sizeof(cmd),
+           "%s %s -o %s --spp 2 --albedo-spp 8 --color-only --resolution 16x16 2>/dev/null", exe,
+           KPCN_TESTDATA "/scenes/cornell-box/scene.json", out);
+  CHECK(run(cmd) == 1);
+  CHECK(!file_exists(out));
+  snprintf(cmd, sizeof(cmd), "%s %s -o %s --albedo-spp many 2>/dev/null", exe,
+           KPCN_TESTDATA "/scenes/cornell-box/scene.json", out);
+  CHECK(run(cmd) == 2);
   /* a good render writes the file, nothing else is left behind */
   snprintf(cmd, sizeof(cmd), "%s %s -o %s --spp 1 --resolution 16x16 --threads 1", exe,
            KPCN_TESTDATA "/scenes/cornell-box/scene.json", out);
