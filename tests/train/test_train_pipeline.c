@@ -281,25 +281,33 @@ static void test_validation_geomean(void) {
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT);
 }
 
-/* --widen: a 16-channel model widened to 32 validates to the same relMSE (same function),
- * trains, and ends with 32 channels; without an init model, or narrower, it is an error. */
+/* Trains the settings() model with one validation pair (files tagged `tag`) into `path`;
+ * *val receives its validation. Then *s is set up for a run from that model into `next`. */
+static int train_then_init(const char *path, const char *next, const char *tag, const char **vn,
+                           const char **vr, kpcn_val_result *val, kpcn_train_settings *s) {
+  settings(s, path);
+  with_val_pair(s, tag, vn, vr);
+  kpcn_trainer *t = NULL;
+  CHECK(kpcn_trainer_create(&t, s) == KPCN_OK);
+  if (!t) return 0;
+  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
+  CHECK(kpcn_trainer_validate(t, val) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+  settings(s, next);
+  with_val_pair(s, tag, vn, vr);
+  s->init_model = path;
+  return 1;
+}
+
 /* --init with kpa_passes: the one-pass model's weights go on as a two-pass model, saved as
  * one; its validation differs from the same weights in one pass. */
 static void test_init_passes(void) {
   const char *vn[1], *vr[1];
   kpcn_train_settings s;
-  settings(&s, tf_tmp("p1.safetensors"));
-  with_val_pair(&s, "p", vn, vr);
-  kpcn_trainer *t = NULL;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
-  if (!t) return;
-  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
   kpcn_val_result one, two;
-  CHECK(kpcn_trainer_validate(t, &one) == KPCN_OK);
-  kpcn_trainer_destroy(t);
-  settings(&s, tf_tmp("p2.safetensors"));
-  with_val_pair(&s, "p", vn, vr);
-  s.init_model = tf_tmp("p1.safetensors");
+  if (!train_then_init(tf_tmp("p1.safetensors"), tf_tmp("p2.safetensors"), "p", vn, vr, &one, &s))
+    return;
+  kpcn_trainer *t = NULL;
   s.kpa_passes = 2;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
   if (!t) return;
@@ -348,18 +356,10 @@ static double score_l1(const char *path, int *nonzero) {
 static void test_init_source_weight(void) {
   const char *vn[1], *vr[1];
   kpcn_train_settings s;
-  settings(&s, tf_tmp("s1.safetensors"));
-  with_val_pair(&s, "s", vn, vr);
-  kpcn_trainer *t = NULL;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
-  if (!t) return;
-  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
   kpcn_val_result plain, sw;
-  CHECK(kpcn_trainer_validate(t, &plain) == KPCN_OK);
-  kpcn_trainer_destroy(t);
-  settings(&s, tf_tmp("s2.safetensors"));
-  with_val_pair(&s, "s", vn, vr);
-  s.init_model = tf_tmp("s1.safetensors");
+  const char *base = tf_tmp("s1.safetensors");
+  if (!train_then_init(base, tf_tmp("s2.safetensors"), "s", vn, vr, &plain, &s)) return;
+  kpcn_trainer *t = NULL;
   s.source_weight = 1;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
   if (!t) return;
@@ -377,7 +377,7 @@ static void test_init_source_weight(void) {
   /* --source-lr-scale: the same run with the score learning at 20x moves it much further */
   settings(&s, tf_tmp("s3.safetensors"));
   with_val_pair(&s, "s", vn, vr);
-  s.init_model = tf_tmp("s1.safetensors");
+  s.init_model = base;
   s.source_weight = 1;
   s.source_lr_scale = 20;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
@@ -389,26 +389,16 @@ static void test_init_source_weight(void) {
   CHECK(l20 > 8 * l1);
 }
 
+/* --widen: a 16-channel model widened to 32 validates to the same relMSE (same function),
+ * trains, and ends with 32 channels; without an init model, or narrower, it is an error. */
 static void test_widen(void) {
-  kpcn_aov_set *n, *r;
-  CHECK(tf_make_pair(&n, &r, 40, 32, 41, 0) == 0);
-  const char *vn[1] = {tf_tmp("w_noisy.exr")}, *vr[1] = {tf_tmp("w_ref.exr")};
-  CHECK(kpcn_exr_write_aov(vn[0], n, NULL) == KPCN_OK);
-  CHECK(kpcn_exr_write_aov(vr[0], r, NULL) == KPCN_OK);
-  kpcn_aov_destroy(n), kpcn_aov_destroy(r);
+  const char *vn[1], *vr[1];
   kpcn_train_settings s;
-  settings(&s, tf_tmp("w16.safetensors"));
-  s.nval = 1, s.val_noisy = vn, s.val_ref = vr;
-  kpcn_trainer *t = NULL;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
-  if (!t) return;
-  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
   kpcn_val_result narrow, wide;
-  CHECK(kpcn_trainer_validate(t, &narrow) == KPCN_OK);
-  kpcn_trainer_destroy(t);
-  settings(&s, tf_tmp("w32.safetensors"));
-  s.nval = 1, s.val_noisy = vn, s.val_ref = vr;
-  s.init_model = tf_tmp("w16.safetensors");
+  if (!train_then_init(tf_tmp("w16.safetensors"), tf_tmp("w32.safetensors"), "w", vn, vr, &narrow,
+                       &s))
+    return;
+  kpcn_trainer *t = NULL;
   s.widen_channels = 32;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
   if (!t) return;
