@@ -48,43 +48,55 @@ static void sample_to_channels(const kpcn_sample_out *so, float *v) {
   v[16] = so->visibility;
 }
 
-/* The albedo pass of one pixel (settings.albedo_spp): aspp samples of the same sequence as the
- * colour's (so its first spp are the colour pass's camera rays), traced features-only, their
- * albedo averaged (Welford, in sample order, as the colour pass does) into the albedo buffer
- * and its variance at pixel index pi. Returns the rays traced. */
-static uint64_t albedo_pass(const kpcn_render_ctx *fctx, int px, int py, int aspp,
-                            kpcn_sampler_cache *cache, kpcn_aov_set *set, size_t pi) {
-  const size_t plane = (size_t)set->width * (size_t)set->height;
-  double mean[3] = {0, 0, 0}, m2[3] = {0, 0, 0};
-  uint64_t rays = 0;
-  kpcn_sampler_cache_reset(cache, kpcn_pixel_seed(fctx->seed, (uint32_t)px, (uint32_t)py));
-  for (int i0 = 0; i0 < aspp; i0 += 16) {
-    int n = aspp - i0 < 16 ? aspp - i0 : 16;
+/* Traces samples [0, n) of pixel (px, py)'s sequence with c — the colour pass, or the albedo
+ * pass (c->features_only: the same sequence, so its first spp samples are the colour pass's
+ * camera rays) — keeping per-channel Welford accumulators (mean, m2; zeroed by the caller) in
+ * sample order. A sample with a NaN/Inf channel (should not happen) counts as black. */
+static void pixel_samples(const kpcn_render_ctx *c, int px, int py, int n,
+                          kpcn_sampler_cache *cache, double *mean, double *m2, uint64_t *rays,
+                          uint64_t *nonfinite) {
+  kpcn_sampler_cache_reset(cache, kpcn_pixel_seed(c->seed, (uint32_t)px, (uint32_t)py));
+  for (int i0 = 0; i0 < n; i0 += 16) {
+    int m = n - i0 < 16 ? n - i0 : 16;
     kpcn_sampler smp[16];
     kpcn_sample_out so[16];
-    for (int k = 0; k < n; k++)
-      kpcn_sampler_start(&smp[k], fctx->seed, (uint32_t)px, (uint32_t)py, (uint32_t)(i0 + k),
-                         cache);
-    fctx->trace(fctx, px, py, smp, n, so);
-    for (int k = 0; k < n; k++) {
-      rays += so[k].rays;
-      const float v[3] = {so[k].albedo.x, so[k].albedo.y, so[k].albedo.z};
-      const int ok = isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
-      const double inv_n = 1.0 / (double)(i0 + k + 1);
-      for (int c = 0; c < 3; c++) {
-        const double x = ok ? (double)v[c] : 0.0, delta = x - mean[c];
-        mean[c] += delta * inv_n;
-        m2[c] += delta * (x - mean[c]);
+    for (int k = 0; k < m; k++)
+      kpcn_sampler_start(&smp[k], c->seed, (uint32_t)px, (uint32_t)py, (uint32_t)(i0 + k), cache);
+    c->trace(c, px, py, smp, m, so);
+    for (int k = 0; k < m; k++) { /* accumulated in sample order */
+      *rays += so[k].rays;
+      float v[NCH];
+      sample_to_channels(&so[k], v);
+      int ok = 1;
+      for (int ch = 0; ch < NCH; ch++)
+        ok &= isfinite(v[ch]) != 0;
+      if (!ok) {
+        (*nonfinite)++;
+        memset(v, 0, sizeof(v));
+      }
+      double inv_n = 1.0 / (double)(i0 + k + 1);
+      for (int ch = 0; ch < NCH; ch++) {
+        double delta = (double)v[ch] - mean[ch];
+        mean[ch] += delta * inv_n;
+        m2[ch] += delta * ((double)v[ch] - mean[ch]);
       }
     }
   }
+}
+
+/* Buffer b of pixel pi from the accumulators of n samples: the means, and the variance of the
+ * mean averaged over the buffer's channels (0 for one sample). */
+static void store_buffer(kpcn_aov_set *set, int b, const double *mean, const double *m2, int n,
+                         size_t pi) {
+  const size_t plane = (size_t)set->width * (size_t)set->height;
+  const int nc = kpcn_buffer_channels((kpcn_buffer)b);
   double var = 0.0;
-  for (int c = 0; c < 3; c++) {
-    set->buf[KPCN_BUF_ALBEDO][(size_t)c * plane + pi] = (float)mean[c];
-    var += m2[c] / ((double)(aspp - 1) * (double)aspp);
+  for (int c = 0; c < nc; c++) {
+    int ch = buf_first[b] + c;
+    set->buf[b][(size_t)c * plane + pi] = (float)mean[ch];
+    if (n > 1) var += m2[ch] / ((double)(n - 1) * (double)n);
   }
-  if (set->var[KPCN_BUF_ALBEDO]) set->var[KPCN_BUF_ALBEDO][pi] = (float)(var / 3);
-  return rays;
+  if (set->var[b]) set->var[b][pi] = (float)(var / nc);
 }
 
 kpcn_status kpcn_render_ctx_init(kpcn_render_ctx *ctx, const kpcn_scene *scene,
@@ -176,52 +188,17 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
       int py = cy + row;
       for (int col = 0; col < cw; col++) {
         int px = cx + col;
-        double mean[NCH], m2[NCH];
-        memset(mean, 0, sizeof(mean));
-        memset(m2, 0, sizeof(m2));
+        double mean[NCH] = {0}, m2[NCH] = {0};
         kpcn_sampler_cache cache;
-        kpcn_sampler_cache_reset(&cache, kpcn_pixel_seed(ctx.seed, (uint32_t)px, (uint32_t)py));
-        for (int i0 = 0; i0 < spp; i0 += 16) {
-          int n = spp - i0 < 16 ? spp - i0 : 16;
-          kpcn_sampler smp[16];
-          kpcn_sample_out so[16];
-          for (int k = 0; k < n; k++)
-            kpcn_sampler_start(&smp[k], ctx.seed, (uint32_t)px, (uint32_t)py, (uint32_t)(i0 + k),
-                               &cache);
-          ctx.trace(&ctx, px, py, smp, n, so);
-          for (int k = 0; k < n; k++) { /* accumulated in sample order */
-            int i = i0 + k;
-            total_rays += so[k].rays;
-            float v[NCH];
-            sample_to_channels(&so[k], v);
-            int ok = 1;
-            for (int c = 0; c < NCH; c++)
-              ok &= isfinite(v[c]) != 0;
-            if (!ok) { /* a NaN/Inf sample (should not happen) counts as black */
-              nonfinite++;
-              memset(v, 0, sizeof(v));
-            }
-            double inv_n = 1.0 / (double)(i + 1);
-            for (int c = 0; c < NCH; c++) {
-              double delta = (double)v[c] - mean[c];
-              mean[c] += delta * inv_n;
-              m2[c] += delta * ((double)v[c] - mean[c]);
-            }
-          }
-        }
+        pixel_samples(&ctx, px, py, spp, &cache, mean, m2, &total_rays, &nonfinite);
         size_t pi = (size_t)row * (size_t)cw + (size_t)col;
-        for (int b = 0; b < KPCN_BUF_COUNT; b++) {
-          if (!set->buf[b]) continue;
-          int nc = kpcn_buffer_channels((kpcn_buffer)b);
-          double var = 0.0;
-          for (int c = 0; c < nc; c++) {
-            int ch = buf_first[b] + c;
-            set->buf[b][(size_t)c * plane + pi] = (float)mean[ch];
-            if (spp > 1) var += m2[ch] / ((double)(spp - 1) * (double)spp);
-          }
-          if (set->var[b]) set->var[b][pi] = (float)(var / nc);
+        for (int b = 0; b < KPCN_BUF_COUNT; b++)
+          if (set->buf[b]) store_buffer(set, b, mean, m2, spp, pi);
+        if (aspp) { /* the albedo pass replaces the albedo buffer */
+          memset(mean, 0, sizeof mean), memset(m2, 0, sizeof m2);
+          pixel_samples(&fctx, px, py, aspp, &cache, mean, m2, &total_rays, &nonfinite);
+          store_buffer(set, KPCN_BUF_ALBEDO, mean, m2, aspp, pi);
         }
-        if (aspp) total_rays += albedo_pass(&fctx, px, py, aspp, &cache, set, pi);
       }
 #pragma omp atomic
       rows_done++;
