@@ -117,6 +117,14 @@ int main() {
     ImageBuf again;
     CHECK(ops::from_aov_set(again, *set));
     CHECK(again.spec().get_int_attribute("kpcn:spp") == 16);
+    // no albedo pass: no kpcn:albedoSpp; one: kept both ways
+    CHECK(set->albedo_spp == 0 && again.spec().find_attribute("kpcn:albedoSpp") == nullptr);
+    set->albedo_spp = 64;
+    ImageBuf with_pass;
+    CHECK(ops::from_aov_set(with_pass, *set));
+    CHECK(with_pass.spec().get_int_attribute("kpcn:albedoSpp") == 64);
+    kpcn::AovPtr back = ops::to_aov_set(with_pass, err);
+    CHECK(back && back->albedo_spp == 64 && back->spp == 16);
     ops::CompareOptions all;
     all.channels = {"R", "G", "B", "albedo.G", "N.Z", "Z", "visibility.V", "color.var"};
     ops::MetricResult same = ops::compare(again, noisy, ops::Metric::L1, all);
