@@ -299,6 +299,24 @@ static int train_then_init(const char *path, const char *next, const char *tag, 
   return 1;
 }
 
+/* The run set up in *s starts from a converted model that computes the same function as the
+ * one validated at `before`: its validation equals it to `tol` (relative); then it trains.
+ * *arch receives the converted model's architecture. */
+static void same_function_then_train(const kpcn_train_settings *s, const char *what, double before,
+                                     double tol, kpcn_arch *arch) {
+  memset(arch, 0, sizeof *arch);
+  kpcn_trainer *t = NULL;
+  CHECK(kpcn_trainer_create(&t, s) == KPCN_OK);
+  if (!t) return;
+  *arch = *kpcn_model_arch(kpcn_trainer_model(t));
+  kpcn_val_result after;
+  CHECK(kpcn_trainer_validate(t, &after) == KPCN_OK);
+  printf("%s: validation relMSE %.9g before, %.9g after\n", what, before, after.relmse);
+  CHECK(fabs(after.relmse - before) <= tol * before);
+  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+}
+
 /* --init with kpa_passes: the one-pass model's weights go on as a two-pass model, saved as
  * one; its validation differs from the same weights in one pass. */
 static void test_init_passes(void) {
@@ -356,20 +374,14 @@ static double score_l1(const char *path, int *nonzero) {
 static void test_init_source_weight(void) {
   const char *vn[1], *vr[1];
   kpcn_train_settings s;
-  kpcn_val_result plain, sw;
+  kpcn_val_result plain;
   const char *base = tf_tmp("s1.safetensors");
   if (!train_then_init(base, tf_tmp("s2.safetensors"), "s", vn, vr, &plain, &s)) return;
   kpcn_trainer *t = NULL;
+  kpcn_arch a;
   s.source_weight = 1;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
-  if (!t) return;
-  CHECK(kpcn_model_arch(kpcn_trainer_model(t))->source_weight == 1);
-  CHECK(kpcn_trainer_validate(t, &sw) == KPCN_OK);
-  printf("plain model with a zero source score: validation relMSE %.9g -> %.9g\n", plain.relmse,
-         sw.relmse);
-  CHECK(fabs(sw.relmse - plain.relmse) <= 1e-5 * plain.relmse);
-  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
-  kpcn_trainer_destroy(t);
+  same_function_then_train(&s, "plain model with a zero source score", plain.relmse, 1e-5, &a);
+  CHECK(a.source_weight == 1);
   int moved = 0;
   const double l1 = score_l1(tf_tmp("s2.safetensors"), &moved);
   printf("source-score weights moved by training: %d, L1 %.4g\n", moved, l1);
@@ -394,21 +406,15 @@ static void test_init_source_weight(void) {
 static void test_widen(void) {
   const char *vn[1], *vr[1];
   kpcn_train_settings s;
-  kpcn_val_result narrow, wide;
+  kpcn_val_result narrow;
   if (!train_then_init(tf_tmp("w16.safetensors"), tf_tmp("w32.safetensors"), "w", vn, vr, &narrow,
                        &s))
     return;
   kpcn_trainer *t = NULL;
+  kpcn_arch a;
   s.widen_channels = 32;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
-  if (!t) return;
-  CHECK(kpcn_model_arch(kpcn_trainer_model(t))->channels == 32);
-  CHECK(kpcn_trainer_validate(t, &wide) == KPCN_OK);
-  printf("widened 16 -> 32 channels: validation relMSE %.9g before, %.9g after\n", narrow.relmse,
-         wide.relmse);
-  CHECK(fabs(wide.relmse - narrow.relmse) <= 1e-6 * narrow.relmse);
-  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
-  kpcn_trainer_destroy(t);
+  same_function_then_train(&s, "widened 16 -> 32 channels", narrow.relmse, 1e-6, &a);
+  CHECK(a.channels == 32);
   kpcn_model *m = NULL;
   CHECK(kpcn_model_load(tf_tmp("w32.safetensors"), &m) == KPCN_OK);
   CHECK(m && kpcn_model_arch(m)->channels == 32);
