@@ -97,16 +97,15 @@ static inline float exp_nonpos(float x) {
 }
 
 /* For channels c < nch: o[c * os + i] = scale[i] * sum over the K² taps t of
- * wt[t][i] * pr[c][dy][dx + i] for i < n (scale NULL: 1); wt rows ws floats apart, padded
- * source rows pw apart, K of them per channel. Inlined with constant n = XB the
- * accumulators are registers (a variable n only serves the row's last chunk); with nch = 3
- * each weight is loaded once for all three colour channels instead of three times (loads,
- * not FMAs, bound this loop). */
-static inline __attribute__((always_inline)) void apply_chunk(const int n, const int nch, int K,
-                                                              const float *restrict wt, size_t ws,
-                                                              const float *restrict pr, int pw,
-                                                              const float *restrict scale,
-                                                              float *restrict o, size_t os) {
+ * wt[t][i] * pr[c][slot[dy]][dx + i] for i < n (scale NULL: 1); wt rows ws floats apart,
+ * padded source rows pw apart, K of them per channel, source row dy in slot[dy]. Inlined with
+ * constant n = XB the accumulators are registers (a variable n only serves the row's last chunk);
+ * with nch = 3 each weight is loaded once for all three colour channels instead of three times
+ * (loads, not FMAs, bound this loop). */
+static inline __attribute__((always_inline)) void
+apply_chunk(const int n, const int nch, int K, const float *restrict wt, size_t ws,
+            const float *restrict pr, int pw, const int *slot, const float *restrict scale,
+            float *restrict o, size_t os) {
   float acc[3][XB];
   for (int c = 0; c < nch; c++)
     for (int i = 0; i < XB; i++)
@@ -115,7 +114,7 @@ static inline __attribute__((always_inline)) void apply_chunk(const int n, const
   for (int dy = 0; dy < K; dy++)
     for (int dx = 0; dx < K; dx++) {
       const float *restrict wr = wt + (size_t)(dy * K + dx) * ws;
-      const float *restrict src = pr + (size_t)dy * pw + dx;
+      const float *restrict src = pr + (size_t)slot[dy] * pw + dx;
       for (int i = 0; i < n; i++)
         for (int c = 0; c < nch; c++)
           acc[c][i] += wr[i] * src[c * pc + i];
@@ -150,16 +149,12 @@ static inline void transpose8x8(const float *src, size_t ss, float *dst, size_t 
 
 #if defined(__GNUC__) && defined(__x86_64__) && defined(__AVX2__)
 #define KPCN_HAVE_T16 1
-/* dst[j * ds + i] = src[i * ss + j] for i < 16, j < nb <= 16 (for nChw16c logits: 16 pixels'
- * whole cache lines of one block to nb tap rows). Four shuffle stages: 32-bit and 64-bit
- * interleaves leave a 4 x 4 transposed block in each 128-bit lane, two lane shuffles gather
- * the four lanes of each output row. Reads all 16 floats of every source row (a block's
- * padding too, so the caller keeps them inside the row stride), stores only nb rows. */
-__attribute__((target("avx512f"))) static void transpose16x16(const float *src, size_t ss,
-                                                              float *dst, size_t ds, int nb) {
-  __m512 r[16], t[16], u[16];
-  for (int i = 0; i < 16; i++)
-    r[i] = _mm512_loadu_ps(src + (size_t)i * ss);
+/* row[j] (lane i) = src[i * ss + j] for i, j < 16: four shuffle stages, 32-bit and 64-bit
+ * interleaves leaving a 4 x 4 transposed block in each 128-bit lane, then two lane shuffles
+ * gathering the four lanes of each output row. r holds the 16 source rows (lanes j). */
+__attribute__((target("avx512f"), always_inline)) static inline void
+transpose16_regs(__m512 r[16], __m512 row[16]) {
+  __m512 t[16], u[16];
   for (int i = 0; i < 16; i += 2) {
     t[i] = _mm512_unpacklo_ps(r[i], r[i + 1]);
     t[i + 1] = _mm512_unpackhi_ps(r[i], r[i + 1]);
@@ -178,12 +173,87 @@ __attribute__((target("avx512f"))) static void transpose16x16(const float *src, 
                  hi01 = _mm512_shuffle_f32x4(u[c], u[4 + c], _MM_SHUFFLE(3, 2, 3, 2)),
                  lo23 = _mm512_shuffle_f32x4(u[8 + c], u[12 + c], _MM_SHUFFLE(1, 0, 1, 0)),
                  hi23 = _mm512_shuffle_f32x4(u[8 + c], u[12 + c], _MM_SHUFFLE(3, 2, 3, 2));
-    const __m512 row[4] = {_mm512_shuffle_f32x4(lo01, lo23, _MM_SHUFFLE(2, 0, 2, 0)),
-                           _mm512_shuffle_f32x4(lo01, lo23, _MM_SHUFFLE(3, 1, 3, 1)),
-                           _mm512_shuffle_f32x4(hi01, hi23, _MM_SHUFFLE(2, 0, 2, 0)),
-                           _mm512_shuffle_f32x4(hi01, hi23, _MM_SHUFFLE(3, 1, 3, 1))};
-    for (int k = 0; k < 4; k++)
-      if (4 * k + c < nb) _mm512_storeu_ps(dst + (size_t)(4 * k + c) * ds, row[k]);
+    row[c] = _mm512_shuffle_f32x4(lo01, lo23, _MM_SHUFFLE(2, 0, 2, 0));
+    row[4 + c] = _mm512_shuffle_f32x4(lo01, lo23, _MM_SHUFFLE(3, 1, 3, 1));
+    row[8 + c] = _mm512_shuffle_f32x4(hi01, hi23, _MM_SHUFFLE(2, 0, 2, 0));
+    row[12 + c] = _mm512_shuffle_f32x4(hi01, hi23, _MM_SHUFFLE(3, 1, 3, 1));
+  }
+}
+
+/* dst[j * ds + i] = src[i * ss + j] for i < 16, j < nb <= 16 (for nChw16c logits: 16 pixels'
+ * whole cache lines of one block to nb tap rows). Reads all 16 floats of every source row (a
+ * block's padding too, so the caller keeps them inside the row stride), stores only nb rows. */
+__attribute__((target("avx512f"))) static void transpose16x16(const float *src, size_t ss,
+                                                              float *dst, size_t ds, int nb) {
+  __m512 r[16], row[16];
+  for (int i = 0; i < 16; i++)
+    r[i] = _mm512_loadu_ps(src + (size_t)i * ss);
+  transpose16_regs(r, row);
+  for (int j = 0; j < nb; j++)
+    _mm512_storeu_ps(dst + (size_t)j * ds, row[j]);
+}
+
+/* exp_nonpos on 16 lanes, the same arithmetic (FMAs where the scalar form multiplies then
+ * adds, so the last bit may differ from the default build's). */
+__attribute__((target("avx512f"), always_inline)) static inline __m512 exp_nonpos16(__m512 x) {
+  const __m512 magic = _mm512_set1_ps(12582912.f);
+  x = _mm512_max_ps(x, _mm512_set1_ps(-87.f));
+  const __m512 nf =
+      _mm512_sub_ps(_mm512_fmadd_ps(x, _mm512_set1_ps(1.44269504088896341f), magic), magic);
+  __m512 r = _mm512_fnmadd_ps(nf, _mm512_set1_ps(0.693145751953125f), x);
+  r = _mm512_fnmadd_ps(nf, _mm512_set1_ps(1.428606765330187e-06f), r);
+  __m512 p = _mm512_set1_ps(1.f / 720.f);
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.f / 120.f));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.f / 24.f));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.f / 6.f));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(0.5f));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.f));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.f));
+  const __m512i e =
+      _mm512_slli_epi32(_mm512_add_epi32(_mm512_cvtps_epi32(nf), _mm512_set1_epi32(127)), 23);
+  return _mm512_mul_ps(p, _mm512_castsi512_ps(e));
+}
+
+/* The softmax numerators of pixels [0, 16 ng) of a chunk whose taps come in runs of 16
+ * consecutive floats (nChw16c blocks, or pixel-major rows; L0: the chunk's first pixel,
+ * block 0). Per group of 16 pixels each run is loaded masked to its valid taps (nothing past
+ * a pixel's row or the buffer is read), transposed in registers into tap rows wt[t][16g ..]
+ * and folded into the running max on the way, so the max costs no pass of its own; then
+ * e^(l - max) replaces each row, summed in a register (tap order, as the generic loop).
+ * The logits come from DRAM (the net just wrote them), in up to K²/16 streams a block plane
+ * apart; the hardware prefetcher lost them at every 4 KiB page, so each load also prefetches
+ * its line of the next 16 pixels (1024-px rows, 121 taps, 2 threads: 29 -> 22 ms a tile).
+ * Leaves the exponentials in wt and their sums in sum[0, 16 ng). */
+__attribute__((target("avx512f"))) static void softmax16(const float *L0,
+                                                         const kpcn_logits_layout *lay, int K2,
+                                                         int ng, float *wt, size_t ws, float *sum) {
+  const int bl = lay->block, ps = lay->pixel_stride;
+  for (int g = 0; g < ng; g++) {
+    __m512 m = _mm512_set1_ps(-INFINITY);
+    for (int t0 = 0; t0 < K2; t0 += 16) {
+      const int nb = K2 - t0 < 16 ? K2 - t0 : 16;
+      const float *src =
+          L0 + (size_t)(t0 / bl) * lay->block_stride + (size_t)(t0 % bl) + (size_t)16 * g * ps;
+      const __mmask16 k = (__mmask16)((1u << nb) - 1u);
+      __m512 r[16], row[16];
+      for (int i = 0; i < 16; i++) {
+        _mm_prefetch((const char *)(src + (size_t)(i + 16) * ps), _MM_HINT_T0);
+        r[i] = _mm512_maskz_loadu_ps(k, src + (size_t)i * ps);
+      }
+      transpose16_regs(r, row);
+      for (int j = 0; j < nb; j++) {
+        _mm512_storeu_ps(wt + (size_t)(t0 + j) * ws + 16 * g, row[j]);
+        m = _mm512_max_ps(m, row[j]);
+      }
+    }
+    __m512 acc = _mm512_setzero_ps();
+    for (int t = 0; t < K2; t++) {
+      float *wr = wt + (size_t)t * ws + 16 * g;
+      const __m512 e = exp_nonpos16(_mm512_sub_ps(_mm512_loadu_ps(wr), m));
+      _mm512_storeu_ps(wr, e);
+      acc = _mm512_add_ps(acc, e);
+    }
+    _mm512_storeu_ps(sum + 16 * g, acc);
   }
 }
 #endif
@@ -254,49 +324,67 @@ static void transpose(const float *restrict src, int ps, int w, int nb, float *r
  * with the whole row's K² x w weights (~0.5 MB at w = 1024, K = 11) every pass streamed
  * them through L2. Planar logits are read in place and run whole rows (xc_n = w): 64-float
  * pieces of K² rows a plane apart defeated the prefetcher (1.4x slower). */
-KPCN_AVX512_CLONES static void fwd_row(int K, int nc, int h, int w, int xc_n, size_t ws, int y,
-                                       const float *logits, const kpcn_logits_layout *lay,
+KPCN_AVX512_CLONES static void fwd_row(int K, int nc, int h, int w, int xc_n, size_t ws, int b,
+                                       int y, const float *logits, const kpcn_logits_layout *lay,
                                        const float *noisy, float *out, float *weights,
-                                       float *restrict wt, int t16) {
+                                       float *restrict wt, int *last, int t16) {
   const int r = K / 2, K2 = K * K, pw = w + 2 * r;
   const size_t plane = (size_t)h * w;
   float *restrict mx = wt + (size_t)K2 * ws, *restrict sum = mx + xc_n, *restrict pr = sum + xc_n;
-  /* the K clamped source rows of every channel, padded once for the whole row */
-  for (int c = 0; c < nc; c++)
-    for (int dy = 0; dy < K; dy++)
-      padded_row(pr + (size_t)(c * K + dy) * pw,
-                 noisy + (size_t)c * plane + (size_t)clampi(y + dy - r, 0, h - 1) * w, w, r);
+  /* The K clamped source rows of every channel, padded, in a ring of K slots indexed by the
+   * unclamped source row: a thread's rows are consecutive (static schedule), so after its
+   * first row it pads one new source row per output row instead of K (re-padding all of
+   * them was ~15 % of the layer). last[] = the image and row this thread did before. */
+  int slot[KPCN_NN_MAX_KERNEL];
+  const int first = last[0] == b && last[1] == y - 1 ? K - 1 : 0;
+  for (int dy = 0; dy < K; dy++) {
+    const int sy = y + dy - r;
+    slot[dy] = ((sy % K) + K) % K;
+    if (dy >= first)
+      for (int c = 0; c < nc; c++)
+        padded_row(pr + (size_t)(c * K + slot[dy]) * pw,
+                   noisy + (size_t)c * plane + (size_t)clampi(sy, 0, h - 1) * w, w, r);
+  }
+  last[0] = b, last[1] = y;
   const int planar = lay->block == 1 && lay->pixel_stride == 1;
   for (int xc = 0; xc < w; xc += xc_n) {
     const int n = w - xc < xc_n ? w - xc : xc_n;
     const float *L; /* logit 0 of pixel xc; logit t's row starts at L + t * lstride */
     size_t lstride;
+    int x1 = 0; /* pixels [0, x1) already hold their exponentials and sums */
     if (planar) {
       L = logits + (size_t)y * w + xc, lstride = lay->block_stride;
     } else {
       const int ps = lay->pixel_stride, bl = lay->block;
-      for (int t0 = 0; t0 < K2; t0 += bl) {
-        const float *src =
-            logits + (size_t)(t0 / bl) * lay->block_stride + ((size_t)y * w + xc) * ps;
-        const int nb = K2 - t0 < bl ? K2 - t0 : bl;
-        transpose(src, ps, n, nb, wt + (size_t)t0 * ws, ws, t16);
+      const float *L0 = logits + ((size_t)y * w + xc) * ps;
+#ifdef KPCN_HAVE_T16
+      if (t16 && (bl % 16 == 0 || bl >= K2)) {
+        x1 = n & ~15;
+        softmax16(L0, lay, K2, x1 / 16, wt, ws, sum);
       }
+#endif
+      if (x1 < n)
+        for (int t0 = 0; t0 < K2; t0 += bl) {
+          const float *src = L0 + (size_t)(t0 / bl) * lay->block_stride + (size_t)x1 * ps;
+          const int nb = K2 - t0 < bl ? K2 - t0 : bl;
+          transpose(src, ps, n - x1, nb, wt + (size_t)t0 * ws + x1, ws, t16);
+        }
       L = wt, lstride = ws;
     }
-    for (int x = 0; x < n; x++)
+    for (int x = x1; x < n; x++)
       mx[x] = L[x];
     for (int t = 1; t < K2; t++) {
       const float *restrict Lt = L + (size_t)t * lstride;
-      for (int x = 0; x < n; x++)
+      for (int x = x1; x < n; x++)
         mx[x] = Lt[x] > mx[x] ? Lt[x] : mx[x]; /* fmaxf won't vectorize */
     }
-    for (int x = 0; x < n; x++)
+    for (int x = x1; x < n; x++)
       sum[x] = 0.f;
     for (int t = 0; t < K2; t++) {
       float *wr = wt + (size_t)t * ws; /* may be Lt itself (gathered layouts): same element */
       const float *Lt = L + (size_t)t * lstride;
 #pragma omp simd
-      for (int x = 0; x < n; x++) {
+      for (int x = x1; x < n; x++) {
         float e = exp_nonpos(Lt[x] - mx[x]);
         wr[x] = e;
         sum[x] += e;
@@ -323,11 +411,11 @@ KPCN_AVX512_CLONES static void fwd_row(int K, int nc, int h, int w, int xc_n, si
         const float *scale = scale_out ? sum + x0 : NULL;
         /* constant width and channel count: the accumulators stay in registers */
         if (n - x0 >= XB && nch == 3)
-          apply_chunk(XB, 3, K, wt + x0, ws, prc + x0, pw, scale, o + x0, plane);
+          apply_chunk(XB, 3, K, wt + x0, ws, prc + x0, pw, slot, scale, o + x0, plane);
         else if (n - x0 >= XB)
-          apply_chunk(XB, 1, K, wt + x0, ws, prc + x0, pw, scale, o + x0, plane);
+          apply_chunk(XB, 1, K, wt + x0, ws, prc + x0, pw, slot, scale, o + x0, plane);
         else
-          apply_chunk(n - x0, nch, K, wt + x0, ws, prc + x0, pw, scale, o + x0, plane);
+          apply_chunk(n - x0, nch, K, wt + x0, ws, prc + x0, pw, slot, scale, o + x0, plane);
       }
       c0 += nch;
     }
@@ -366,16 +454,31 @@ kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const fl
   const size_t ws = kpcn_plane_stride((size_t)xc_n);
   const size_t scratch = (size_t)K2 * ws + 2 * (size_t)xc_n + (size_t)nc * K * (w + 2 * r) + 64;
   float *buf = kpcn_aligned_alloc((size_t)nt * scratch * sizeof(float), "kpa scratch");
-  if (!buf) return KPCN_ERR_OUT_OF_MEMORY;
+  /* per thread: the last (image, row) done, 64 bytes apart */
+  int *last = kpcn_aligned_alloc((size_t)nt * 16 * sizeof(int), "kpa row state");
+  if (!buf || !last) {
+    kpcn_aligned_free(buf);
+    kpcn_aligned_free(last);
+    return KPCN_ERR_OUT_OF_MEMORY;
+  }
+  for (int i = 0; i < nt; i++)
+    last[16 * i] = -1;
   const int t16 = have_avx512();
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++) {
     const int b = (int)(row / h), y = (int)(row % h);
-    fwd_row(K, nc, h, w, xc_n, ws, y, logits + (size_t)b * lay.image_stride, &lay,
+    fwd_row(K, nc, h, w, xc_n, ws, b, y, logits + (size_t)b * lay.image_stride, &lay,
             noisy + (size_t)b * nc * plane, out + (size_t)b * nc * plane,
-            weights ? weights + (size_t)b * K2 * plane : NULL, thread_scratch(buf, scratch), t16);
+            weights ? weights + (size_t)b * K2 * plane : NULL, thread_scratch(buf, scratch),
+#ifdef _OPENMP
+            last + 16 * omp_get_thread_num(),
+#else
+            last,
+#endif
+            t16);
   }
   kpcn_aligned_free(buf);
+  kpcn_aligned_free(last);
   return KPCN_OK;
 }
 
