@@ -182,9 +182,12 @@ const char *kpcn_model_meta_key(const kpcn_model *m, int i);
 
 typedef enum kpcn_precision { KPCN_PREC_F32 = 0, KPCN_PREC_BF16 = 1 } kpcn_precision;
 
-/* Activation layout between layers. AUTO: nhwc (brgconv / AMX kernels), or nChw16c when
- * oneDNN has no optimized nhwc kernel for some layer (kpcn_net_stats.n_slow). The others
- * exist for benchmarking; all give the same results up to summation order. */
+/* Activation layout between layers. AUTO: for f32 training nets, per layer nChw16c where
+ * oneDNN has a jit kernel for the layer there (its f32 backward-weights is faster on it) and
+ * nhwc elsewhere, reordered between layers (kpcn_net_stats.n_relayout); for other nets nhwc
+ * (brgconv / AMX kernels), or nChw16c when oneDNN has no optimized nhwc kernel for some layer
+ * (kpcn_net_stats.n_slow). The others exist for benchmarking; all give the same results up
+ * to summation order. */
 typedef enum kpcn_layout {
   KPCN_LAYOUT_AUTO = 0,
   KPCN_LAYOUT_NCHW16C = 1,
@@ -278,6 +281,7 @@ typedef struct kpcn_net_stats {
   size_t bytes;   /* memory held by the net (activations, scratchpad, weight copies) */
   int n_slow;     /* primitives running oneDNN's slow reference ("ref:") implementation */
   int n_bwdd_fwd; /* layers whose backward-data runs as a forward conv (see net.c) */
+  int n_relayout; /* layers whose input is reordered from the previous layer's layout */
 } kpcn_net_stats;
 void kpcn_net_get_stats(const kpcn_net *net, kpcn_net_stats *s);
 /* Name of the oneDNN implementation chosen for conv layer l forward ("brgconv:..."). */
