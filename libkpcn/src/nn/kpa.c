@@ -313,6 +313,45 @@ static void transpose(const float *restrict src, int ps, int w, int nb, float *r
   transpose_8(src, ps, x16, w, 0, nb, dst, ds);
 }
 
+/* The K clamped source rows around output row y of image b (noisy: the image's first plane),
+ * every channel, padded by K/2 (padded_row), in a ring of K slots per channel indexed by the
+ * unclamped source row; slot[dy] = the slot of row y + dy - K/2. A thread's rows are
+ * consecutive (static schedule), so after its first row it pads one new source row per
+ * output row instead of K (re-padding all of them was ~15 % of the forward). last[] = the
+ * image and row this thread did before (-1: none). */
+static void source_rows(int K, int nc, int h, int w, int b, int y, const float *noisy, float *pr,
+                        int *last, int *slot) {
+  const int r = K / 2, pw = w + 2 * r;
+  const size_t plane = (size_t)h * w;
+  const int first = last[0] == b && last[1] == y - 1 ? K - 1 : 0;
+  for (int dy = 0; dy < K; dy++) {
+    const int sy = y + dy - r;
+    slot[dy] = ((sy % K) + K) % K;
+    if (dy >= first)
+      for (int c = 0; c < nc; c++)
+        padded_row(pr + (size_t)(c * K + slot[dy]) * pw,
+                   noisy + (size_t)c * plane + (size_t)clampi(sy, 0, h - 1) * w, w, r);
+  }
+  last[0] = b, last[1] = y;
+}
+
+/* Per-thread state for source_rows, 64 bytes apart; NULL when out of memory. */
+static int *row_state(int nt) {
+  int *last = kpcn_aligned_alloc((size_t)nt * 16 * sizeof(int), "kpa row state");
+  if (last)
+    for (int i = 0; i < nt; i++)
+      last[16 * i] = -1;
+  return last;
+}
+
+static inline int *thread_state(int *last) {
+#ifdef _OPENMP
+  return last + 16 * omp_get_thread_num();
+#else
+  return last;
+#endif
+}
+
 #define XC 64 /* pixels per column chunk of gathered logits: its K² weight rows stay in L1/L2 */
 
 /* One output row y of one image. A separate function (all sizes by value) so the compiler
@@ -331,21 +370,8 @@ KPCN_AVX512_CLONES static void fwd_row(int K, int nc, int h, int w, int xc_n, si
   const int r = K / 2, K2 = K * K, pw = w + 2 * r;
   const size_t plane = (size_t)h * w;
   float *restrict mx = wt + (size_t)K2 * ws, *restrict sum = mx + xc_n, *restrict pr = sum + xc_n;
-  /* The K clamped source rows of every channel, padded, in a ring of K slots indexed by the
-   * unclamped source row: a thread's rows are consecutive (static schedule), so after its
-   * first row it pads one new source row per output row instead of K (re-padding all of
-   * them was ~15 % of the layer). last[] = the image and row this thread did before. */
   int slot[KPCN_NN_MAX_KERNEL];
-  const int first = last[0] == b && last[1] == y - 1 ? K - 1 : 0;
-  for (int dy = 0; dy < K; dy++) {
-    const int sy = y + dy - r;
-    slot[dy] = ((sy % K) + K) % K;
-    if (dy >= first)
-      for (int c = 0; c < nc; c++)
-        padded_row(pr + (size_t)(c * K + slot[dy]) * pw,
-                   noisy + (size_t)c * plane + (size_t)clampi(sy, 0, h - 1) * w, w, r);
-  }
-  last[0] = b, last[1] = y;
+  source_rows(K, nc, h, w, b, y, noisy, pr, last, slot);
   const int planar = lay->block == 1 && lay->pixel_stride == 1;
   for (int xc = 0; xc < w; xc += xc_n) {
     const int n = w - xc < xc_n ? w - xc : xc_n;
@@ -454,15 +480,12 @@ kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const fl
   const size_t ws = kpcn_plane_stride((size_t)xc_n);
   const size_t scratch = (size_t)K2 * ws + 2 * (size_t)xc_n + (size_t)nc * K * (w + 2 * r) + 64;
   float *buf = kpcn_aligned_alloc((size_t)nt * scratch * sizeof(float), "kpa scratch");
-  /* per thread: the last (image, row) done, 64 bytes apart */
-  int *last = kpcn_aligned_alloc((size_t)nt * 16 * sizeof(int), "kpa row state");
+  int *last = row_state(nt);
   if (!buf || !last) {
     kpcn_aligned_free(buf);
     kpcn_aligned_free(last);
     return KPCN_ERR_OUT_OF_MEMORY;
   }
-  for (int i = 0; i < nt; i++)
-    last[16 * i] = -1;
   const int t16 = have_avx512();
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++) {
@@ -470,12 +493,7 @@ kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const fl
     fwd_row(K, nc, h, w, xc_n, ws, b, y, logits + (size_t)b * lay.image_stride, &lay,
             noisy + (size_t)b * nc * plane, out + (size_t)b * nc * plane,
             weights ? weights + (size_t)b * K2 * plane : NULL, thread_scratch(buf, scratch),
-#ifdef _OPENMP
-            last + 16 * omp_get_thread_num(),
-#else
-            last,
-#endif
-            t16);
+            thread_state(last), t16);
   }
   kpcn_aligned_free(buf);
   kpcn_aligned_free(last);
@@ -544,39 +562,62 @@ static void store_dlogits_row(const float *D, int K2, int w, int y, const kpcn_l
   }
 }
 
-/* Backward, dlogits: one (image, row) through the softmax Jacobian. Planar dlogits are written
- * in place of the row's result; other layouts (lay non-NULL) go through store_dlogits_row. */
-KPCN_AVX512_CLONES static void bwd_dlogits_row(int K, int nc, int h, int w, long row,
+/* dL/dw for the taps of XB (or n) pixels: g[t][i] = sum over channels c of dout[c][i] *
+ * pr[c][slot[dy]][dx + i], and dot[i] = sum_t W[t][i] g[t][i]; each tap's sum is kept in
+ * registers over the channels (the K² rows of g are written once, not once per channel). The
+ * sums run in the same order as a per-channel pass over g would (c, then t for dot). */
+static inline __attribute__((always_inline)) void
+grad_chunk(const int n, int nc, int K, const float *restrict W, size_t plane,
+           const float *restrict dor, size_t dstride, const float *restrict pr, int pw,
+           const int *slot, float *restrict g, size_t gs, float *restrict dot) {
+  float dacc[XB];
+  for (int i = 0; i < XB; i++)
+    dacc[i] = 0.f;
+  const size_t pc = (size_t)K * pw;
+  for (int dy = 0; dy < K; dy++)
+    for (int dx = 0; dx < K; dx++) {
+      const int t = dy * K + dx;
+      const float *restrict src = pr + (size_t)slot[dy] * pw + dx;
+      float acc[XB];
+      for (int i = 0; i < XB; i++)
+        acc[i] = 0.f;
+      for (int c = 0; c < nc; c++)
+        for (int i = 0; i < n; i++)
+          acc[i] += dor[c * dstride + i] * src[c * pc + i];
+      const float *restrict Wt = W + (size_t)t * plane;
+      float *restrict gt = g + (size_t)t * gs;
+      for (int i = 0; i < n; i++) {
+        gt[i] = acc[i];
+        dacc[i] += Wt[i] * acc[i];
+      }
+    }
+  for (int i = 0; i < n; i++)
+    dot[i] = dacc[i];
+}
+
+/* Backward, dlogits: one (image, row) through the softmax Jacobian,
+ * dlogit_t = w_t (g_t - sum_s w_s g_s). Planar dlogits are written in place of the row's
+ * result; other layouts (lay non-NULL) go through store_dlogits_row. */
+KPCN_AVX512_CLONES static void bwd_dlogits_row(int K, int nc, int h, int w, int b, int y,
                                                const float *weights, const float *noisy,
                                                const float *dout, float *dlogits,
                                                const kpcn_logits_layout *lay, float *scratch,
-                                               int t16) {
-  const int r = K / 2, K2 = K * K;
+                                               int *last, int t16) {
+  const int r = K / 2, K2 = K * K, pw = w + 2 * r;
   const size_t plane = (size_t)h * w;
   float *g = scratch; /* [K2][w]: dL/dw_t */
-  float *dot = g + (size_t)K2 * w, *pr = dot + 2 * (size_t)w;
-  const int b = (int)(row / h), y = (int)(row % h);
-  for (size_t i = 0; i < (size_t)K2 * w; i++)
-    g[i] = 0.f;
-  for (int c = 0; c < nc; c++) {
-    const float *dor = dout + ((size_t)b * nc + c) * plane + (size_t)y * w;
-    for (int dy = 0; dy < K; dy++) {
-      int yy = clampi(y + dy - r, 0, h - 1);
-      padded_row(pr, noisy + ((size_t)b * nc + c) * plane + (size_t)yy * w, w, r);
-      for (int dx = 0; dx < K; dx++) {
-        float *gr = g + (size_t)(dy * K + dx) * w;
-        const float *src = pr + dx;
-        for (int x = 0; x < w; x++)
-          gr[x] += dor[x] * src[x];
-      }
-    }
-  }
+  float *dot = g + (size_t)K2 * w, *pr = dot + (size_t)w;
+  int slot[KPCN_NN_MAX_KERNEL];
+  source_rows(K, nc, h, w, b, y, noisy + (size_t)b * nc * plane, pr, last, slot);
   const float *W = weights + (size_t)b * K2 * plane + (size_t)y * w;
-  for (int x = 0; x < w; x++)
-    dot[x] = 0.f;
-  for (int t = 0; t < K2; t++)
-    for (int x = 0; x < w; x++)
-      dot[x] += W[t * plane + x] * g[(size_t)t * w + x];
+  const float *dor = dout + (size_t)b * nc * plane + (size_t)y * w;
+  for (int x0 = 0; x0 < w; x0 += XB) {
+    if (w - x0 >= XB)
+      grad_chunk(XB, nc, K, W + x0, plane, dor + x0, plane, pr + x0, pw, slot, g + x0, w, dot + x0);
+    else
+      grad_chunk(w - x0, nc, K, W + x0, plane, dor + x0, plane, pr + x0, pw, slot, g + x0, w,
+                 dot + x0);
+  }
   if (lay) {
     for (int t = 0; t < K2; t++)
       for (int x = 0; x < w; x++)
@@ -601,9 +642,16 @@ static kpcn_status kpa_backward(const char *fn, int K, int n, int nc, int h, int
   const int r = K / 2, K2 = K * K, nt = kpcn_resolve_threads(nthreads);
   if (lay) KPCN_TRY(check_layout(fn, lay, K2));
   const int t16 = have_avx512();
-  const size_t scratch = (size_t)K2 * w + 2 * (size_t)w + (size_t)w + 2 * r + 64;
+  /* per thread: g [K2][w], dot [w], the ring of nc x K padded source rows (dnoisy: one
+   * padded accumulator row) */
+  const size_t scratch = (size_t)K2 * w + (size_t)w + (size_t)nc * K * (w + 2 * r) + 64;
   float *buf = kpcn_aligned_alloc((size_t)nt * scratch * sizeof(float), "kpa scratch");
-  if (!buf) return KPCN_ERR_OUT_OF_MEMORY;
+  int *last = row_state(nt);
+  if (!buf || !last) {
+    kpcn_aligned_free(buf);
+    kpcn_aligned_free(last);
+    return KPCN_ERR_OUT_OF_MEMORY;
+  }
   /* dnoisy first: it reads weights, which dlogits may alias. Gather over output rows qy
    * (each thread owns its rows, so the sum order is fixed and thread-count independent);
    * within a row the x-scatter goes to a padded accumulator folded at the edges. */
@@ -614,9 +662,10 @@ static kpcn_status kpa_backward(const char *fn, int K, int n, int nc, int h, int
   }
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++)
-    bwd_dlogits_row(K, nc, h, w, row, weights, noisy, dout, dlogits, lay,
-                    thread_scratch(buf, scratch), t16);
+    bwd_dlogits_row(K, nc, h, w, (int)(row / h), (int)(row % h), weights, noisy, dout, dlogits, lay,
+                    thread_scratch(buf, scratch), thread_state(last), t16);
   kpcn_aligned_free(buf);
+  kpcn_aligned_free(last);
   return KPCN_OK;
 }
 
