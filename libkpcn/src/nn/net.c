@@ -1,88 +1,24 @@
 /* kpcn_net: one KPCN branch executed with oneDNN (C API, OpenMP runtime).
  *
- * Layout strategy: every conv primitive is created with format "any" for weights and for
- * its destination, and with the previous layer's chosen destination descriptor as its
- * source, so activations stay in oneDNN's preferred blocked layout (nChw16c for f32 jit,
- * nhwc for bf16 brgconv) from layer to layer. Reorders happen only at the ends (user NCHW
+ * Layout strategy: every conv primitive is created with format "any" for weights and a fixed
+ * activation layout per layer (net_layer.c, kpcn_net_choose_tag: nhwc for inference and bf16,
+ * nChw16c where oneDNN has a jit kernel for f32 training), so activations stay in a layout
+ * oneDNN's fast kernels take from layer to layer. Reorders happen at the ends (user NCHW
  * input -> layer 0, last layer -> user NCHW logits, and the weights from the model's OIHW
- * arrays, which are re-read each forward so an optimizer can update them in place).
+ * arrays, which are re-read each forward so an optimizer can update them in place) and
+ * between layers of different layouts (a Winograd logits layer; the dilation-8 layer of a
+ * training net), both ways in training.
  * Backward (training nets, f32 or bf16 mixed precision): ReLU backward (from the stored
  * post-ReLU activation) in place on the gradient buffer, then backward-weights and
  * backward-data per layer; weight and bias gradients are f32 in either precision.
  * One user-mode scratchpad is shared by all primitives. */
-#include "core/internal.h"
-#include "nn/model_internal.h"
+#include "nn/net_internal.h"
 
-#include <oneapi/dnnl/dnnl.h>
-#include <oneapi/dnnl/dnnl_debug.h>
 #include <omp.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
-
-#define DN(call)                                                                                   \
-  do {                                                                                             \
-    dnnl_status_t _d = (call);                                                                     \
-    if (_d != dnnl_success)                                                                        \
-      return kpcn_fail(KPCN_ERR_INTERNAL, "oneDNN: %s failed: %s (%s:%d)", #call,                  \
-                       dnnl_status2str(_d), __FILE__, __LINE__);                                   \
-  } while (0)
-
-typedef struct reorder {
-  dnnl_primitive_t prim;
-  dnnl_memory_t src, dst;
-} reorder;
-
-typedef struct layer {
-  int cin, cout, k, d, has_relu;
-  dnnl_memory_desc_t src_md, dst_md, w_md, bw_md, dw_md;
-  dnnl_memory_desc_t ddst_md; /* dst gradient: dst_md, but bf16 for bf16 f32-logits layers */
-  dnnl_primitive_desc_t fwd_pd, bwdd_pd, bwdw_pd, relu_pd;
-  dnnl_primitive_t fwd, bwdd, bwdw, relu;
-  dnnl_memory_t src, dst, w, bias;      /* forward operands */
-  dnnl_memory_t bw, dw, db, ddst, dsrc; /* backward operands */
-  reorder w_in, bw_in, dw_out;          /* OIHW <-> primitive weight layouts */
-  reorder src_in;        /* previous layer's dst -> this layer's src layout, where they differ */
-  reorder dsrc_out;      /* ... and back for the input gradient (training) */
-  dnnl_format_tag_t tag; /* activation layout of this layer (build_layer) */
-  void *rin;             /* training: this layer's own reordered input (backward reads it) */
-  int winograd;
-  int bwdd_fwd;         /* backward-data runs as a forward conv with flipped weights */
-  float *wflip;         /* ... whose OIHW weights (cin x cout x k x k) are built here */
-  float *gw, *gb;       /* gradients, OIHW f32 (net-owned) */
-  void *act;            /* dst buffer */
-  void *wp, *bwp, *dwp; /* weight copies in primitive layouts */
-} layer;
-
-struct kpcn_net {
-  kpcn_model *model;
-  kpcn_branch branch;
-  kpcn_net_options o;
-  int nl, nt;
-  dnnl_engine_t eng;
-  dnnl_stream_t stream;
-  dnnl_primitive_attr_t attr, attr_relu; /* user scratchpad; + fused ReLU post-op */
-  layer L[KPCN_NN_MAX_LAYERS];
-  reorder in, out, dout_in, dinput_out;
-  reorder dout_native; /* native-layout f32 dlogits -> the last layer's dst gradient */
-  int dout_direct;     /* ... or none: native dlogits already are that gradient */
-  void *xbuf;          /* layer-0 input in its primitive layout */
-  void *rbuf;          /* a layer's input after src_in (inference; shared) */
-  void *pp[2];         /* inference ping-pong activation buffers */
-  void *dbuf[2];       /* backward gradient ping-pong buffers */
-  void *wbuf;          /* all primitive-layout weight copies */
-  float *grads;        /* all gradients */
-  void *scratch;
-  dnnl_memory_t scratch_mem;
-  size_t bytes;
-  int n_slow, n_bwdd_fwd, n_relayout;
-  kpcn_net_stats st;
-  char impl[KPCN_NN_MAX_LAYERS][64];
-  int native_ok;             /* the last layer's output layout is readable by the kpa */
-  kpcn_logits_layout native; /* ... and this is it */
-  float *planar_logits;      /* fallback buffer of kpcn_net_forward_logits */
-};
 
 static double now_s(void) {
   struct timespec t;
@@ -108,38 +44,38 @@ static void thr_pop(thr_guard g) {
   omp_set_num_threads(g.saved);
 }
 
-static void *net_alloc(kpcn_net *n, size_t bytes, const char *what) {
+void *kpcn_net_alloc(kpcn_net *n, size_t bytes, const char *what) {
   void *p = kpcn_aligned_alloc(bytes ? bytes : 64, what);
   if (p) n->bytes += bytes;
   return p;
 }
 
-static kpcn_status mem(kpcn_net *n, dnnl_memory_t *m, const dnnl_memory_desc_t *md, void *h) {
+kpcn_status kpcn_net_mem(kpcn_net *n, dnnl_memory_t *m, const dnnl_memory_desc_t *md, void *h) {
   DN(dnnl_memory_create(m, md, n->eng, h ? h : DNNL_MEMORY_NONE));
   return KPCN_OK;
 }
 
-static size_t pd_scratch(const_dnnl_primitive_desc_t pd) {
+size_t kpcn_net_pd_scratch(const_dnnl_primitive_desc_t pd) {
   const dnnl_memory_desc_t *md = dnnl_primitive_desc_query_md(pd, dnnl_query_scratchpad_md, 0);
   return md ? dnnl_memory_desc_get_size(md) : 0;
 }
 
 /* Creates a reorder between two descriptors; memories get their handles later. */
-static kpcn_status make_reorder(kpcn_net *n, reorder *r, const dnnl_memory_desc_t *from,
-                                const dnnl_memory_desc_t *to, size_t *scratch) {
+kpcn_status kpcn_net_make_reorder(kpcn_net *n, reorder *r, const dnnl_memory_desc_t *from,
+                                  const dnnl_memory_desc_t *to, size_t *scratch) {
   dnnl_primitive_desc_t pd;
   DN(dnnl_reorder_primitive_desc_create(&pd, from, n->eng, to, n->eng, n->attr));
-  size_t s = pd_scratch(pd);
+  size_t s = kpcn_net_pd_scratch(pd);
   if (s > *scratch) *scratch = s;
   dnnl_status_t d = dnnl_primitive_create(&r->prim, pd);
   dnnl_primitive_desc_destroy(pd);
   DN(d);
-  KPCN_TRY(mem(n, &r->src, from, NULL));
-  KPCN_TRY(mem(n, &r->dst, to, NULL));
+  KPCN_TRY(kpcn_net_mem(n, &r->src, from, NULL));
+  KPCN_TRY(kpcn_net_mem(n, &r->dst, to, NULL));
   return KPCN_OK;
 }
 
-static kpcn_status run_reorder(kpcn_net *n, reorder *r, const void *src, void *dst) {
+kpcn_status kpcn_net_run_reorder(kpcn_net *n, reorder *r, const void *src, void *dst) {
   DN(dnnl_memory_set_data_handle(r->src, (void *)src));
   DN(dnnl_memory_set_data_handle(r->dst, dst));
   dnnl_exec_arg_t a[3] = {
@@ -150,28 +86,28 @@ static kpcn_status run_reorder(kpcn_net *n, reorder *r, const void *src, void *d
 
 /* Weight reorders are tiny (kilobytes to a few MB); an OpenMP team costs more than the copy,
  * especially on a loaded machine, so they run on the calling thread only. */
-static kpcn_status run_reorder_1t(kpcn_net *n, reorder *r, const void *src, void *dst) {
+kpcn_status kpcn_net_run_reorder_1t(kpcn_net *n, reorder *r, const void *src, void *dst) {
   omp_set_num_threads(1);
-  kpcn_status s = run_reorder(n, r, src, dst);
+  kpcn_status s = kpcn_net_run_reorder(n, r, src, dst);
   omp_set_num_threads(n->nt);
   return s;
 }
 
-static void free_reorder(reorder *r) {
+void kpcn_net_free_reorder(reorder *r) {
   if (r->prim) dnnl_primitive_destroy(r->prim);
   if (r->src) dnnl_memory_destroy(r->src);
   if (r->dst) dnnl_memory_destroy(r->dst);
 }
 
-static kpcn_status make_pd(kpcn_net *n, dnnl_primitive_desc_t *pd, const void *desc,
-                           const_dnnl_primitive_attr_t attr, const_dnnl_primitive_desc_t hint,
-                           const char *what, int l, size_t *scratch) {
+kpcn_status kpcn_net_make_pd(kpcn_net *n, dnnl_primitive_desc_t *pd, const void *desc,
+                             const_dnnl_primitive_attr_t attr, const_dnnl_primitive_desc_t hint,
+                             const char *what, int l, size_t *scratch) {
   dnnl_status_t d = dnnl_primitive_desc_create(pd, desc, attr, n->eng, hint);
   if (d != dnnl_success)
     return kpcn_fail(d == dnnl_unimplemented ? KPCN_ERR_UNSUPPORTED : KPCN_ERR_INTERNAL,
                      "oneDNN has no %s implementation for conv layer %d (%s)", what, l,
                      dnnl_status2str(d));
-  size_t s = pd_scratch(*pd);
+  size_t s = kpcn_net_pd_scratch(*pd);
   if (s > *scratch) *scratch = s;
   const char *impl = NULL;
   if (dnnl_primitive_desc_query(*pd, dnnl_query_impl_info_str, 0, &impl) == dnnl_success && impl &&
@@ -189,256 +125,6 @@ void kpcn_net_options_defaults(kpcn_net_options *o) {
   memset(o, 0, sizeof *o);
   o->batch = 1;
   o->height = o->width = 64;
-}
-
-/* Winograd F(2,3) for the logits layer when it is 3x3 undilated (fp32 inference): oneDNN
- * implements it only on channel-blocked (nChw16c) activations, so the layer gets its own
- * input layout (build_layer adds the reorder from the previous layer's) and writes blocked
- * logits, which the kpa layer reads in place. Measured on the cpu preset (1024x534 tiles,
- * Zen 4): 48->121 channels 182 ms instead of ~300 direct (+18 ms for the input reorder);
- * the 36->48 first layer was slower than direct (97 vs ~88 ms, plus a reorder), and
- * inner layers would pay two reorders, so only the last layer uses it. Not an error when
- * oneDNN has no such kernel (other ISAs): y->winograd stays 0 and the layer is built
- * direct. */
-static kpcn_status try_winograd(kpcn_net *n, int l, dnnl_memory_desc_t wany, dnnl_memory_desc_t bmd,
-                                size_t *scratch) {
-  layer *y = &n->L[l];
-  dnnl_dims_t sd = {n->o.batch, y->cin, n->o.height, n->o.width};
-  dnnl_dims_t dd = {n->o.batch, y->cout, n->o.height, n->o.width};
-  dnnl_dims_t strides = {1, 1}, dil = {0, 0}, pad = {1, 1};
-  dnnl_memory_desc_t smd, dmd;
-  DN(dnnl_memory_desc_init_by_tag(&smd, 4, sd, dnnl_f32, dnnl_nChw16c));
-  DN(dnnl_memory_desc_init_by_tag(&dmd, 4, dd, dnnl_f32, dnnl_nChw16c));
-  dnnl_convolution_desc_t cd;
-  DN(dnnl_dilated_convolution_forward_desc_init(&cd, dnnl_forward_inference,
-                                                dnnl_convolution_winograd, &smd, &wany, &bmd, &dmd,
-                                                strides, dil, pad, pad));
-  if (dnnl_primitive_desc_create(&y->fwd_pd, &cd, y->has_relu ? n->attr_relu : n->attr, n->eng,
-                                 NULL) != dnnl_success) {
-    y->fwd_pd = NULL;
-    return KPCN_OK;
-  }
-  size_t s = pd_scratch(y->fwd_pd);
-  /* For some sizes (a 1024x540 tile of the cpu preset's logits layer) oneDNN 2.6 schedules
-   * the Winograd transform over the whole image, with a scratchpad of about 3x the layer's
-   * output; the direct convolution is then the better trade (a few % slower, no 0.9 GB). */
-  const size_t dst_bytes = sizeof(float) * (size_t)n->o.batch * (size_t)((y->cout + 15) & ~15) *
-                           (size_t)n->o.height * (size_t)n->o.width;
-  if (s > dst_bytes) {
-    dnnl_primitive_desc_destroy(y->fwd_pd);
-    y->fwd_pd = NULL;
-    return KPCN_OK;
-  }
-  if (s > *scratch) *scratch = s;
-  y->winograd = 1;
-  return KPCN_OK;
-}
-
-static int impl_is(const_dnnl_primitive_desc_t pd, const char *prefix) {
-  const char *impl = NULL;
-  return dnnl_primitive_desc_query(pd, dnnl_query_impl_info_str, 0, &impl) == dnnl_success &&
-         impl && !strncmp(impl, prefix, strlen(prefix));
-}
-
-/* The gradient of a stride-1 "same" convolution with respect to its input is the forward
- * convolution of the output gradient with the weights transposed (in <-> out channels) and
- * flipped in space, at the same dilation and padding. Where oneDNN 2.6 has no direct
- * backward-data kernel for a layer (f32 nhwc with dilation 8 on 64 x 64 patches: it falls back
- * to im2col + GEMM, 18.5 ms a call against 8.5 for the forward brgconv), the layer's
- * backward-data runs as that forward primitive instead (y->bwdd_pd replaced, y->bwdd_fwd
- * set; the flipped OIHW weights are built in y->wflip before each use). Kept only when the
- * forward kernel is not itself a fallback. *iohw: the flipped weights' user descriptor. */
-static kpcn_status try_bwdd_as_forward(kpcn_net *n, int l, const dnnl_dims_t strides,
-                                       const dnnl_dims_t dil, const dnnl_dims_t pl,
-                                       const dnnl_dims_t pr, dnnl_memory_desc_t *iohw,
-                                       size_t *scratch) {
-  layer *y = &n->L[l];
-  if (!impl_is(y->bwdd_pd, "x64:gemm") && !impl_is(y->bwdd_pd, "gemm") &&
-      !impl_is(y->bwdd_pd, "ref"))
-    return KPCN_OK;
-  dnnl_dims_t wd = {y->cin, y->cout, y->k, y->k};
-  dnnl_memory_desc_t wany;
-  DN(dnnl_memory_desc_init_by_tag(&wany, 4, wd, dnnl_f32, dnnl_format_tag_any));
-  DN(dnnl_memory_desc_init_by_tag(iohw, 4, wd, dnnl_f32, dnnl_oihw));
-  dnnl_convolution_desc_t cd;
-  DN(dnnl_dilated_convolution_forward_desc_init(&cd, dnnl_forward_inference,
-                                                dnnl_convolution_direct, &y->ddst_md, &wany, NULL,
-                                                &y->src_md, strides, dil, pl, pr));
-  dnnl_primitive_desc_t pd;
-  if (dnnl_primitive_desc_create(&pd, &cd, n->attr, n->eng, NULL) != dnnl_success) return KPCN_OK;
-  const dnnl_memory_desc_t *s = dnnl_primitive_desc_query_md(pd, dnnl_query_src_md, 0),
-                           *d = dnnl_primitive_desc_query_md(pd, dnnl_query_dst_md, 0);
-  if (impl_is(pd, "ref") || impl_is(pd, "gemm") || impl_is(pd, "x64:gemm") || !s || !d ||
-      !dnnl_memory_desc_equal(s, &y->ddst_md) || !dnnl_memory_desc_equal(d, &y->src_md)) {
-    dnnl_primitive_desc_destroy(pd);
-    return KPCN_OK;
-  }
-  y->wflip = net_alloc(n, sizeof(float) * (size_t)y->cin * y->cout * y->k * y->k, "net weights");
-  if (!y->wflip) {
-    dnnl_primitive_desc_destroy(pd);
-    return KPCN_ERR_OUT_OF_MEMORY;
-  }
-  if (impl_is(y->bwdd_pd, "ref")) n->n_slow--; /* make_pd counted the one replaced */
-  dnnl_primitive_desc_destroy(y->bwdd_pd);
-  y->bwdd_pd = pd;
-  y->bwdd_fwd = 1;
-  n->n_bwdd_fwd++;
-  size_t sz = pd_scratch(pd);
-  if (sz > *scratch) *scratch = sz;
-  return KPCN_OK;
-}
-
-/* wflip[i][o][a][b] = w[o][i][k-1-a][k-1-b] */
-static void flip_weights(const layer *y, const float *w) {
-  const int k = y->k, kk = k * k;
-  for (int o = 0; o < y->cout; o++)
-    for (int i = 0; i < y->cin; i++)
-      for (int t = 0; t < kk; t++)
-        y->wflip[((size_t)i * y->cout + o) * kk + (kk - 1 - t)] =
-            w[((size_t)o * y->cin + i) * kk + t];
-}
-
-/* The activation layout of layer l. Explicit layouts apply to every layer. AUTO: nhwc, except
- * for f32 training nets, where each layer runs channel-blocked (nChw16c) when oneDNN has a
- * jit forward kernel for it there and nhwc otherwise (its reference kernel serves the
- * dilation-8 layer in nChw16c), with reorders between layers of different layouts. Why:
- * oneDNN 2.6's f32 backward-weights kernel is ~1.4x faster on nChw16c than on nhwc (cpu
- * preset, batch 16 of 64 x 64: 8.5 vs 12 ms per 48-channel layer), while the inference
- * forward is best in nhwc (brgconv) and bf16 has its brgconv kernels only there. */
-static kpcn_status choose_tag(kpcn_net *n, int l) {
-  layer *y = &n->L[l];
-  y->tag = n->o.layout == KPCN_LAYOUT_NCHW16C ? dnnl_nChw16c : dnnl_nhwc;
-  if (n->o.layout != KPCN_LAYOUT_AUTO || !n->o.training || n->o.precision != KPCN_PREC_F32)
-    return KPCN_OK;
-  const kpcn_arch *a = &n->model->arch;
-  const int k = a->conv_size[l], d = a->dilation[l], pad = d * (k - 1) / 2;
-  dnnl_dims_t sd = {n->o.batch, kpcn_arch_layer_in(a, l), n->o.height, n->o.width},
-              dd = {n->o.batch, kpcn_arch_layer_out(a, l), n->o.height, n->o.width},
-              wd = {dd[1], sd[1], k, k}, bd = {dd[1]}, strides = {1, 1}, dil = {d - 1, d - 1},
-              pads = {pad, pad};
-  dnnl_memory_desc_t smd, dmd, wmd, bmd;
-  DN(dnnl_memory_desc_init_by_tag(&smd, 4, sd, dnnl_f32, dnnl_nChw16c));
-  DN(dnnl_memory_desc_init_by_tag(&dmd, 4, dd, dnnl_f32, dnnl_nChw16c));
-  DN(dnnl_memory_desc_init_by_tag(&wmd, 4, wd, dnnl_f32, dnnl_format_tag_any));
-  DN(dnnl_memory_desc_init_by_tag(&bmd, 1, bd, dnnl_f32, dnnl_x));
-  dnnl_convolution_desc_t cd;
-  DN(dnnl_dilated_convolution_forward_desc_init(&cd, dnnl_forward_training, dnnl_convolution_direct,
-                                                &smd, &wmd, &bmd, &dmd, strides, dil, pads, pads));
-  dnnl_primitive_desc_t pd;
-  if (dnnl_primitive_desc_create(&pd, &cd, n->attr, n->eng, NULL) != dnnl_success) return KPCN_OK;
-  if (!impl_is(pd, "ref")) y->tag = dnnl_nChw16c;
-  dnnl_primitive_desc_destroy(pd);
-  return KPCN_OK;
-}
-
-/* Builds the primitives of layer l; src_md is the previous layer's destination. */
-static kpcn_status build_layer(kpcn_net *n, int l, const dnnl_memory_desc_t *src_md,
-                               size_t *scratch) {
-  const kpcn_arch *a = &n->model->arch;
-  layer *y = &n->L[l];
-  y->cin = kpcn_arch_layer_in(a, l);
-  y->cout = kpcn_arch_layer_out(a, l);
-  y->k = a->conv_size[l];
-  y->d = a->dilation[l];
-  y->has_relu = l < a->n_hidden;
-  const int bf = n->o.precision == KPCN_PREC_BF16;
-  const dnnl_data_type_t adt = bf ? dnnl_bf16 : dnnl_f32;
-  const dnnl_data_type_t ddt = (bf && y->has_relu) ? dnnl_bf16 : dnnl_f32; /* logits stay f32 */
-  const int N = n->o.batch, H = n->o.height, W = n->o.width;
-  dnnl_dims_t wd = {y->cout, y->cin, y->k, y->k}, bd = {y->cout}, dd = {N, y->cout, H, W};
-  dnnl_dims_t strides = {1, 1}, dil = {y->d - 1, y->d - 1};
-  const int pad = y->d * (y->k - 1) / 2;
-  dnnl_dims_t pl = {pad, pad}, pr = {pad, pad};
-  dnnl_memory_desc_t wany, bmd, dany;
-  DN(dnnl_memory_desc_init_by_tag(&wany, 4, wd, adt, dnnl_format_tag_any));
-  DN(dnnl_memory_desc_init_by_tag(&bmd, 1, bd, dnnl_f32, dnnl_x));
-  /* A fixed activation layout per layer (choose_tag): with "any" oneDNN may pick different
-   * layouts for consecutive layers and then find no optimized kernel for the pair. */
-  const dnnl_format_tag_t tag = y->tag;
-  DN(dnnl_memory_desc_init_by_tag(&dany, 4, dd, ddt, tag));
-  /* the layer's own input layout; src_md (the previous output) differs after a Winograd layer */
-  dnnl_dims_t sd = {N, y->cin, H, W};
-  dnnl_memory_desc_t sany;
-  DN(dnnl_memory_desc_init_by_tag(&sany, 4, sd, adt, tag));
-  dnnl_convolution_desc_t cd;
-  if (!n->o.training && !n->o.direct_conv && !bf && y->k == 3 && y->d == 1 && l == n->nl - 1)
-    KPCN_TRY(try_winograd(n, l, wany, bmd, scratch));
-  if (!y->winograd) {
-    DN(dnnl_dilated_convolution_forward_desc_init(
-        &cd, n->o.training ? dnnl_forward_training : dnnl_forward_inference,
-        dnnl_convolution_direct, &sany, &wany, &bmd, &dany, strides, dil, pl, pr));
-    KPCN_TRY(make_pd(n, &y->fwd_pd, &cd, y->has_relu ? n->attr_relu : n->attr, NULL, "forward", l,
-                     scratch));
-  }
-  y->src_md = *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_src_md, 0);
-  y->w_md = *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_weights_md, 0);
-  y->dst_md = *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_dst_md, 0);
-  if (l > 0 && !dnnl_memory_desc_equal(src_md, &y->src_md)) {
-    KPCN_TRY(make_reorder(n, &y->src_in, src_md, &y->src_md, scratch));
-    n->n_relayout++;
-  }
-  const char *impl = NULL;
-  dnnl_primitive_desc_query(y->fwd_pd, dnnl_query_impl_info_str, 0, &impl);
-  snprintf(n->impl[l], sizeof n->impl[l], "%s", impl ? impl : "?");
-  DN(dnnl_primitive_create(&y->fwd, y->fwd_pd));
-  KPCN_TRY(mem(n, &y->src, &y->src_md, NULL));
-  KPCN_TRY(mem(n, &y->dst, &y->dst_md, NULL));
-  KPCN_TRY(mem(n, &y->w, &y->w_md, NULL));
-  KPCN_TRY(mem(n, &y->bias, &bmd, NULL));
-  dnnl_memory_desc_t oihw;
-  DN(dnnl_memory_desc_init_by_tag(&oihw, 4, wd, dnnl_f32, dnnl_oihw));
-  KPCN_TRY(make_reorder(n, &y->w_in, &oihw, &y->w_md, scratch));
-  if (!n->o.training) return KPCN_OK;
-
-  /* backward: weights (always), data (for l > 0, or l == 0 when input_grad). bf16 nets train
-   * mixed-precision: activations, weight copies and output gradients in bf16 (oneDNN's bf16
-   * backward kernels take bf16 diff_dst only, so the f32 logits' gradient is rounded too),
-   * weight and bias gradients accumulated and returned in f32 for the f32 master weights. */
-  y->ddst_md = y->dst_md;
-  if (bf && !y->has_relu) DN(dnnl_memory_desc_init_by_tag(&y->ddst_md, 4, dd, dnnl_bf16, tag));
-  dnnl_memory_desc_t dwany;
-  DN(dnnl_memory_desc_init_by_tag(&dwany, 4, wd, dnnl_f32, dnnl_format_tag_any));
-  dnnl_convolution_desc_t bwd;
-  DN(dnnl_dilated_convolution_backward_weights_desc_init(
-      &bwd, dnnl_convolution_direct, &y->src_md, &dwany, &bmd, &y->ddst_md, strides, dil, pl, pr));
-  KPCN_TRY(make_pd(n, &y->bwdw_pd, &bwd, n->attr, y->fwd_pd, "backward-weights", l, scratch));
-  y->dw_md = *dnnl_primitive_desc_query_md(y->bwdw_pd, dnnl_query_diff_weights_md, 0);
-  DN(dnnl_primitive_create(&y->bwdw, y->bwdw_pd));
-  KPCN_TRY(mem(n, &y->dw, &y->dw_md, NULL));
-  KPCN_TRY(mem(n, &y->db, &bmd, NULL));
-  KPCN_TRY(mem(n, &y->ddst, &y->ddst_md, NULL));
-  KPCN_TRY(make_reorder(n, &y->dw_out, &y->dw_md, &oihw, scratch));
-  if (l > 0 || n->o.input_grad) {
-    DN(dnnl_dilated_convolution_backward_data_desc_init(&bwd, dnnl_convolution_direct, &y->src_md,
-                                                        &wany, &y->ddst_md, strides, dil, pl, pr));
-    KPCN_TRY(make_pd(n, &y->bwdd_pd, &bwd, n->attr, y->fwd_pd, "backward-data", l, scratch));
-    const dnnl_memory_desc_t *from = &oihw;
-    dnnl_memory_desc_t iohw;
-    if (!bf) KPCN_TRY(try_bwdd_as_forward(n, l, strides, dil, pl, pr, &iohw, scratch));
-    if (y->bwdd_fwd) from = &iohw;
-    y->bw_md = *dnnl_primitive_desc_query_md(y->bwdd_pd, dnnl_query_weights_md, 0);
-    DN(dnnl_primitive_create(&y->bwdd, y->bwdd_pd));
-    KPCN_TRY(mem(n, &y->bw, &y->bw_md, NULL));
-    KPCN_TRY(mem(n, &y->dsrc, &y->src_md, NULL));
-    KPCN_TRY(make_reorder(n, &y->bw_in, from, &y->bw_md, scratch));
-    if (y->src_in.prim)
-      KPCN_TRY(make_reorder(n, &y->dsrc_out, &y->src_md, &n->L[l - 1].ddst_md, scratch));
-  }
-  if (y->has_relu) {
-    /* eltwise backward needs a forward hint; ReLU derivative from the stored output */
-    dnnl_eltwise_desc_t ef, eb;
-    dnnl_primitive_desc_t hint;
-    DN(dnnl_eltwise_forward_desc_init(&ef, dnnl_forward_training, dnnl_eltwise_relu_use_dst_for_bwd,
-                                      &y->dst_md, 0.f, 0.f));
-    KPCN_TRY(make_pd(n, &hint, &ef, n->attr, NULL, "relu-forward", l, scratch));
-    DN(dnnl_eltwise_backward_desc_init(&eb, dnnl_eltwise_relu_use_dst_for_bwd, &y->dst_md,
-                                       &y->dst_md, 0.f, 0.f));
-    kpcn_status s = make_pd(n, &y->relu_pd, &eb, n->attr, hint, "relu-backward", l, scratch);
-    dnnl_primitive_desc_destroy(hint);
-    KPCN_TRY(s);
-    DN(dnnl_primitive_create(&y->relu, y->relu_pd));
-  }
-  return KPCN_OK;
 }
 
 static size_t md_size(const dnnl_memory_desc_t *md) { return dnnl_memory_desc_get_size(md); }
@@ -459,28 +145,28 @@ static kpcn_status bind_buffers(kpcn_net *n, size_t scratch) {
     if (n->o.training && md_size(&y->ddst_md) > db) db = md_size(&y->ddst_md);
     if (md_size(&y->src_md) > db) db = md_size(&y->src_md);
   }
-  n->wbuf = net_alloc(n, wbytes, "net weight copies");
-  n->xbuf = net_alloc(n, md_size(&n->L[0].src_md), "net input");
+  n->wbuf = kpcn_net_alloc(n, wbytes, "net weight copies");
+  n->xbuf = kpcn_net_alloc(n, md_size(&n->L[0].src_md), "net input");
   size_t rb = 0;
   for (int l = 1; l < nl && !n->o.training; l++)
     if (n->L[l].src_in.prim && md_size(&n->L[l].src_md) > rb) rb = md_size(&n->L[l].src_md);
-  if (rb && !(n->rbuf = net_alloc(n, rb, "net reordered activations")))
+  if (rb && !(n->rbuf = kpcn_net_alloc(n, rb, "net reordered activations")))
     return KPCN_ERR_OUT_OF_MEMORY;
-  n->scratch = net_alloc(n, scratch, "oneDNN scratchpad");
+  n->scratch = kpcn_net_alloc(n, scratch, "oneDNN scratchpad");
   if (!n->wbuf || !n->xbuf || !n->scratch) return KPCN_ERR_OUT_OF_MEMORY;
   dnnl_memory_desc_t smd;
   dnnl_dims_t sd = {(dnnl_dim_t)(scratch ? scratch : 1)};
   DN(dnnl_memory_desc_init_by_tag(&smd, 1, sd, dnnl_u8, dnnl_x));
-  KPCN_TRY(mem(n, &n->scratch_mem, &smd, n->scratch));
+  KPCN_TRY(kpcn_net_mem(n, &n->scratch_mem, &smd, n->scratch));
   if (n->o.training) {
-    n->grads = net_alloc(n, gfloats * sizeof(float), "net gradients");
-    n->dbuf[0] = net_alloc(n, db, "net gradient buffer");
-    n->dbuf[1] = net_alloc(n, db, "net gradient buffer");
+    n->grads = kpcn_net_alloc(n, gfloats * sizeof(float), "net gradients");
+    n->dbuf[0] = kpcn_net_alloc(n, db, "net gradient buffer");
+    n->dbuf[1] = kpcn_net_alloc(n, db, "net gradient buffer");
     if (!n->grads || !n->dbuf[0] || !n->dbuf[1]) return KPCN_ERR_OUT_OF_MEMORY;
     memset(n->grads, 0, gfloats * sizeof(float));
   } else {
-    n->pp[0] = net_alloc(n, pp[0], "net activations");
-    n->pp[1] = net_alloc(n, pp[1] ? pp[1] : 64, "net activations");
+    n->pp[0] = kpcn_net_alloc(n, pp[0], "net activations");
+    n->pp[1] = kpcn_net_alloc(n, pp[1] ? pp[1] : 64, "net activations");
     if (!n->pp[0] || !n->pp[1]) return KPCN_ERR_OUT_OF_MEMORY;
   }
   char *wp = n->wbuf;
@@ -488,9 +174,9 @@ static kpcn_status bind_buffers(kpcn_net *n, size_t scratch) {
   for (int l = 0; l < nl; l++) {
     layer *y = &n->L[l];
     if (n->o.training) {
-      y->act = net_alloc(n, md_size(&y->dst_md), "net activations");
+      y->act = kpcn_net_alloc(n, md_size(&y->dst_md), "net activations");
       if (!y->act) return KPCN_ERR_OUT_OF_MEMORY;
-      if (y->src_in.prim && !(y->rin = net_alloc(n, md_size(&y->src_md), "net activations")))
+      if (y->src_in.prim && !(y->rin = kpcn_net_alloc(n, md_size(&y->src_md), "net activations")))
         return KPCN_ERR_OUT_OF_MEMORY;
       y->gw = gp;
       gp += ((size_t)y->cout * y->cin * y->k * y->k + 15) & ~(size_t)15;
@@ -568,13 +254,13 @@ static kpcn_status build(kpcn_net *n) {
   dnnl_dims_t xd = {N, a->n_inputs, H, W};
   dnnl_memory_desc_t xany, user_in;
   for (int l = 0; l < n->nl; l++)
-    KPCN_TRY(choose_tag(n, l));
+    KPCN_TRY(kpcn_net_choose_tag(n, l));
   DN(dnnl_memory_desc_init_by_tag(&xany, 4, xd, adt, n->L[0].tag));
   const dnnl_dim_t ps = n->o.input_plane_stride ? (dnnl_dim_t)n->o.input_plane_stride : H * W;
   dnnl_dims_t xstrides = {a->n_inputs * ps, ps, W, 1};
   DN(dnnl_memory_desc_init_by_strides(&user_in, 4, xd, dnnl_f32, xstrides));
   for (int l = 0; l < n->nl; l++)
-    KPCN_TRY(build_layer(n, l, l == 0 ? &xany : &n->L[l - 1].dst_md, &scratch));
+    KPCN_TRY(kpcn_net_build_layer(n, l, l == 0 ? &xany : &n->L[l - 1].dst_md, &scratch));
   /* We asked backward for the exact forward layouts; make sure oneDNN honoured them. */
   for (int l = 0; l < n->nl; l++) {
     const layer *y = &n->L[l];
@@ -593,15 +279,15 @@ static kpcn_status build(kpcn_net *n) {
                        "backward-weights of conv layer %d",
                        l);
   }
-  KPCN_TRY(make_reorder(n, &n->in, &user_in, &n->L[0].src_md, &scratch));
+  KPCN_TRY(kpcn_net_make_reorder(n, &n->in, &user_in, &n->L[0].src_md, &scratch));
   const layer *last = &n->L[n->nl - 1];
   dnnl_dims_t od = {N, last->cout, H, W};
   dnnl_memory_desc_t user_out;
   DN(dnnl_memory_desc_init_by_tag(&user_out, 4, od, dnnl_f32, dnnl_nchw));
-  KPCN_TRY(make_reorder(n, &n->out, &last->dst_md, &user_out, &scratch));
+  KPCN_TRY(kpcn_net_make_reorder(n, &n->out, &last->dst_md, &user_out, &scratch));
   n->native_ok = logits_layout_of(&last->dst_md, last->cout, H, W, &n->native);
   if (n->o.training) {
-    KPCN_TRY(make_reorder(n, &n->dout_in, &user_out, &last->ddst_md, &scratch));
+    KPCN_TRY(kpcn_net_make_reorder(n, &n->dout_in, &user_out, &last->ddst_md, &scratch));
     /* dlogits in the logits' own layout (kpcn_net_backward_logits): f32 nets take them as
      * they are (the last layer has no ReLU, so backward never writes its dst gradient), bf16
      * nets convert them in place of layout (f32 -> bf16, same order: a streaming pass, where
@@ -609,10 +295,11 @@ static kpcn_status build(kpcn_net *n) {
     if (n->native_ok) {
       n->dout_direct = !last->has_relu && dnnl_memory_desc_equal(&last->dst_md, &last->ddst_md);
       if (!n->dout_direct)
-        KPCN_TRY(make_reorder(n, &n->dout_native, &last->dst_md, &last->ddst_md, &scratch));
+        KPCN_TRY(
+            kpcn_net_make_reorder(n, &n->dout_native, &last->dst_md, &last->ddst_md, &scratch));
     }
     if (n->o.input_grad)
-      KPCN_TRY(make_reorder(n, &n->dinput_out, &n->L[0].src_md, &user_in, &scratch));
+      KPCN_TRY(kpcn_net_make_reorder(n, &n->dinput_out, &n->L[0].src_md, &user_in, &scratch));
   }
   return bind_buffers(n, scratch);
 }
@@ -691,20 +378,20 @@ void kpcn_net_destroy(kpcn_net *n) {
     dnnl_memory_t ms[9] = {y->src, y->dst, y->w, y->bias, y->bw, y->dw, y->db, y->ddst, y->dsrc};
     for (int i = 0; i < 9; i++)
       if (ms[i]) dnnl_memory_destroy(ms[i]);
-    free_reorder(&y->w_in);
-    free_reorder(&y->bw_in);
-    free_reorder(&y->dw_out);
-    free_reorder(&y->src_in);
-    free_reorder(&y->dsrc_out);
+    kpcn_net_free_reorder(&y->w_in);
+    kpcn_net_free_reorder(&y->bw_in);
+    kpcn_net_free_reorder(&y->dw_out);
+    kpcn_net_free_reorder(&y->src_in);
+    kpcn_net_free_reorder(&y->dsrc_out);
     if (n->o.training) kpcn_aligned_free(y->act);
     kpcn_aligned_free(y->rin);
     kpcn_aligned_free(y->wflip);
   }
-  free_reorder(&n->in);
-  free_reorder(&n->out);
-  free_reorder(&n->dout_in);
-  free_reorder(&n->dout_native);
-  free_reorder(&n->dinput_out);
+  kpcn_net_free_reorder(&n->in);
+  kpcn_net_free_reorder(&n->out);
+  kpcn_net_free_reorder(&n->dout_in);
+  kpcn_net_free_reorder(&n->dout_native);
+  kpcn_net_free_reorder(&n->dinput_out);
   if (n->scratch_mem) dnnl_memory_destroy(n->scratch_mem);
   kpcn_aligned_free(n->xbuf);
   kpcn_aligned_free(n->rbuf);
@@ -733,12 +420,12 @@ kpcn_status kpcn_net_set_branch(kpcn_net *n, kpcn_branch b) {
 
 static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
   const kpcn_model *m = n->model;
-  KPCN_TRY(run_reorder(n, &n->in, input, n->xbuf));
+  KPCN_TRY(kpcn_net_run_reorder(n, &n->in, input, n->xbuf));
   for (int l = 0; l < n->nl; l++) {
     layer *y = &n->L[l];
-    KPCN_TRY(run_reorder_1t(n, &y->w_in, m->w[n->branch][l], y->wp));
+    KPCN_TRY(kpcn_net_run_reorder_1t(n, &y->w_in, m->w[n->branch][l], y->wp));
     if (y->src_in.prim)
-      KPCN_TRY(run_reorder(n, &y->src_in, n->L[l - 1].act, y->rin ? y->rin : n->rbuf));
+      KPCN_TRY(kpcn_net_run_reorder(n, &y->src_in, n->L[l - 1].act, y->rin ? y->rin : n->rbuf));
     DN(dnnl_memory_set_data_handle(y->bias, m->b[n->branch][l]));
     dnnl_exec_arg_t a[5] = {{DNNL_ARG_SRC, y->src},
                             {DNNL_ARG_WEIGHTS, y->w},
@@ -750,7 +437,7 @@ static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
     DN(dnnl_stream_wait(n->stream));
     n->st.fwd_conv_s += now_s() - t0;
   }
-  return logits ? run_reorder(n, &n->out, n->L[n->nl - 1].act, logits) : KPCN_OK;
+  return logits ? kpcn_net_run_reorder(n, &n->out, n->L[n->nl - 1].act, logits) : KPCN_OK;
 }
 
 kpcn_status kpcn_net_forward(kpcn_net *n, const float *input, float *logits) {
@@ -771,7 +458,7 @@ kpcn_status kpcn_net_forward_logits(kpcn_net *n, const float *input, const float
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_forward_logits: NULL argument");
   const int N = n->o.batch, H = n->o.height, W = n->o.width, C = n->L[n->nl - 1].cout;
   if (!n->native_ok && !n->planar_logits) {
-    n->planar_logits = net_alloc(n, sizeof(float) * (size_t)N * C * H * W, "planar logits");
+    n->planar_logits = kpcn_net_alloc(n, sizeof(float) * (size_t)N * C * H * W, "planar logits");
     if (!n->planar_logits) return KPCN_ERR_OUT_OF_MEMORY;
   }
   thr_guard g = thr_push(n->nt);
@@ -791,7 +478,8 @@ static kpcn_status backward(kpcn_net *n, const float *dlogits, float *dinput, in
   int cur = 0;
   const int direct = native && n->dout_direct;
   if (!direct)
-    KPCN_TRY(run_reorder(n, native ? &n->dout_native : &n->dout_in, dlogits, n->dbuf[cur]));
+    KPCN_TRY(
+        kpcn_net_run_reorder(n, native ? &n->dout_native : &n->dout_in, dlogits, n->dbuf[cur]));
   for (int l = n->nl - 1; l >= 0; l--) {
     layer *y = &n->L[l];
     double t0;
@@ -814,10 +502,11 @@ static kpcn_status backward(kpcn_net *n, const float *dlogits, float *dinput, in
     DN(dnnl_primitive_execute(y->bwdw, n->stream, 5, aw));
     DN(dnnl_stream_wait(n->stream));
     n->st.bwd_conv_s += now_s() - t0;
-    KPCN_TRY(run_reorder_1t(n, &y->dw_out, y->dwp, y->gw));
+    KPCN_TRY(kpcn_net_run_reorder_1t(n, &y->dw_out, y->dwp, y->gw));
     if (y->bwdd) {
-      if (y->bwdd_fwd) flip_weights(y, m->w[n->branch][l]);
-      KPCN_TRY(run_reorder_1t(n, &y->bw_in, y->bwdd_fwd ? y->wflip : m->w[n->branch][l], y->bwp));
+      if (y->bwdd_fwd) kpcn_net_flip_weights(y, m->w[n->branch][l]);
+      KPCN_TRY(kpcn_net_run_reorder_1t(n, &y->bw_in, y->bwdd_fwd ? y->wflip : m->w[n->branch][l],
+                                       y->bwp));
       DN(dnnl_memory_set_data_handle(y->dsrc, n->dbuf[cur ^ 1]));
       /* a forward primitive standing in for backward-data reads SRC and writes DST */
       dnnl_exec_arg_t ad[4] = {{y->bwdd_fwd ? DNNL_ARG_SRC : DNNL_ARG_DIFF_DST, y->ddst},
@@ -830,12 +519,12 @@ static kpcn_status backward(kpcn_net *n, const float *dlogits, float *dinput, in
       n->st.bwd_conv_s += now_s() - t0;
       /* into the previous layer's layout, over this layer's spent output gradient */
       if (y->dsrc_out.prim)
-        KPCN_TRY(run_reorder(n, &y->dsrc_out, n->dbuf[cur ^ 1], n->dbuf[cur]));
+        KPCN_TRY(kpcn_net_run_reorder(n, &y->dsrc_out, n->dbuf[cur ^ 1], n->dbuf[cur]));
       else
         cur ^= 1;
     }
   }
-  if (n->o.input_grad) KPCN_TRY(run_reorder(n, &n->dinput_out, n->dbuf[cur], dinput));
+  if (n->o.input_grad) KPCN_TRY(kpcn_net_run_reorder(n, &n->dinput_out, n->dbuf[cur], dinput));
   return KPCN_OK;
 }
 

@@ -1,0 +1,265 @@
+/* One conv layer of a kpcn_net: its activation layout (choose_tag), its forward primitive
+ * (direct, or Winograd for an fp32 inference logits layer) and, for training nets, its
+ * backward-weights, backward-data (or a forward conv standing in for it) and ReLU-backward
+ * primitives, with the weight reorders from the model's OIHW arrays. See net.c for the
+ * net as a whole. */
+#include "nn/net_internal.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Winograd F(2,3) for the logits layer when it is 3x3 undilated (fp32 inference): oneDNN
+ * implements it only on channel-blocked (nChw16c) activations, so the layer gets its own
+ * input layout (build_layer adds the reorder from the previous layer's) and writes blocked
+ * logits, which the kpa layer reads in place. Measured on the cpu preset (1024x534 tiles,
+ * Zen 4): 48->121 channels 182 ms instead of ~300 direct (+18 ms for the input reorder);
+ * the 36->48 first layer was slower than direct (97 vs ~88 ms, plus a reorder), and
+ * inner layers would pay two reorders, so only the last layer uses it. Not an error when
+ * oneDNN has no such kernel (other ISAs): y->winograd stays 0 and the layer is built
+ * direct. */
+static kpcn_status try_winograd(kpcn_net *n, int l, dnnl_memory_desc_t wany, dnnl_memory_desc_t bmd,
+                                size_t *scratch) {
+  layer *y = &n->L[l];
+  dnnl_dims_t sd = {n->o.batch, y->cin, n->o.height, n->o.width};
+  dnnl_dims_t dd = {n->o.batch, y->cout, n->o.height, n->o.width};
+  dnnl_dims_t strides = {1, 1}, dil = {0, 0}, pad = {1, 1};
+  dnnl_memory_desc_t smd, dmd;
+  DN(dnnl_memory_desc_init_by_tag(&smd, 4, sd, dnnl_f32, dnnl_nChw16c));
+  DN(dnnl_memory_desc_init_by_tag(&dmd, 4, dd, dnnl_f32, dnnl_nChw16c));
+  dnnl_convolution_desc_t cd;
+  DN(dnnl_dilated_convolution_forward_desc_init(&cd, dnnl_forward_inference,
+                                                dnnl_convolution_winograd, &smd, &wany, &bmd, &dmd,
+                                                strides, dil, pad, pad));
+  if (dnnl_primitive_desc_create(&y->fwd_pd, &cd, y->has_relu ? n->attr_relu : n->attr, n->eng,
+                                 NULL) != dnnl_success) {
+    y->fwd_pd = NULL;
+    return KPCN_OK;
+  }
+  size_t s = kpcn_net_pd_scratch(y->fwd_pd);
+  /* For some sizes (a 1024x540 tile of the cpu preset's logits layer) oneDNN 2.6 schedules
+   * the Winograd transform over the whole image, with a scratchpad of about 3x the layer's
+   * output; the direct convolution is then the better trade (a few % slower, no 0.9 GB). */
+  const size_t dst_bytes = sizeof(float) * (size_t)n->o.batch * (size_t)((y->cout + 15) & ~15) *
+                           (size_t)n->o.height * (size_t)n->o.width;
+  if (s > dst_bytes) {
+    dnnl_primitive_desc_destroy(y->fwd_pd);
+    y->fwd_pd = NULL;
+    return KPCN_OK;
+  }
+  if (s > *scratch) *scratch = s;
+  y->winograd = 1;
+  return KPCN_OK;
+}
+
+int kpcn_net_impl_is(const_dnnl_primitive_desc_t pd, const char *prefix) {
+  const char *impl = NULL;
+  return dnnl_primitive_desc_query(pd, dnnl_query_impl_info_str, 0, &impl) == dnnl_success &&
+         impl && !strncmp(impl, prefix, strlen(prefix));
+}
+
+/* The gradient of a stride-1 "same" convolution with respect to its input is the forward
+ * convolution of the output gradient with the weights transposed (in <-> out channels) and
+ * flipped in space, at the same dilation and padding. Where oneDNN 2.6 has no direct
+ * backward-data kernel for a layer (f32 nhwc with dilation 8 on 64 x 64 patches: it falls back
+ * to im2col + GEMM, 18.5 ms a call against 8.5 for the forward brgconv), the layer's
+ * backward-data runs as that forward primitive instead (y->bwdd_pd replaced, y->bwdd_fwd
+ * set; the flipped OIHW weights are built in y->wflip before each use). Kept only when the
+ * forward kernel is not itself a fallback. *iohw: the flipped weights' user descriptor. */
+static kpcn_status try_bwdd_as_forward(kpcn_net *n, int l, const dnnl_dims_t strides,
+                                       const dnnl_dims_t dil, const dnnl_dims_t pl,
+                                       const dnnl_dims_t pr, dnnl_memory_desc_t *iohw,
+                                       size_t *scratch) {
+  layer *y = &n->L[l];
+  if (!kpcn_net_impl_is(y->bwdd_pd, "x64:gemm") && !kpcn_net_impl_is(y->bwdd_pd, "gemm") &&
+      !kpcn_net_impl_is(y->bwdd_pd, "ref"))
+    return KPCN_OK;
+  dnnl_dims_t wd = {y->cin, y->cout, y->k, y->k};
+  dnnl_memory_desc_t wany;
+  DN(dnnl_memory_desc_init_by_tag(&wany, 4, wd, dnnl_f32, dnnl_format_tag_any));
+  DN(dnnl_memory_desc_init_by_tag(iohw, 4, wd, dnnl_f32, dnnl_oihw));
+  dnnl_convolution_desc_t cd;
+  DN(dnnl_dilated_convolution_forward_desc_init(&cd, dnnl_forward_inference,
+                                                dnnl_convolution_direct, &y->ddst_md, &wany, NULL,
+                                                &y->src_md, strides, dil, pl, pr));
+  dnnl_primitive_desc_t pd;
+  if (dnnl_primitive_desc_create(&pd, &cd, n->attr, n->eng, NULL) != dnnl_success) return KPCN_OK;
+  const dnnl_memory_desc_t *s = dnnl_primitive_desc_query_md(pd, dnnl_query_src_md, 0),
+                           *d = dnnl_primitive_desc_query_md(pd, dnnl_query_dst_md, 0);
+  if (kpcn_net_impl_is(pd, "ref") || kpcn_net_impl_is(pd, "gemm") ||
+      kpcn_net_impl_is(pd, "x64:gemm") || !s || !d || !dnnl_memory_desc_equal(s, &y->ddst_md) ||
+      !dnnl_memory_desc_equal(d, &y->src_md)) {
+    dnnl_primitive_desc_destroy(pd);
+    return KPCN_OK;
+  }
+  y->wflip =
+      kpcn_net_alloc(n, sizeof(float) * (size_t)y->cin * y->cout * y->k * y->k, "net weights");
+  if (!y->wflip) {
+    dnnl_primitive_desc_destroy(pd);
+    return KPCN_ERR_OUT_OF_MEMORY;
+  }
+  if (kpcn_net_impl_is(y->bwdd_pd, "ref")) n->n_slow--; /* make_pd counted the one replaced */
+  dnnl_primitive_desc_destroy(y->bwdd_pd);
+  y->bwdd_pd = pd;
+  y->bwdd_fwd = 1;
+  n->n_bwdd_fwd++;
+  size_t sz = kpcn_net_pd_scratch(pd);
+  if (sz > *scratch) *scratch = sz;
+  return KPCN_OK;
+}
+
+/* wflip[i][o][a][b] = w[o][i][k-1-a][k-1-b] */
+void kpcn_net_flip_weights(const layer *y, const float *w) {
+  const int k = y->k, kk = k * k;
+  for (int o = 0; o < y->cout; o++)
+    for (int i = 0; i < y->cin; i++)
+      for (int t = 0; t < kk; t++)
+        y->wflip[((size_t)i * y->cout + o) * kk + (kk - 1 - t)] =
+            w[((size_t)o * y->cin + i) * kk + t];
+}
+
+/* The activation layout of layer l. Explicit layouts apply to every layer. AUTO: nhwc, except
+ * for f32 training nets, where each layer runs channel-blocked (nChw16c) when oneDNN has a
+ * jit forward kernel for it there and nhwc otherwise (its reference kernel serves the
+ * dilation-8 layer in nChw16c), with reorders between layers of different layouts. Why:
+ * oneDNN 2.6's f32 backward-weights kernel is ~1.4x faster on nChw16c than on nhwc (cpu
+ * preset, batch 16 of 64 x 64: 8.5 vs 12 ms per 48-channel layer), while the inference
+ * forward is best in nhwc (brgconv) and bf16 has its brgconv kernels only there. */
+kpcn_status kpcn_net_choose_tag(kpcn_net *n, int l) {
+  layer *y = &n->L[l];
+  y->tag = n->o.layout == KPCN_LAYOUT_NCHW16C ? dnnl_nChw16c : dnnl_nhwc;
+  if (n->o.layout != KPCN_LAYOUT_AUTO || !n->o.training || n->o.precision != KPCN_PREC_F32)
+    return KPCN_OK;
+  const kpcn_arch *a = &n->model->arch;
+  const int k = a->conv_size[l], d = a->dilation[l], pad = d * (k - 1) / 2;
+  dnnl_dims_t sd = {n->o.batch, kpcn_arch_layer_in(a, l), n->o.height, n->o.width},
+              dd = {n->o.batch, kpcn_arch_layer_out(a, l), n->o.height, n->o.width},
+              wd = {dd[1], sd[1], k, k}, bd = {dd[1]}, strides = {1, 1}, dil = {d - 1, d - 1},
+              pads = {pad, pad};
+  dnnl_memory_desc_t smd, dmd, wmd, bmd;
+  DN(dnnl_memory_desc_init_by_tag(&smd, 4, sd, dnnl_f32, dnnl_nChw16c));
+  DN(dnnl_memory_desc_init_by_tag(&dmd, 4, dd, dnnl_f32, dnnl_nChw16c));
+  DN(dnnl_memory_desc_init_by_tag(&wmd, 4, wd, dnnl_f32, dnnl_format_tag_any));
+  DN(dnnl_memory_desc_init_by_tag(&bmd, 1, bd, dnnl_f32, dnnl_x));
+  dnnl_convolution_desc_t cd;
+  DN(dnnl_dilated_convolution_forward_desc_init(&cd, dnnl_forward_training, dnnl_convolution_direct,
+                                                &smd, &wmd, &bmd, &dmd, strides, dil, pads, pads));
+  dnnl_primitive_desc_t pd;
+  if (dnnl_primitive_desc_create(&pd, &cd, n->attr, n->eng, NULL) != dnnl_success) return KPCN_OK;
+  if (!kpcn_net_impl_is(pd, "ref")) y->tag = dnnl_nChw16c;
+  dnnl_primitive_desc_destroy(pd);
+  return KPCN_OK;
+}
+
+/* Builds the primitives of layer l; src_md is the previous layer's destination. */
+kpcn_status kpcn_net_build_layer(kpcn_net *n, int l, const dnnl_memory_desc_t *src_md,
+                                 size_t *scratch) {
+  const kpcn_arch *a = &n->model->arch;
+  layer *y = &n->L[l];
+  y->cin = kpcn_arch_layer_in(a, l);
+  y->cout = kpcn_arch_layer_out(a, l);
+  y->k = a->conv_size[l];
+  y->d = a->dilation[l];
+  y->has_relu = l < a->n_hidden;
+  const int bf = n->o.precision == KPCN_PREC_BF16;
+  const dnnl_data_type_t adt = bf ? dnnl_bf16 : dnnl_f32;
+  const dnnl_data_type_t ddt = (bf && y->has_relu) ? dnnl_bf16 : dnnl_f32; /* logits stay f32 */
+  const int N = n->o.batch, H = n->o.height, W = n->o.width;
+  dnnl_dims_t wd = {y->cout, y->cin, y->k, y->k}, bd = {y->cout}, dd = {N, y->cout, H, W};
+  dnnl_dims_t strides = {1, 1}, dil = {y->d - 1, y->d - 1};
+  const int pad = y->d * (y->k - 1) / 2;
+  dnnl_dims_t pl = {pad, pad}, pr = {pad, pad};
+  dnnl_memory_desc_t wany, bmd, dany;
+  DN(dnnl_memory_desc_init_by_tag(&wany, 4, wd, adt, dnnl_format_tag_any));
+  DN(dnnl_memory_desc_init_by_tag(&bmd, 1, bd, dnnl_f32, dnnl_x));
+  /* A fixed activation layout per layer (choose_tag): with "any" oneDNN may pick different
+   * layouts for consecutive layers and then find no optimized kernel for the pair. */
+  const dnnl_format_tag_t tag = y->tag;
+  DN(dnnl_memory_desc_init_by_tag(&dany, 4, dd, ddt, tag));
+  /* the layer's own input layout; src_md (the previous output) differs after a Winograd layer */
+  dnnl_dims_t sd = {N, y->cin, H, W};
+  dnnl_memory_desc_t sany;
+  DN(dnnl_memory_desc_init_by_tag(&sany, 4, sd, adt, tag));
+  dnnl_convolution_desc_t cd;
+  if (!n->o.training && !n->o.direct_conv && !bf && y->k == 3 && y->d == 1 && l == n->nl - 1)
+    KPCN_TRY(try_winograd(n, l, wany, bmd, scratch));
+  if (!y->winograd) {
+    DN(dnnl_dilated_convolution_forward_desc_init(
+        &cd, n->o.training ? dnnl_forward_training : dnnl_forward_inference,
+        dnnl_convolution_direct, &sany, &wany, &bmd, &dany, strides, dil, pl, pr));
+    KPCN_TRY(kpcn_net_make_pd(n, &y->fwd_pd, &cd, y->has_relu ? n->attr_relu : n->attr, NULL,
+                              "forward", l, scratch));
+  }
+  y->src_md = *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_src_md, 0);
+  y->w_md = *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_weights_md, 0);
+  y->dst_md = *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_dst_md, 0);
+  if (l > 0 && !dnnl_memory_desc_equal(src_md, &y->src_md)) {
+    KPCN_TRY(kpcn_net_make_reorder(n, &y->src_in, src_md, &y->src_md, scratch));
+    n->n_relayout++;
+  }
+  const char *impl = NULL;
+  dnnl_primitive_desc_query(y->fwd_pd, dnnl_query_impl_info_str, 0, &impl);
+  snprintf(n->impl[l], sizeof n->impl[l], "%s", impl ? impl : "?");
+  DN(dnnl_primitive_create(&y->fwd, y->fwd_pd));
+  KPCN_TRY(kpcn_net_mem(n, &y->src, &y->src_md, NULL));
+  KPCN_TRY(kpcn_net_mem(n, &y->dst, &y->dst_md, NULL));
+  KPCN_TRY(kpcn_net_mem(n, &y->w, &y->w_md, NULL));
+  KPCN_TRY(kpcn_net_mem(n, &y->bias, &bmd, NULL));
+  dnnl_memory_desc_t oihw;
+  DN(dnnl_memory_desc_init_by_tag(&oihw, 4, wd, dnnl_f32, dnnl_oihw));
+  KPCN_TRY(kpcn_net_make_reorder(n, &y->w_in, &oihw, &y->w_md, scratch));
+  if (!n->o.training) return KPCN_OK;
+
+  /* backward: weights (always), data (for l > 0, or l == 0 when input_grad). bf16 nets train
+   * mixed-precision: activations, weight copies and output gradients in bf16 (oneDNN's bf16
+   * backward kernels take bf16 diff_dst only, so the f32 logits' gradient is rounded too),
+   * weight and bias gradients accumulated and returned in f32 for the f32 master weights. */
+  y->ddst_md = y->dst_md;
+  if (bf && !y->has_relu) DN(dnnl_memory_desc_init_by_tag(&y->ddst_md, 4, dd, dnnl_bf16, tag));
+  dnnl_memory_desc_t dwany;
+  DN(dnnl_memory_desc_init_by_tag(&dwany, 4, wd, dnnl_f32, dnnl_format_tag_any));
+  dnnl_convolution_desc_t bwd;
+  DN(dnnl_dilated_convolution_backward_weights_desc_init(
+      &bwd, dnnl_convolution_direct, &y->src_md, &dwany, &bmd, &y->ddst_md, strides, dil, pl, pr));
+  KPCN_TRY(
+      kpcn_net_make_pd(n, &y->bwdw_pd, &bwd, n->attr, y->fwd_pd, "backward-weights", l, scratch));
+  y->dw_md = *dnnl_primitive_desc_query_md(y->bwdw_pd, dnnl_query_diff_weights_md, 0);
+  DN(dnnl_primitive_create(&y->bwdw, y->bwdw_pd));
+  KPCN_TRY(kpcn_net_mem(n, &y->dw, &y->dw_md, NULL));
+  KPCN_TRY(kpcn_net_mem(n, &y->db, &bmd, NULL));
+  KPCN_TRY(kpcn_net_mem(n, &y->ddst, &y->ddst_md, NULL));
+  KPCN_TRY(kpcn_net_make_reorder(n, &y->dw_out, &y->dw_md, &oihw, scratch));
+  if (l > 0 || n->o.input_grad) {
+    DN(dnnl_dilated_convolution_backward_data_desc_init(&bwd, dnnl_convolution_direct, &y->src_md,
+                                                        &wany, &y->ddst_md, strides, dil, pl, pr));
+    KPCN_TRY(
+        kpcn_net_make_pd(n, &y->bwdd_pd, &bwd, n->attr, y->fwd_pd, "backward-data", l, scratch));
+    const dnnl_memory_desc_t *from = &oihw;
+    dnnl_memory_desc_t iohw;
+    if (!bf) KPCN_TRY(try_bwdd_as_forward(n, l, strides, dil, pl, pr, &iohw, scratch));
+    if (y->bwdd_fwd) from = &iohw;
+    y->bw_md = *dnnl_primitive_desc_query_md(y->bwdd_pd, dnnl_query_weights_md, 0);
+    DN(dnnl_primitive_create(&y->bwdd, y->bwdd_pd));
+    KPCN_TRY(kpcn_net_mem(n, &y->bw, &y->bw_md, NULL));
+    KPCN_TRY(kpcn_net_mem(n, &y->dsrc, &y->src_md, NULL));
+    KPCN_TRY(kpcn_net_make_reorder(n, &y->bw_in, from, &y->bw_md, scratch));
+    if (y->src_in.prim)
+      KPCN_TRY(kpcn_net_make_reorder(n, &y->dsrc_out, &y->src_md, &n->L[l - 1].ddst_md, scratch));
+  }
+  if (y->has_relu) {
+    /* eltwise backward needs a forward hint; ReLU derivative from the stored output */
+    dnnl_eltwise_desc_t ef, eb;
+    dnnl_primitive_desc_t hint;
+    DN(dnnl_eltwise_forward_desc_init(&ef, dnnl_forward_training, dnnl_eltwise_relu_use_dst_for_bwd,
+                                      &y->dst_md, 0.f, 0.f));
+    KPCN_TRY(kpcn_net_make_pd(n, &hint, &ef, n->attr, NULL, "relu-forward", l, scratch));
+    DN(dnnl_eltwise_backward_desc_init(&eb, dnnl_eltwise_relu_use_dst_for_bwd, &y->dst_md,
+                                       &y->dst_md, 0.f, 0.f));
+    kpcn_status s =
+        kpcn_net_make_pd(n, &y->relu_pd, &eb, n->attr, hint, "relu-backward", l, scratch);
+    dnnl_primitive_desc_destroy(hint);
+    KPCN_TRY(s);
+    DN(dnnl_primitive_create(&y->relu, y->relu_pd));
+  }
+  return KPCN_OK;
+}
