@@ -5,6 +5,7 @@
  * net as a whole. */
 #include "nn/net_internal.h"
 
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -119,18 +120,22 @@ void kpcn_net_flip_weights(const layer *y, const float *w) {
 }
 
 /* The activation layout of layer l. Explicit layouts apply to every layer. AUTO: nhwc, except
- * for f32 training nets, where each layer runs channel-blocked (nChw16c) when oneDNN has a
- * jit forward kernel for it there and nhwc otherwise (its reference kernel serves the
- * dilation-8 layer in nChw16c), with reorders between layers of different layouts. Why:
- * oneDNN 2.6's f32 backward-weights kernel is ~1.4x faster on nChw16c than on nhwc (cpu
- * preset, batch 16 of 64 x 64: 8.5 vs 12 ms per 48-channel layer), while the inference
- * forward is best in nhwc (brgconv) and bf16 has its brgconv kernels only there. */
+ * for f32 training nets, where a layer runs channel-blocked (nChw16c) when oneDNN has a jit
+ * forward kernel for it there (its reference kernel serves the dilation-8 layer in nChw16c)
+ * and padding its channels to multiples of 16 adds at most 15 % to its work, with reorders
+ * between layers of different layouts. Why: oneDNN 2.6's f32 backward-weights kernel is ~1.4x
+ * faster on nChw16c than on nhwc (cpu preset, batch 16 of 64 x 64: 8.5 vs 12 ms per
+ * 48-channel layer; 121 logits pad to 128), while the padding ate the gain where channels are
+ * far from a multiple of 16 (paper preset, 100 -> 112: 288-315 vs 321 GFLOP/s in nhwc); the
+ * inference forward is best in nhwc (brgconv) and bf16 has its brgconv kernels only there. */
 kpcn_status kpcn_net_choose_tag(kpcn_net *n, int l) {
   layer *y = &n->L[l];
   y->tag = n->o.layout == KPCN_LAYOUT_NCHW16C ? dnnl_nChw16c : dnnl_nhwc;
   if (n->o.layout != KPCN_LAYOUT_AUTO || !n->o.training || n->o.precision != KPCN_PREC_F32)
     return KPCN_OK;
   const kpcn_arch *a = &n->model->arch;
+  const double cin = kpcn_arch_layer_in(a, l), cout = kpcn_arch_layer_out(a, l);
+  if (16 * ceil(cin / 16) * 16 * ceil(cout / 16) > 1.15 * cin * cout) return KPCN_OK;
   const int k = a->conv_size[l], d = a->dilation[l], pad = d * (k - 1) / 2;
   dnnl_dims_t sd = {n->o.batch, kpcn_arch_layer_in(a, l), n->o.height, n->o.width},
               dd = {n->o.batch, kpcn_arch_layer_out(a, l), n->o.height, n->o.width},
