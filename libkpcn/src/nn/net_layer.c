@@ -59,6 +59,12 @@ int kpcn_net_impl_is(const_dnnl_primitive_desc_t pd, const char *prefix) {
          impl && !strncmp(impl, prefix, strlen(prefix));
 }
 
+/* oneDNN's generic fallbacks (reference loops, im2col + GEMM) rather than a direct kernel */
+static int is_fallback(const_dnnl_primitive_desc_t pd) {
+  return kpcn_net_impl_is(pd, "ref") || kpcn_net_impl_is(pd, "gemm") ||
+         kpcn_net_impl_is(pd, "x64:gemm");
+}
+
 /* The gradient of a stride-1 "same" convolution with respect to its input is the forward
  * convolution of the output gradient with the weights transposed (in <-> out channels) and
  * flipped in space, at the same dilation and padding. Where oneDNN 2.6 has no direct
@@ -72,9 +78,7 @@ static kpcn_status try_bwdd_as_forward(kpcn_net *n, int l, const dnnl_dims_t str
                                        const dnnl_dims_t pr, dnnl_memory_desc_t *iohw,
                                        size_t *scratch) {
   layer *y = &n->L[l];
-  if (!kpcn_net_impl_is(y->bwdd_pd, "x64:gemm") && !kpcn_net_impl_is(y->bwdd_pd, "gemm") &&
-      !kpcn_net_impl_is(y->bwdd_pd, "ref"))
-    return KPCN_OK;
+  if (!is_fallback(y->bwdd_pd)) return KPCN_OK;
   dnnl_dims_t wd = {y->cin, y->cout, y->k, y->k};
   dnnl_memory_desc_t wany;
   DN(dnnl_memory_desc_init_by_tag(&wany, 4, wd, dnnl_f32, dnnl_format_tag_any));
@@ -87,8 +91,7 @@ static kpcn_status try_bwdd_as_forward(kpcn_net *n, int l, const dnnl_dims_t str
   if (dnnl_primitive_desc_create(&pd, &cd, n->attr, n->eng, NULL) != dnnl_success) return KPCN_OK;
   const dnnl_memory_desc_t *s = dnnl_primitive_desc_query_md(pd, dnnl_query_src_md, 0),
                            *d = dnnl_primitive_desc_query_md(pd, dnnl_query_dst_md, 0);
-  if (kpcn_net_impl_is(pd, "ref") || kpcn_net_impl_is(pd, "gemm") ||
-      kpcn_net_impl_is(pd, "x64:gemm") || !s || !d || !dnnl_memory_desc_equal(s, &y->ddst_md) ||
+  if (is_fallback(pd) || !s || !d || !dnnl_memory_desc_equal(s, &y->ddst_md) ||
       !dnnl_memory_desc_equal(d, &y->src_md)) {
     dnnl_primitive_desc_destroy(pd);
     return KPCN_OK;
