@@ -226,10 +226,22 @@ bool cmd_ch(Context &ctx, const Modifiers &, const std::vector<std::string> &a, 
   return true;
 }
 
+// $OCIO; else the config installed next to this executable (<bin>/../share/kpcn/ocio: an
+// install moved or made with `cmake --install --prefix` elsewhere); else the source tree's
+// (a build-tree kpcntool); else the configured install path.
 std::string default_ocio_config() {
   const char *env = std::getenv("OCIO");
   if (env && *env) return env;
   struct stat st;
+  char exe[4096];
+  ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+  if (n > 0) {
+    exe[n] = '\0';
+    std::string dir(exe);
+    dir.erase(dir.find_last_of('/') + 1);
+    std::string installed = dir + "../share/kpcn/ocio/config.ocio";
+    if (stat(installed.c_str(), &st) == 0) return installed;
+  }
   if (stat(KPCN_DEFAULT_OCIO, &st) == 0) return KPCN_DEFAULT_OCIO;
   return KPCN_INSTALLED_OCIO;
 }
