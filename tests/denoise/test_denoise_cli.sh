@@ -13,7 +13,19 @@ fail() { echo "FAIL: $*"; exit 1; }
 # files may differ in header metadata (command history), so compare pixels
 "$T" --json "$D/out_t.exr" "$D/out.exr" --l1 >"$D/l1.json" || fail "l1"
 grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/l1.json" || fail "tile=16 differs from untiled: $(cat "$D/l1.json")"
-"$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":bf16=1 -o "$D/out_b.exr" || fail "bf16"
+# bf16 needs AVX-512 (oneDNN 2.6); elsewhere (or under ONEDNN_MAX_CPU_ISA=AVX2) it is refused
+# with a message and no output file
+bf16=yes
+grep -qw avx512f /proc/cpuinfo || bf16=no
+case "${ONEDNN_MAX_CPU_ISA:-}" in SSE* | sse* | AVX | avx | AVX2* | avx2*) bf16=no ;; esac
+if [ $bf16 = yes ]; then
+  "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":bf16=1 -o "$D/out_b.exr" || fail "bf16"
+else
+  "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":bf16=1 -o "$D/out_b.exr" 2>"$D/b.err" &&
+    fail "bf16 accepted without AVX-512"
+  grep -q "bf16 is not available on this CPU" "$D/b.err" || fail "bf16 refusal unclear: $(cat "$D/b.err")"
+  [ -e "$D/out_b.exr" ] && fail "bf16 refusal left an output file"
+fi
 # self-ensemble: differs from the plain output, equals a mirrored input's result mirrored
 "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":ensemble=8 -o "$D/out_e.exr" || fail "ensemble"
 "$T" "$D/aov.exr" --mirror --denoise:model="$D/model.safetensors":ensemble=8 --mirror \

@@ -1,4 +1,5 @@
 #define _GNU_SOURCE
+#include "core/internal.h"
 #include "testutil.h"
 #include <stdlib.h>
 #include <string.h>
@@ -57,4 +58,10 @@ char *kt_slurp(const char *path, long *len) {
   b[n] = 0;
   if (len) *len = n;
   return b;
+}
+
+int kt_have_bf16(const char *what) {
+  if (kpcn_cpu_allows_avx512()) return 1;
+  printf("%s: bf16 skipped (no AVX-512 here)\n", what);
+  return 0;
 }

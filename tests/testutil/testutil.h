@@ -33,6 +33,10 @@ extern int kt_checks;
 
 /* Prints "N passed, N failed" and returns the process exit code. */
 int kt_summary(const char *suite);
+/* Whether bf16 nets can run here: oneDNN 2.6 has bf16 convolutions on AVX-512 CPUs only (and
+ * not under ONEDNN_MAX_CPU_ISA=AVX2, which the *_avx2 tests set); elsewhere nets refuse bf16
+ * with a message (test_denoise_kpcn checks it). Prints "<what>: bf16 skipped" when not. */
+int kt_have_bf16(const char *what);
 
 /* Path helpers: a fresh temp dir for this test process, and a file path inside it. */
 const char *kt_tmpdir(void);

@@ -278,10 +278,11 @@ kpcn_status kpcn_net_params(kpcn_net *net, kpcn_param *out, int max);
 typedef struct kpcn_net_stats {
   double fwd_s, fwd_conv_s, bwd_s, bwd_conv_s;
   long n_fwd, n_bwd;
-  size_t bytes;   /* memory held by the net (activations, scratchpad, weight copies) */
-  int n_slow;     /* primitives running oneDNN's slow reference ("ref:") implementation */
-  int n_bwdd_fwd; /* layers whose backward-data runs as a forward conv (see net.c) */
-  int n_relayout; /* layers whose input is reordered from the previous layer's layout */
+  size_t bytes;         /* memory held by the net (activations, scratchpad, weight copies) */
+  int n_slow;           /* primitives running oneDNN's slow reference ("ref:") implementation */
+  int n_bwdd_fwd;       /* layers whose backward-data runs as a forward conv (see net.c) */
+  int n_relayout;       /* layers whose input is reordered from the previous layer's layout */
+  int n_space_to_batch; /* dilated inference layers run undilated on d*d sub-images (net.c) */
 } kpcn_net_stats;
 void kpcn_net_get_stats(const kpcn_net *net, kpcn_net_stats *s);
 /* Name of the oneDNN implementation chosen for conv layer l forward ("brgconv:..."). */

@@ -41,6 +41,12 @@ void kpcn_abort_file(const char *tmp);
 unsigned kpcn_fast_fp_begin(int nthreads);
 void kpcn_fast_fp_end(unsigned saved, int nthreads);
 
+/* Whether libkpcn's own AVX-512 kernels may run: the CPU has AVX-512F and the oneDNN ISA cap
+ * ($ONEDNN_MAX_CPU_ISA, or the older $DNNL_MAX_CPU_ISA) does not name a level below it
+ * (SSE41, AVX, AVX2, AVX2_VNNI...). One variable then makes both oneDNN and kpcn run as on
+ * an AVX2 machine, which is how the tests cover the fallback paths on an AVX-512 host. */
+int kpcn_cpu_allows_avx512(void);
+
 #define KPCN_TRY(expr)                                                                             \
   do {                                                                                             \
     kpcn_status _s = (expr);                                                                       \

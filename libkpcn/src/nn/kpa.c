@@ -260,7 +260,7 @@ __attribute__((target("avx512f"))) static void softmax16(const float *L0,
 
 static int have_avx512(void) {
 #ifdef KPCN_HAVE_T16
-  return __builtin_cpu_supports("avx512f");
+  return kpcn_cpu_allows_avx512();
 #else
   return 0;
 #endif

@@ -103,6 +103,12 @@ kpcn_status kpcn_net_make_pd(kpcn_net *n, dnnl_primitive_desc_t *pd, const void 
                              const_dnnl_primitive_attr_t attr, const_dnnl_primitive_desc_t hint,
                              const char *what, int l, size_t *scratch) {
   dnnl_status_t d = dnnl_primitive_desc_create(pd, desc, attr, n->eng, hint);
+  /* oneDNN 2.6 has bf16 convolutions on AVX-512 CPUs only (emulated without AVX512_BF16). */
+  if (d == dnnl_unimplemented && n->o.precision == KPCN_PREC_BF16)
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                     "bf16 is not available on this CPU: oneDNN has no bf16 %s implementation "
+                     "for conv layer %d (it needs AVX-512); run in fp32 instead",
+                     what, l);
   if (d != dnnl_success)
     return kpcn_fail(d == dnnl_unimplemented ? KPCN_ERR_UNSUPPORTED : KPCN_ERR_INTERNAL,
                      "oneDNN has no %s implementation for conv layer %d (%s)", what, l,
@@ -168,6 +174,15 @@ static kpcn_status bind_buffers(kpcn_net *n, size_t scratch) {
     n->pp[0] = kpcn_net_alloc(n, pp[0], "net activations");
     n->pp[1] = kpcn_net_alloc(n, pp[1] ? pp[1] : 64, "net activations");
     if (!n->pp[0] || !n->pp[1]) return KPCN_ERR_OUT_OF_MEMORY;
+    size_t sb[2] = {0, 0};
+    for (int l = 0; l < nl; l++)
+      if (n->L[l].s2b) {
+        if (md_size(&n->L[l].src_md) > sb[0]) sb[0] = md_size(&n->L[l].src_md);
+        if (md_size(&n->L[l].dst_md) > sb[1]) sb[1] = md_size(&n->L[l].dst_md);
+      }
+    for (int i = 0; i < 2 && sb[i]; i++)
+      if (!(n->sbuf[i] = kpcn_net_alloc(n, sb[i], "net space-to-batch activations")))
+        return KPCN_ERR_OUT_OF_MEMORY;
   }
   char *wp = n->wbuf;
   float *gp = n->grads;
@@ -203,6 +218,10 @@ static kpcn_status bind_buffers(kpcn_net *n, size_t scratch) {
                                            : y->src_in.prim ? n->rbuf
                                                             : n->L[l - 1].act));
     DN(dnnl_memory_set_data_handle(y->dst, y->act));
+    if (y->s2b) {
+      DN(dnnl_memory_set_data_handle(y->ssrc, n->sbuf[0]));
+      DN(dnnl_memory_set_data_handle(y->sdst, n->sbuf[1]));
+    }
   }
   return KPCN_OK;
 }
@@ -375,9 +394,12 @@ void kpcn_net_destroy(kpcn_net *n) {
       if (ps[i]) dnnl_primitive_destroy(ps[i]);
       if (pds[i]) dnnl_primitive_desc_destroy(pds[i]);
     }
-    dnnl_memory_t ms[9] = {y->src, y->dst, y->w, y->bias, y->bw, y->dw, y->db, y->ddst, y->dsrc};
-    for (int i = 0; i < 9; i++)
+    dnnl_memory_t ms[11] = {y->src, y->dst,  y->w,    y->bias, y->bw,  y->dw,
+                            y->db,  y->ddst, y->dsrc, y->ssrc, y->sdst};
+    for (int i = 0; i < 11; i++)
       if (ms[i]) dnnl_memory_destroy(ms[i]);
+    kpcn_net_free_reorder(&y->s2b_in);
+    kpcn_net_free_reorder(&y->s2b_out);
     kpcn_net_free_reorder(&y->w_in);
     kpcn_net_free_reorder(&y->bw_in);
     kpcn_net_free_reorder(&y->dw_out);
@@ -397,6 +419,8 @@ void kpcn_net_destroy(kpcn_net *n) {
   kpcn_aligned_free(n->rbuf);
   kpcn_aligned_free(n->pp[0]);
   kpcn_aligned_free(n->pp[1]);
+  kpcn_aligned_free(n->sbuf[0]);
+  kpcn_aligned_free(n->sbuf[1]);
   kpcn_aligned_free(n->dbuf[0]);
   kpcn_aligned_free(n->dbuf[1]);
   kpcn_aligned_free(n->wbuf);
@@ -427,15 +451,21 @@ static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
     if (y->src_in.prim)
       KPCN_TRY(kpcn_net_run_reorder(n, &y->src_in, n->L[l - 1].act, y->rin ? y->rin : n->rbuf));
     DN(dnnl_memory_set_data_handle(y->bias, m->b[n->branch][l]));
-    dnnl_exec_arg_t a[5] = {{DNNL_ARG_SRC, y->src},
+    if (y->s2b) { /* gather the d*d sub-images (the layer's src memory holds the input) */
+      void *src = NULL;
+      DN(dnnl_memory_get_data_handle(y->src, &src));
+      KPCN_TRY(kpcn_net_run_reorder(n, &y->s2b_in, src, n->sbuf[0]));
+    }
+    dnnl_exec_arg_t a[5] = {{DNNL_ARG_SRC, y->s2b ? y->ssrc : y->src},
                             {DNNL_ARG_WEIGHTS, y->w},
                             {DNNL_ARG_BIAS, y->bias},
-                            {DNNL_ARG_DST, y->dst},
+                            {DNNL_ARG_DST, y->s2b ? y->sdst : y->dst},
                             {DNNL_ARG_SCRATCHPAD, n->scratch_mem}};
     double t0 = now_s();
     DN(dnnl_primitive_execute(y->fwd, n->stream, 5, a));
     DN(dnnl_stream_wait(n->stream));
     n->st.fwd_conv_s += now_s() - t0;
+    if (y->s2b) KPCN_TRY(kpcn_net_run_reorder(n, &y->s2b_out, n->sbuf[1], y->act));
   }
   return logits ? kpcn_net_run_reorder(n, &n->out, n->L[n->nl - 1].act, logits) : KPCN_OK;
 }
@@ -583,6 +613,9 @@ void kpcn_net_get_stats(const kpcn_net *n, kpcn_net_stats *s) {
   s->bytes = n->bytes;
   s->n_slow = n->n_slow;
   s->n_bwdd_fwd = n->n_bwdd_fwd;
+  s->n_space_to_batch = 0;
+  for (int l = 0; l < n->nl; l++)
+    s->n_space_to_batch += n->L[l].s2b;
   s->n_relayout = n->n_relayout;
 }
 

@@ -35,11 +35,14 @@ typedef struct layer {
   dnnl_format_tag_t tag; /* activation layout of this layer (build_layer) */
   void *rin;             /* training: this layer's own reordered input (backward reads it) */
   int winograd;
-  int bwdd_fwd;         /* backward-data runs as a forward conv with flipped weights */
-  float *wflip;         /* ... whose OIHW weights (cin x cout x k x k) are built here */
-  float *gw, *gb;       /* gradients, OIHW f32 (net-owned) */
-  void *act;            /* dst buffer */
-  void *wp, *bwp, *dwp; /* weight copies in primitive layouts */
+  int s2b;                  /* dilated layer run as an undilated conv on d*d sub-images */
+  dnnl_memory_t ssrc, sdst; /* ... its operands in that batch layout (net->sbuf) */
+  reorder s2b_in, s2b_out;  /* ... and the gathers into / out of it */
+  int bwdd_fwd;             /* backward-data runs as a forward conv with flipped weights */
+  float *wflip;             /* ... whose OIHW weights (cin x cout x k x k) are built here */
+  float *gw, *gb;           /* gradients, OIHW f32 (net-owned) */
+  void *act;                /* dst buffer */
+  void *wp, *bwp, *dwp;     /* weight copies in primitive layouts */
 } layer;
 
 struct kpcn_net {
@@ -57,6 +60,7 @@ struct kpcn_net {
   void *xbuf;          /* layer-0 input in its primitive layout */
   void *rbuf;          /* a layer's input after src_in (inference; shared) */
   void *pp[2];         /* inference ping-pong activation buffers */
+  void *sbuf[2];       /* space-to-batch layers' input and output (inference) */
   void *dbuf[2];       /* backward gradient ping-pong buffers */
   void *wbuf;          /* all primitive-layout weight copies */
   float *grads;        /* all gradients */

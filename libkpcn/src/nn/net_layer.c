@@ -122,6 +122,69 @@ void kpcn_net_flip_weights(const layer *y, const float *w) {
             w[((size_t)o * y->cin + i) * kk + t];
 }
 
+/* A 6-D view of an N x C x H x W nhwc activation as N x C x H/d x d x W/d x d (row = hs*d + dy,
+ * column = ws*d + dx): whole (sub = 0) or as the d*d sub-images (dy, dx) of the batch
+ * (dy*d + dx)*N + n, each H/d x W/d nhwc (sub = 1). A reorder between the two is the
+ * space-to-batch gather (or its inverse). */
+static kpcn_status s2b_view(dnnl_memory_desc_t *md, int N, int C, int H, int W, int d, int sub,
+                            dnnl_data_type_t dt) {
+  const dnnl_dim_t hs = H / d, ws = W / d, c = C;
+  dnnl_dims_t dims = {N, C, hs, d, ws, d};
+  dnnl_dims_t whole = {(dnnl_dim_t)H * W * c, 1,     d * (dnnl_dim_t)W * c,
+                       (dnnl_dim_t)W * c,     d * c, c};
+  const dnnl_dim_t img = hs * ws * c;
+  dnnl_dims_t split = {img, 1, ws * c, d * (dnnl_dim_t)N * img, c, (dnnl_dim_t)N * img};
+  DN(dnnl_memory_desc_init_by_strides(md, 6, dims, dt, sub ? split : whole));
+  return KPCN_OK;
+}
+
+/* oneDNN 2.6 has no direct kernel for dilations >= 4 on AVX2 (nhwc falls back to im2col +
+ * GEMM: ~3x slower, with an im2col scratchpad of 9x the layer input; nChw8c to reference
+ * loops). A dilation-d conv equals an undilated one on the d x d interleaved sub-images of
+ * its input (zero padding included, when d divides H and W), so for an inference layer whose
+ * direct kernel is such a fallback the net gathers its input into that batch (a reorder), runs
+ * the undilated jit kernel and scatters the result back. *pd is replaced when it is used. */
+static kpcn_status try_space_to_batch(kpcn_net *n, int l, const dnnl_memory_desc_t *wany,
+                                      const dnnl_memory_desc_t *bmd, size_t *scratch) {
+  layer *y = &n->L[l];
+  const int N = n->o.batch, H = n->o.height, W = n->o.width, d = y->d;
+  if (n->o.training || n->o.precision != KPCN_PREC_F32 || y->tag != dnnl_nhwc || d < 2 || H % d ||
+      W % d || !is_fallback(y->fwd_pd))
+    return KPCN_OK;
+  dnnl_dims_t sd = {(dnnl_dim_t)N * d * d, y->cin, H / d, W / d},
+              dd = {(dnnl_dim_t)N * d * d, y->cout, H / d, W / d};
+  dnnl_dims_t strides = {1, 1}, dil = {0, 0}, pad = {(y->k - 1) / 2, (y->k - 1) / 2};
+  dnnl_memory_desc_t smd, dmd;
+  DN(dnnl_memory_desc_init_by_tag(&smd, 4, sd, dnnl_f32, dnnl_nhwc));
+  DN(dnnl_memory_desc_init_by_tag(&dmd, 4, dd, dnnl_f32, dnnl_nhwc));
+  dnnl_convolution_desc_t cd;
+  DN(dnnl_dilated_convolution_forward_desc_init(&cd, dnnl_forward_inference,
+                                                dnnl_convolution_direct, &smd, wany, bmd, &dmd,
+                                                strides, dil, pad, pad));
+  dnnl_primitive_desc_t pd;
+  if (dnnl_primitive_desc_create(&pd, &cd, y->has_relu ? n->attr_relu : n->attr, n->eng, NULL) !=
+      dnnl_success)
+    return KPCN_OK;
+  if (is_fallback(pd)) {
+    dnnl_primitive_desc_destroy(pd);
+    return KPCN_OK;
+  }
+  dnnl_primitive_desc_destroy(y->fwd_pd);
+  y->fwd_pd = pd;
+  y->s2b = 1;
+  const size_t s = kpcn_net_pd_scratch(pd);
+  if (s > *scratch) *scratch = s;
+  KPCN_TRY(kpcn_net_mem(n, &y->ssrc, &smd, NULL));
+  KPCN_TRY(kpcn_net_mem(n, &y->sdst, &dmd, NULL));
+  dnnl_memory_desc_t a, b;
+  KPCN_TRY(s2b_view(&a, N, y->cin, H, W, d, 0, dnnl_f32));
+  KPCN_TRY(s2b_view(&b, N, y->cin, H, W, d, 1, dnnl_f32));
+  KPCN_TRY(kpcn_net_make_reorder(n, &y->s2b_in, &a, &b, scratch));
+  KPCN_TRY(s2b_view(&a, N, y->cout, H, W, d, 1, dnnl_f32));
+  KPCN_TRY(s2b_view(&b, N, y->cout, H, W, d, 0, dnnl_f32));
+  return kpcn_net_make_reorder(n, &y->s2b_out, &a, &b, scratch);
+}
+
 /* The activation layout of layer l. Explicit layouts apply to every layer. AUTO: nhwc, except
  * for f32 training nets, where a layer runs channel-blocked (nChw16c) when oneDNN has a jit
  * forward kernel for it there (its reference kernel serves the dilation-8 layer in nChw16c)
@@ -195,12 +258,17 @@ kpcn_status kpcn_net_build_layer(kpcn_net *n, int l, const dnnl_memory_desc_t *s
     DN(dnnl_dilated_convolution_forward_desc_init(
         &cd, n->o.training ? dnnl_forward_training : dnnl_forward_inference,
         dnnl_convolution_direct, &sany, &wany, &bmd, &dany, strides, dil, pl, pr));
+    /* the direct kernel's scratchpad counts only if the layer keeps it */
+    size_t direct_scratch = 0;
     KPCN_TRY(kpcn_net_make_pd(n, &y->fwd_pd, &cd, y->has_relu ? n->attr_relu : n->attr, NULL,
-                              "forward", l, scratch));
+                              "forward", l, &direct_scratch));
+    KPCN_TRY(try_space_to_batch(n, l, &wany, &bmd, scratch));
+    if (!y->s2b && direct_scratch > *scratch) *scratch = direct_scratch;
   }
-  y->src_md = *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_src_md, 0);
+  /* the layer's activations as the net sees them (whole images, also for space-to-batch) */
+  y->src_md = y->s2b ? sany : *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_src_md, 0);
   y->w_md = *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_weights_md, 0);
-  y->dst_md = *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_dst_md, 0);
+  y->dst_md = y->s2b ? dany : *dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_dst_md, 0);
   if (l > 0 && !dnnl_memory_desc_equal(src_md, &y->src_md)) {
     KPCN_TRY(kpcn_net_make_reorder(n, &y->src_in, src_md, &y->src_md, scratch));
     n->n_relayout++;

@@ -314,8 +314,8 @@ fail:
 #undef GO
 }
 
-int64_t kpcn_trainer_iteration(const kpcn_trainer *t) { return t->iter; }
-kpcn_model *kpcn_trainer_model(kpcn_trainer *t) { return t->model; }
+int64_t kpcn_trainer_iteration(const kpcn_trainer *t) { return t ? t->iter : 0; }
+kpcn_model *kpcn_trainer_model(kpcn_trainer *t) { return t ? t->model : NULL; }
 
 double kpcn_trainer_flops_per_iter(const kpcn_trainer *t) {
   /* forward F + backward-weights F + backward-data F minus the first layer's (no input
