@@ -174,15 +174,19 @@ static kpcn_status bind_buffers(kpcn_net *n, size_t scratch) {
     n->pp[0] = kpcn_net_alloc(n, pp[0], "net activations");
     n->pp[1] = kpcn_net_alloc(n, pp[1] ? pp[1] : 64, "net activations");
     if (!n->pp[0] || !n->pp[1]) return KPCN_ERR_OUT_OF_MEMORY;
-    size_t sb[2] = {0, 0};
+    size_t sb[2] = {0, 0}, pb[2] = {0, 0};
     for (int l = 0; l < nl; l++)
-      if (n->L[l].s2b) {
-        if (md_size(&n->L[l].src_md) > sb[0]) sb[0] = md_size(&n->L[l].src_md);
-        if (md_size(&n->L[l].dst_md) > sb[1]) sb[1] = md_size(&n->L[l].dst_md);
+      for (int i = 0; i < 2 && n->L[l].s2b; i++) {
+        if (n->L[l].s2b_bytes[i] > sb[i]) sb[i] = n->L[l].s2b_bytes[i];
+        if (n->L[l].pad_in.prim && n->L[l].s2b_bytes[i] > pb[i]) pb[i] = n->L[l].s2b_bytes[i];
       }
-    for (int i = 0; i < 2 && sb[i]; i++)
-      if (!(n->sbuf[i] = kpcn_net_alloc(n, sb[i], "net space-to-batch activations")))
+    for (int i = 0; i < 2; i++) {
+      if (sb[i] && !(n->sbuf[i] = kpcn_net_alloc(n, sb[i], "net space-to-batch activations")))
         return KPCN_ERR_OUT_OF_MEMORY;
+      if (pb[i] && !(n->pbuf[i] = kpcn_net_alloc(n, pb[i], "net space-to-batch padding")))
+        return KPCN_ERR_OUT_OF_MEMORY;
+    }
+    n->pbuf_bytes = pb[0];
   }
   char *wp = n->wbuf;
   float *gp = n->grads;
@@ -400,6 +404,8 @@ void kpcn_net_destroy(kpcn_net *n) {
       if (ms[i]) dnnl_memory_destroy(ms[i]);
     kpcn_net_free_reorder(&y->s2b_in);
     kpcn_net_free_reorder(&y->s2b_out);
+    kpcn_net_free_reorder(&y->pad_in);
+    kpcn_net_free_reorder(&y->crop_out);
     kpcn_net_free_reorder(&y->w_in);
     kpcn_net_free_reorder(&y->bw_in);
     kpcn_net_free_reorder(&y->dw_out);
@@ -421,6 +427,8 @@ void kpcn_net_destroy(kpcn_net *n) {
   kpcn_aligned_free(n->pp[1]);
   kpcn_aligned_free(n->sbuf[0]);
   kpcn_aligned_free(n->sbuf[1]);
+  kpcn_aligned_free(n->pbuf[0]);
+  kpcn_aligned_free(n->pbuf[1]);
   kpcn_aligned_free(n->dbuf[0]);
   kpcn_aligned_free(n->dbuf[1]);
   kpcn_aligned_free(n->wbuf);
@@ -454,6 +462,17 @@ static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
     if (y->s2b) { /* gather the d*d sub-images (the layer's src memory holds the input) */
       void *src = NULL;
       DN(dnnl_memory_get_data_handle(y->src, &src));
+      if (y->pad_in.prim) { /* into the zero-bordered buffer first */
+        /* its border must be zero in this layer's layout (layers of other channel counts or
+         * dilations lay the buffer out differently; the cpu preset's share one) */
+        const int key[3] = {y->cin, y->s2b_hp, y->s2b_wp};
+        if (memcmp(n->pbuf_zeroed, key, sizeof key)) {
+          memset(n->pbuf[0], 0, n->pbuf_bytes);
+          memcpy(n->pbuf_zeroed, key, sizeof key);
+        }
+        KPCN_TRY(kpcn_net_run_reorder(n, &y->pad_in, src, n->pbuf[0]));
+        src = n->pbuf[0];
+      }
       KPCN_TRY(kpcn_net_run_reorder(n, &y->s2b_in, src, n->sbuf[0]));
     }
     dnnl_exec_arg_t a[5] = {{DNNL_ARG_SRC, y->s2b ? y->ssrc : y->src},
@@ -465,7 +484,12 @@ static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
     DN(dnnl_primitive_execute(y->fwd, n->stream, 5, a));
     DN(dnnl_stream_wait(n->stream));
     n->st.fwd_conv_s += now_s() - t0;
-    if (y->s2b) KPCN_TRY(kpcn_net_run_reorder(n, &y->s2b_out, n->sbuf[1], y->act));
+    if (y->s2b && y->crop_out.prim) {
+      KPCN_TRY(kpcn_net_run_reorder(n, &y->s2b_out, n->sbuf[1], n->pbuf[1]));
+      KPCN_TRY(kpcn_net_run_reorder(n, &y->crop_out, n->pbuf[1], y->act));
+    } else if (y->s2b) {
+      KPCN_TRY(kpcn_net_run_reorder(n, &y->s2b_out, n->sbuf[1], y->act));
+    }
   }
   return logits ? kpcn_net_run_reorder(n, &n->out, n->L[n->nl - 1].act, logits) : KPCN_OK;
 }

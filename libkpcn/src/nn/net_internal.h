@@ -37,7 +37,11 @@ typedef struct layer {
   int winograd;
   int s2b;                  /* dilated layer run as an undilated conv on d*d sub-images */
   dnnl_memory_t ssrc, sdst; /* ... its operands in that batch layout (net->sbuf) */
-  reorder s2b_in, s2b_out;  /* ... and the gathers into / out of it */
+  size_t s2b_bytes[2];      /* ... and their sizes */
+  int s2b_hp, s2b_wp;       /* ... the padded extent (multiples of d) */
+  reorder s2b_in, s2b_out;  /* ... the gathers into / out of it */
+  reorder pad_in, crop_out; /* ... through zero-bordered buffers (net->pbuf) where d does not
+                               divide the size */
   int bwdd_fwd;             /* backward-data runs as a forward conv with flipped weights */
   float *wflip;             /* ... whose OIHW weights (cin x cout x k x k) are built here */
   float *gw, *gb;           /* gradients, OIHW f32 (net-owned) */
@@ -61,6 +65,9 @@ struct kpcn_net {
   void *rbuf;          /* a layer's input after src_in (inference; shared) */
   void *pp[2];         /* inference ping-pong activation buffers */
   void *sbuf[2];       /* space-to-batch layers' input and output (inference) */
+  void *pbuf[2];       /* ... the same padded to multiples of d (where needed) */
+  size_t pbuf_bytes;   /* size of pbuf[0] */
+  int pbuf_zeroed[3];  /* channels, Hp, Wp of the layout whose border pbuf[0] holds zeroed */
   void *dbuf[2];       /* backward gradient ping-pong buffers */
   void *wbuf;          /* all primitive-layout weight copies */
   float *grads;        /* all gradients */

@@ -138,21 +138,34 @@ static kpcn_status s2b_view(dnnl_memory_desc_t *md, int N, int C, int H, int W, 
   return KPCN_OK;
 }
 
+/* N x C x H x W nhwc data of a buffer laid out as N x C x Hp x Wp nhwc (rows and columns
+ * beyond H, W are padding). */
+static kpcn_status padded_view(dnnl_memory_desc_t *md, int N, int C, int H, int W, int Hp, int Wp) {
+  dnnl_dims_t dims = {N, C, H, W};
+  dnnl_dims_t st = {(dnnl_dim_t)Hp * Wp * C, 1, (dnnl_dim_t)Wp * C, C};
+  DN(dnnl_memory_desc_init_by_strides(md, 4, dims, dnnl_f32, st));
+  return KPCN_OK;
+}
+
 /* oneDNN 2.6 has no direct kernel for dilations >= 4 on AVX2 (nhwc falls back to im2col +
  * GEMM: ~3x slower, with an im2col scratchpad of 9x the layer input; nChw8c to reference
  * loops). A dilation-d conv equals an undilated one on the d x d interleaved sub-images of
- * its input (zero padding included, when d divides H and W), so for an inference layer whose
- * direct kernel is such a fallback the net gathers its input into that batch (a reorder), runs
- * the undilated jit kernel and scatters the result back. *pd is replaced when it is used. */
+ * its input, zero padding included, so for an inference layer whose direct kernel is such a
+ * fallback the net gathers its input into that batch (a reorder), runs the undilated jit
+ * kernel and scatters the result back. Where d does not divide H or W the input is first
+ * copied into a zero-bordered Hp x Wp buffer (the next multiples of d: the extra rows and
+ * columns are exactly the zeros the conv's padding would read) and the result cropped from
+ * one. *pd is replaced when this is used. */
 static kpcn_status try_space_to_batch(kpcn_net *n, int l, const dnnl_memory_desc_t *wany,
                                       const dnnl_memory_desc_t *bmd, size_t *scratch) {
   layer *y = &n->L[l];
   const int N = n->o.batch, H = n->o.height, W = n->o.width, d = y->d;
-  if (n->o.training || n->o.precision != KPCN_PREC_F32 || y->tag != dnnl_nhwc || d < 2 || H % d ||
-      W % d || !is_fallback(y->fwd_pd))
+  if (n->o.training || n->o.precision != KPCN_PREC_F32 || y->tag != dnnl_nhwc || d < 2 ||
+      !is_fallback(y->fwd_pd))
     return KPCN_OK;
-  dnnl_dims_t sd = {(dnnl_dim_t)N * d * d, y->cin, H / d, W / d},
-              dd = {(dnnl_dim_t)N * d * d, y->cout, H / d, W / d};
+  const int Hp = (H + d - 1) / d * d, Wp = (W + d - 1) / d * d;
+  dnnl_dims_t sd = {(dnnl_dim_t)N * d * d, y->cin, Hp / d, Wp / d},
+              dd = {(dnnl_dim_t)N * d * d, y->cout, Hp / d, Wp / d};
   dnnl_dims_t strides = {1, 1}, dil = {0, 0}, pad = {(y->k - 1) / 2, (y->k - 1) / 2};
   dnnl_memory_desc_t smd, dmd;
   DN(dnnl_memory_desc_init_by_tag(&smd, 4, sd, dnnl_f32, dnnl_nhwc));
@@ -172,16 +185,28 @@ static kpcn_status try_space_to_batch(kpcn_net *n, int l, const dnnl_memory_desc
   dnnl_primitive_desc_destroy(y->fwd_pd);
   y->fwd_pd = pd;
   y->s2b = 1;
+  y->s2b_bytes[0] = dnnl_memory_desc_get_size(&smd);
+  y->s2b_bytes[1] = dnnl_memory_desc_get_size(&dmd);
+  y->s2b_hp = Hp, y->s2b_wp = Wp;
   const size_t s = kpcn_net_pd_scratch(pd);
   if (s > *scratch) *scratch = s;
   KPCN_TRY(kpcn_net_mem(n, &y->ssrc, &smd, NULL));
   KPCN_TRY(kpcn_net_mem(n, &y->sdst, &dmd, NULL));
   dnnl_memory_desc_t a, b;
-  KPCN_TRY(s2b_view(&a, N, y->cin, H, W, d, 0, dnnl_f32));
-  KPCN_TRY(s2b_view(&b, N, y->cin, H, W, d, 1, dnnl_f32));
+  if (Hp != H || Wp != W) {
+    dnnl_dims_t full_s = {N, y->cin, H, W}, full_d = {N, y->cout, H, W};
+    DN(dnnl_memory_desc_init_by_tag(&a, 4, full_s, dnnl_f32, dnnl_nhwc));
+    KPCN_TRY(padded_view(&b, N, y->cin, H, W, Hp, Wp));
+    KPCN_TRY(kpcn_net_make_reorder(n, &y->pad_in, &a, &b, scratch));
+    KPCN_TRY(padded_view(&a, N, y->cout, H, W, Hp, Wp));
+    DN(dnnl_memory_desc_init_by_tag(&b, 4, full_d, dnnl_f32, dnnl_nhwc));
+    KPCN_TRY(kpcn_net_make_reorder(n, &y->crop_out, &a, &b, scratch));
+  }
+  KPCN_TRY(s2b_view(&a, N, y->cin, Hp, Wp, d, 0, dnnl_f32));
+  KPCN_TRY(s2b_view(&b, N, y->cin, Hp, Wp, d, 1, dnnl_f32));
   KPCN_TRY(kpcn_net_make_reorder(n, &y->s2b_in, &a, &b, scratch));
-  KPCN_TRY(s2b_view(&a, N, y->cout, H, W, d, 1, dnnl_f32));
-  KPCN_TRY(s2b_view(&b, N, y->cout, H, W, d, 0, dnnl_f32));
+  KPCN_TRY(s2b_view(&a, N, y->cout, Hp, Wp, d, 1, dnnl_f32));
+  KPCN_TRY(s2b_view(&b, N, y->cout, Hp, Wp, d, 0, dnnl_f32));
   return kpcn_net_make_reorder(n, &y->s2b_out, &a, &b, scratch);
 }
 
