@@ -450,6 +450,33 @@ kpcn_status kpcn_net_set_branch(kpcn_net *n, kpcn_branch b) {
   return KPCN_OK;
 }
 
+/* Space-to-batch layer (net_layer.c, try_space_to_batch): its input (what the layer's src
+ * memory points at) into the batch of d*d sub-images, through the zero-bordered buffer where
+ * d does not divide the size. That buffer's border must be zero in this layer's layout;
+ * layers of other channel counts or dilations lay it out differently (the cpu preset's
+ * layers share one, so it is cleared once). */
+static kpcn_status s2b_gather(kpcn_net *n, layer *y) {
+  void *src = NULL;
+  DN(dnnl_memory_get_data_handle(y->src, &src));
+  if (y->pad_in.prim) {
+    const int key[3] = {y->cin, y->s2b_hp, y->s2b_wp};
+    if (memcmp(n->pbuf_zeroed, key, sizeof key)) {
+      memset(n->pbuf[0], 0, n->pbuf_bytes);
+      memcpy(n->pbuf_zeroed, key, sizeof key);
+    }
+    KPCN_TRY(kpcn_net_run_reorder(n, &y->pad_in, src, n->pbuf[0]));
+    src = n->pbuf[0];
+  }
+  return kpcn_net_run_reorder(n, &y->s2b_in, src, n->sbuf[0]);
+}
+
+/* ... and its result from the sub-images back into the layer's output. */
+static kpcn_status s2b_scatter(kpcn_net *n, layer *y) {
+  if (!y->crop_out.prim) return kpcn_net_run_reorder(n, &y->s2b_out, n->sbuf[1], y->act);
+  KPCN_TRY(kpcn_net_run_reorder(n, &y->s2b_out, n->sbuf[1], n->pbuf[1]));
+  return kpcn_net_run_reorder(n, &y->crop_out, n->pbuf[1], y->act);
+}
+
 static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
   const kpcn_model *m = n->model;
   KPCN_TRY(kpcn_net_run_reorder(n, &n->in, input, n->xbuf));
@@ -459,22 +486,7 @@ static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
     if (y->src_in.prim)
       KPCN_TRY(kpcn_net_run_reorder(n, &y->src_in, n->L[l - 1].act, y->rin ? y->rin : n->rbuf));
     DN(dnnl_memory_set_data_handle(y->bias, m->b[n->branch][l]));
-    if (y->s2b) { /* gather the d*d sub-images (the layer's src memory holds the input) */
-      void *src = NULL;
-      DN(dnnl_memory_get_data_handle(y->src, &src));
-      if (y->pad_in.prim) { /* into the zero-bordered buffer first */
-        /* its border must be zero in this layer's layout (layers of other channel counts or
-         * dilations lay the buffer out differently; the cpu preset's share one) */
-        const int key[3] = {y->cin, y->s2b_hp, y->s2b_wp};
-        if (memcmp(n->pbuf_zeroed, key, sizeof key)) {
-          memset(n->pbuf[0], 0, n->pbuf_bytes);
-          memcpy(n->pbuf_zeroed, key, sizeof key);
-        }
-        KPCN_TRY(kpcn_net_run_reorder(n, &y->pad_in, src, n->pbuf[0]));
-        src = n->pbuf[0];
-      }
-      KPCN_TRY(kpcn_net_run_reorder(n, &y->s2b_in, src, n->sbuf[0]));
-    }
+    if (y->s2b) KPCN_TRY(s2b_gather(n, y));
     dnnl_exec_arg_t a[5] = {{DNNL_ARG_SRC, y->s2b ? y->ssrc : y->src},
                             {DNNL_ARG_WEIGHTS, y->w},
                             {DNNL_ARG_BIAS, y->bias},
@@ -484,12 +496,7 @@ static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
     DN(dnnl_primitive_execute(y->fwd, n->stream, 5, a));
     DN(dnnl_stream_wait(n->stream));
     n->st.fwd_conv_s += now_s() - t0;
-    if (y->s2b && y->crop_out.prim) {
-      KPCN_TRY(kpcn_net_run_reorder(n, &y->s2b_out, n->sbuf[1], n->pbuf[1]));
-      KPCN_TRY(kpcn_net_run_reorder(n, &y->crop_out, n->pbuf[1], y->act));
-    } else if (y->s2b) {
-      KPCN_TRY(kpcn_net_run_reorder(n, &y->s2b_out, n->sbuf[1], y->act));
-    }
+    if (y->s2b) KPCN_TRY(s2b_scatter(n, y));
   }
   return logits ? kpcn_net_run_reorder(n, &n->out, n->L[n->nl - 1].act, logits) : KPCN_OK;
 }
