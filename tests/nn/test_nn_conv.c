@@ -99,7 +99,7 @@ static int native_backward_same(kpcn_net *net, const cfg *c, const float *in, co
 static int n_bwdd_fwd_seen; /* layers whose backward-data ran as a forward conv */
 static int n_relayout_seen; /* layers of mixed-layout training nets fed through a reorder */
 
-static int n_s2b_seen;
+static int n_s2b_seen, n_s2b_train_seen; /* space-to-batch layers: inference, training nets */
 
 static void check_vs_ref(const cfg *c, int seed) {
   kpcn_arch a;
@@ -174,9 +174,12 @@ static void check_vs_ref(const cfg *c, int seed) {
     double ed = rel_err(din, ref.dinput, nin);
     kpcn_net_stats st;
     kpcn_net_get_stats(net, &st);
-    printf(" | dW %.2e db %.2e dX %.2e | %s | %d backward-data as forward, %d relayouts\n", ew, eb,
-           ed, kpcn_net_impl_name(net, 1), st.n_bwdd_fwd, st.n_relayout);
+    printf(" | dW %.2e db %.2e dX %.2e | %s | %d backward-data as forward, %d relayouts, %d "
+           "space-to-batch\n",
+           ew, eb, ed, kpcn_net_impl_name(net, 1), st.n_bwdd_fwd, st.n_relayout,
+           st.n_space_to_batch);
     n_bwdd_fwd_seen += st.n_bwdd_fwd;
+    n_s2b_train_seen += st.n_space_to_batch;
     n_relayout_seen += st.n_relayout;
     CHECK(ed <= 1e-5);
     /* same thread count -> bit-identical */
@@ -697,8 +700,9 @@ int main(void) {
   if (kpcn_cpu_allows_avx512()) CHECK(n_bwdd_fwd_seen > 0 && n_relayout_seen > 0);
   /* without AVX-512 (or under ONEDNN_MAX_CPU_ISA=AVX2: test_nn_conv_avx2) the last config's
    * dilated layers must have gone through space-to-batch */
-  printf("space-to-batch: %d layer(s) of the inference nets\n", n_s2b_seen);
-  if (!kpcn_cpu_allows_avx512()) CHECK(n_s2b_seen >= 5);
+  printf("space-to-batch: %d layer(s) of the inference nets, %d of the training nets\n", n_s2b_seen,
+         n_s2b_train_seen);
+  if (!kpcn_cpu_allows_avx512()) CHECK(n_s2b_seen >= 5 && n_s2b_train_seen >= 5);
   fd_reference();
   fd_onednn();
   bf16_vs_f32();

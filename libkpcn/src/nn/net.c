@@ -174,20 +174,26 @@ static kpcn_status bind_buffers(kpcn_net *n, size_t scratch) {
     n->pp[0] = kpcn_net_alloc(n, pp[0], "net activations");
     n->pp[1] = kpcn_net_alloc(n, pp[1] ? pp[1] : 64, "net activations");
     if (!n->pp[0] || !n->pp[1]) return KPCN_ERR_OUT_OF_MEMORY;
-    size_t sb[2] = {0, 0}, pb[2] = {0, 0};
-    for (int l = 0; l < nl; l++)
-      for (int i = 0; i < 2 && n->L[l].s2b; i++) {
-        if (n->L[l].s2b_bytes[i] > sb[i]) sb[i] = n->L[l].s2b_bytes[i];
-        if (n->L[l].pad_in.prim && n->L[l].s2b_bytes[i] > pb[i]) pb[i] = n->L[l].s2b_bytes[i];
-      }
-    for (int i = 0; i < 2; i++) {
-      if (sb[i] && !(n->sbuf[i] = kpcn_net_alloc(n, sb[i], "net space-to-batch activations")))
-        return KPCN_ERR_OUT_OF_MEMORY;
-      if (pb[i] && !(n->pbuf[i] = kpcn_net_alloc(n, pb[i], "net space-to-batch padding")))
-        return KPCN_ERR_OUT_OF_MEMORY;
-    }
-    n->pbuf_bytes = pb[0];
   }
+  /* sbuf[side] holds one side of a space-to-batch layer; pbuf[0] is what gathers read (side
+   * 0 forward, side 1 backward), pbuf[1] what scatters write (side 1 forward, 0 backward) */
+  size_t sb[2] = {0, 0}, pb[2] = {0, 0};
+  for (int l = 0; l < nl; l++) {
+    const layer *y = &n->L[l];
+    for (int side = 0; side < 2 && y->s2b; side++) {
+      const size_t bytes = y->s2b_bytes[side];
+      if (bytes > sb[side]) sb[side] = bytes;
+      if (y->pad[side].prim && bytes > pb[0]) pb[0] = bytes;
+      if (y->crop[side].prim && bytes > pb[1]) pb[1] = bytes;
+    }
+  }
+  for (int i = 0; i < 2; i++) {
+    if (sb[i] && !(n->sbuf[i] = kpcn_net_alloc(n, sb[i], "net space-to-batch activations")))
+      return KPCN_ERR_OUT_OF_MEMORY;
+    if (pb[i] && !(n->pbuf[i] = kpcn_net_alloc(n, pb[i], "net space-to-batch padding")))
+      return KPCN_ERR_OUT_OF_MEMORY;
+  }
+  n->pbuf_bytes = pb[0];
   char *wp = n->wbuf;
   float *gp = n->grads;
   for (int l = 0; l < nl; l++) {
@@ -196,6 +202,8 @@ static kpcn_status bind_buffers(kpcn_net *n, size_t scratch) {
       y->act = kpcn_net_alloc(n, md_size(&y->dst_md), "net activations");
       if (!y->act) return KPCN_ERR_OUT_OF_MEMORY;
       if (y->src_in.prim && !(y->rin = kpcn_net_alloc(n, md_size(&y->src_md), "net activations")))
+        return KPCN_ERR_OUT_OF_MEMORY;
+      if (y->s2b && !(y->sin = kpcn_net_alloc(n, y->s2b_bytes[0], "net space-to-batch input")))
         return KPCN_ERR_OUT_OF_MEMORY;
       y->gw = gp;
       gp += ((size_t)y->cout * y->cin * y->k * y->k + 15) & ~(size_t)15;
@@ -223,8 +231,9 @@ static kpcn_status bind_buffers(kpcn_net *n, size_t scratch) {
                                                             : n->L[l - 1].act));
     DN(dnnl_memory_set_data_handle(y->dst, y->act));
     if (y->s2b) {
-      DN(dnnl_memory_set_data_handle(y->ssrc, n->sbuf[0]));
+      DN(dnnl_memory_set_data_handle(y->ssrc, y->sin ? y->sin : n->sbuf[0]));
       DN(dnnl_memory_set_data_handle(y->sdst, n->sbuf[1]));
+      if (y->sdsrc) DN(dnnl_memory_set_data_handle(y->sdsrc, n->sbuf[0]));
     }
   }
   return KPCN_OK;
@@ -290,13 +299,13 @@ static kpcn_status build(kpcn_net *n) {
     const dnnl_memory_desc_t *m;
     if (y->bwdd_pd && !y->bwdd_fwd &&
         (!(m = dnnl_primitive_desc_query_md(y->bwdd_pd, dnnl_query_diff_src_md, 0)) ||
-         !dnnl_memory_desc_equal(m, &y->src_md)))
+         !dnnl_memory_desc_equal(m, y->s2b ? &y->s2b_md[0] : &y->src_md)))
       return kpcn_fail(KPCN_ERR_UNSUPPORTED,
                        "oneDNN chose a different layout for the "
                        "backward-data gradient of conv layer %d",
                        l);
     if (y->bwdw_pd && (!(m = dnnl_primitive_desc_query_md(y->bwdw_pd, dnnl_query_src_md, 0)) ||
-                       !dnnl_memory_desc_equal(m, &y->src_md)))
+                       !dnnl_memory_desc_equal(m, y->s2b ? &y->s2b_md[0] : &y->src_md)))
       return kpcn_fail(KPCN_ERR_UNSUPPORTED,
                        "oneDNN chose a different input layout for the "
                        "backward-weights of conv layer %d",
@@ -398,14 +407,17 @@ void kpcn_net_destroy(kpcn_net *n) {
       if (ps[i]) dnnl_primitive_destroy(ps[i]);
       if (pds[i]) dnnl_primitive_desc_destroy(pds[i]);
     }
-    dnnl_memory_t ms[11] = {y->src, y->dst,  y->w,    y->bias, y->bw,  y->dw,
-                            y->db,  y->ddst, y->dsrc, y->ssrc, y->sdst};
-    for (int i = 0; i < 11; i++)
+    dnnl_memory_t ms[12] = {y->src, y->dst,  y->w,    y->bias, y->bw,   y->dw,
+                            y->db,  y->ddst, y->dsrc, y->ssrc, y->sdst, y->sdsrc};
+    for (int i = 0; i < 12; i++)
       if (ms[i]) dnnl_memory_destroy(ms[i]);
-    kpcn_net_free_reorder(&y->s2b_in);
-    kpcn_net_free_reorder(&y->s2b_out);
-    kpcn_net_free_reorder(&y->pad_in);
-    kpcn_net_free_reorder(&y->crop_out);
+    for (int side = 0; side < 2; side++) {
+      kpcn_net_free_reorder(&y->gather[side]);
+      kpcn_net_free_reorder(&y->scatter[side]);
+      kpcn_net_free_reorder(&y->pad[side]);
+      kpcn_net_free_reorder(&y->crop[side]);
+    }
+    kpcn_aligned_free(y->sin);
     kpcn_net_free_reorder(&y->w_in);
     kpcn_net_free_reorder(&y->bw_in);
     kpcn_net_free_reorder(&y->dw_out);
@@ -450,31 +462,29 @@ kpcn_status kpcn_net_set_branch(kpcn_net *n, kpcn_branch b) {
   return KPCN_OK;
 }
 
-/* Space-to-batch layer (net_layer.c, try_space_to_batch): its input (what the layer's src
- * memory points at) into the batch of d*d sub-images, through the zero-bordered buffer where
- * d does not divide the size. That buffer's border must be zero in this layer's layout;
- * layers of other channel counts or dilations lay it out differently (the cpu preset's
- * layers share one, so it is cleared once). */
-static kpcn_status s2b_gather(kpcn_net *n, layer *y) {
-  void *src = NULL;
-  DN(dnnl_memory_get_data_handle(y->src, &src));
-  if (y->pad_in.prim) {
-    const int key[3] = {y->cin, y->s2b_hp, y->s2b_wp};
+/* Space-to-batch layer (net_layer.c, try_space_to_batch): one side of it (0: input channels,
+ * 1: output channels) from the whole image src into the batch of d*d sub-images dst, through
+ * the zero-bordered buffer where d does not divide the size. That buffer's border must be
+ * zero in this side's layout; layers of other channel counts or dilations lay it out
+ * differently (the cpu preset's layers share one, so it is cleared once). */
+static kpcn_status s2b_gather(kpcn_net *n, layer *y, int side, const void *src, void *dst) {
+  if (y->pad[side].prim) {
+    const int key[3] = {side ? y->cout : y->cin, y->s2b_hp, y->s2b_wp};
     if (memcmp(n->pbuf_zeroed, key, sizeof key)) {
       memset(n->pbuf[0], 0, n->pbuf_bytes);
       memcpy(n->pbuf_zeroed, key, sizeof key);
     }
-    KPCN_TRY(kpcn_net_run_reorder(n, &y->pad_in, src, n->pbuf[0]));
+    KPCN_TRY(kpcn_net_run_reorder(n, &y->pad[side], src, n->pbuf[0]));
     src = n->pbuf[0];
   }
-  return kpcn_net_run_reorder(n, &y->s2b_in, src, n->sbuf[0]);
+  return kpcn_net_run_reorder(n, &y->gather[side], src, dst);
 }
 
-/* ... and its result from the sub-images back into the layer's output. */
-static kpcn_status s2b_scatter(kpcn_net *n, layer *y) {
-  if (!y->crop_out.prim) return kpcn_net_run_reorder(n, &y->s2b_out, n->sbuf[1], y->act);
-  KPCN_TRY(kpcn_net_run_reorder(n, &y->s2b_out, n->sbuf[1], n->pbuf[1]));
-  return kpcn_net_run_reorder(n, &y->crop_out, n->pbuf[1], y->act);
+/* ... and back: sub-images src into the whole image dst. */
+static kpcn_status s2b_scatter(kpcn_net *n, layer *y, int side, const void *src, void *dst) {
+  if (!y->crop[side].prim) return kpcn_net_run_reorder(n, &y->scatter[side], src, dst);
+  KPCN_TRY(kpcn_net_run_reorder(n, &y->scatter[side], src, n->pbuf[1]));
+  return kpcn_net_run_reorder(n, &y->crop[side], n->pbuf[1], dst);
 }
 
 static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
@@ -486,7 +496,11 @@ static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
     if (y->src_in.prim)
       KPCN_TRY(kpcn_net_run_reorder(n, &y->src_in, n->L[l - 1].act, y->rin ? y->rin : n->rbuf));
     DN(dnnl_memory_set_data_handle(y->bias, m->b[n->branch][l]));
-    if (y->s2b) KPCN_TRY(s2b_gather(n, y));
+    if (y->s2b) {
+      void *src = NULL;
+      DN(dnnl_memory_get_data_handle(y->src, &src));
+      KPCN_TRY(s2b_gather(n, y, 0, src, y->sin ? y->sin : n->sbuf[0]));
+    }
     dnnl_exec_arg_t a[5] = {{DNNL_ARG_SRC, y->s2b ? y->ssrc : y->src},
                             {DNNL_ARG_WEIGHTS, y->w},
                             {DNNL_ARG_BIAS, y->bias},
@@ -496,7 +510,7 @@ static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
     DN(dnnl_primitive_execute(y->fwd, n->stream, 5, a));
     DN(dnnl_stream_wait(n->stream));
     n->st.fwd_conv_s += now_s() - t0;
-    if (y->s2b) KPCN_TRY(s2b_scatter(n, y));
+    if (y->s2b) KPCN_TRY(s2b_scatter(n, y, 1, n->sbuf[1], y->act));
   }
   return logits ? kpcn_net_run_reorder(n, &n->out, n->L[n->nl - 1].act, logits) : KPCN_OK;
 }
@@ -544,8 +558,8 @@ static kpcn_status backward(kpcn_net *n, const float *dlogits, float *dinput, in
   for (int l = n->nl - 1; l >= 0; l--) {
     layer *y = &n->L[l];
     double t0;
-    DN(dnnl_memory_set_data_handle(y->ddst,
-                                   direct && l == n->nl - 1 ? (void *)dlogits : n->dbuf[cur]));
+    void *ddst = direct && l == n->nl - 1 ? (void *)dlogits : n->dbuf[cur];
+    DN(dnnl_memory_set_data_handle(y->ddst, ddst));
     if (y->has_relu) {
       dnnl_exec_arg_t a[4] = {{DNNL_ARG_DST, y->dst},
                               {DNNL_ARG_DIFF_DST, y->ddst},
@@ -553,9 +567,13 @@ static kpcn_status backward(kpcn_net *n, const float *dlogits, float *dinput, in
                               {DNNL_ARG_SCRATCHPAD, n->scratch_mem}};
       DN(dnnl_primitive_execute(y->relu, n->stream, 4, a));
     }
+    /* a space-to-batch layer's backward reads its gathered input (kept by forward) and its
+     * output gradient gathered the same way */
+    if (y->s2b) KPCN_TRY(s2b_gather(n, y, 1, ddst, n->sbuf[1]));
+    dnnl_memory_t bddst = y->s2b ? y->sdst : y->ddst;
     DN(dnnl_memory_set_data_handle(y->db, y->gb));
-    dnnl_exec_arg_t aw[5] = {{DNNL_ARG_SRC, y->src},
-                             {DNNL_ARG_DIFF_DST, y->ddst},
+    dnnl_exec_arg_t aw[5] = {{DNNL_ARG_SRC, y->s2b ? y->ssrc : y->src},
+                             {DNNL_ARG_DIFF_DST, bddst},
                              {DNNL_ARG_DIFF_WEIGHTS, y->dw},
                              {DNNL_ARG_DIFF_BIAS, y->db},
                              {DNNL_ARG_SCRATCHPAD, n->scratch_mem}};
@@ -570,14 +588,16 @@ static kpcn_status backward(kpcn_net *n, const float *dlogits, float *dinput, in
                                        y->bwp));
       DN(dnnl_memory_set_data_handle(y->dsrc, n->dbuf[cur ^ 1]));
       /* a forward primitive standing in for backward-data reads SRC and writes DST */
-      dnnl_exec_arg_t ad[4] = {{y->bwdd_fwd ? DNNL_ARG_SRC : DNNL_ARG_DIFF_DST, y->ddst},
-                               {DNNL_ARG_WEIGHTS, y->bw},
-                               {y->bwdd_fwd ? DNNL_ARG_DST : DNNL_ARG_DIFF_SRC, y->dsrc},
-                               {DNNL_ARG_SCRATCHPAD, n->scratch_mem}};
+      dnnl_exec_arg_t ad[4] = {
+          {y->bwdd_fwd ? DNNL_ARG_SRC : DNNL_ARG_DIFF_DST, bddst},
+          {DNNL_ARG_WEIGHTS, y->bw},
+          {y->bwdd_fwd ? DNNL_ARG_DST : DNNL_ARG_DIFF_SRC, y->s2b ? y->sdsrc : y->dsrc},
+          {DNNL_ARG_SCRATCHPAD, n->scratch_mem}};
       t0 = now_s();
       DN(dnnl_primitive_execute(y->bwdd, n->stream, 4, ad));
       DN(dnnl_stream_wait(n->stream));
       n->st.bwd_conv_s += now_s() - t0;
+      if (y->s2b) KPCN_TRY(s2b_scatter(n, y, 0, n->sbuf[0], n->dbuf[cur ^ 1]));
       /* into the previous layer's layout, over this layer's spent output gradient */
       if (y->dsrc_out.prim)
         KPCN_TRY(kpcn_net_run_reorder(n, &y->dsrc_out, n->dbuf[cur ^ 1], n->dbuf[cur]));

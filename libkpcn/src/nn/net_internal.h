@@ -35,18 +35,25 @@ typedef struct layer {
   dnnl_format_tag_t tag; /* activation layout of this layer (build_layer) */
   void *rin;             /* training: this layer's own reordered input (backward reads it) */
   int winograd;
-  int s2b;                  /* dilated layer run as an undilated conv on d*d sub-images */
-  dnnl_memory_t ssrc, sdst; /* ... its operands in that batch layout (net->sbuf) */
-  size_t s2b_bytes[2];      /* ... and their sizes */
-  int s2b_hp, s2b_wp;       /* ... the padded extent (multiples of d) */
-  reorder s2b_in, s2b_out;  /* ... the gathers into / out of it */
-  reorder pad_in, crop_out; /* ... through zero-bordered buffers (net->pbuf) where d does not
-                               divide the size */
-  int bwdd_fwd;             /* backward-data runs as a forward conv with flipped weights */
-  float *wflip;             /* ... whose OIHW weights (cin x cout x k x k) are built here */
-  float *gw, *gb;           /* gradients, OIHW f32 (net-owned) */
-  void *act;                /* dst buffer */
-  void *wp, *bwp, *dwp;     /* weight copies in primitive layouts */
+  /* Space-to-batch (net_layer.c, try_space_to_batch): a dilated layer run as an undilated
+   * conv on the d*d interleaved sub-images of its input, gathered into one batch. Side 0 is
+   * the layer's input (cin channels), side 1 its output (cout): the forward pass gathers side
+   * 0 and scatters side 1, the backward pass gathers side 1 (the output gradient) and
+   * scatters side 0 (the input gradient). */
+  int s2b;
+  dnnl_memory_desc_t s2b_md[2];    /* ... both sides in the batch layout */
+  dnnl_memory_t ssrc, sdst, sdsrc; /* ... operands there (net->sbuf; ssrc: sin in training) */
+  size_t s2b_bytes[2];             /* ... sizes of both sides */
+  int s2b_hp, s2b_wp;              /* ... the padded extent (multiples of d) */
+  reorder gather[2], scatter[2];   /* ... whole image <-> sub-images, per side */
+  reorder pad[2], crop[2];         /* ... through zero-bordered buffers (net->pbuf) where d
+                                      does not divide the size */
+  void *sin;                       /* ... training: the gathered input, for backward-weights */
+  int bwdd_fwd;                    /* backward-data runs as a forward conv with flipped weights */
+  float *wflip;                    /* ... whose OIHW weights (cin x cout x k x k) are built here */
+  float *gw, *gb;                  /* gradients, OIHW f32 (net-owned) */
+  void *act;                       /* dst buffer */
+  void *wp, *bwp, *dwp;            /* weight copies in primitive layouts */
 } layer;
 
 struct kpcn_net {
@@ -64,8 +71,8 @@ struct kpcn_net {
   void *xbuf;          /* layer-0 input in its primitive layout */
   void *rbuf;          /* a layer's input after src_in (inference; shared) */
   void *pp[2];         /* inference ping-pong activation buffers */
-  void *sbuf[2];       /* space-to-batch layers' input and output (inference) */
-  void *pbuf[2];       /* ... the same padded to multiples of d (where needed) */
+  void *sbuf[2];       /* space-to-batch layers' sides 0 and 1 in the batch layout */
+  void *pbuf[2];       /* ... whole images padded to multiples of d: gathered from, scattered to */
   size_t pbuf_bytes;   /* size of pbuf[0] */
   int pbuf_zeroed[3];  /* channels, Hp, Wp of the layout whose border pbuf[0] holds zeroed */
   void *dbuf[2];       /* backward gradient ping-pong buffers */

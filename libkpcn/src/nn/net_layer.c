@@ -147,21 +147,49 @@ static kpcn_status padded_view(dnnl_memory_desc_t *md, int N, int C, int H, int 
   return KPCN_OK;
 }
 
+/* The reorders of one side of a space-to-batch layer (0: input, C = cin; 1: output, C = cout):
+ * the gather into the batch of sub-images and / or the scatter back, each through the padded
+ * Hp x Wp buffer where d does not divide the size. */
+static kpcn_status make_s2b_side(kpcn_net *n, layer *y, int side, int gather, int scatter,
+                                 size_t *scratch) {
+  const int N = n->o.batch, H = n->o.height, W = n->o.width, d = y->d;
+  const int C = side ? y->cout : y->cin, Hp = y->s2b_hp, Wp = y->s2b_wp;
+  dnnl_memory_desc_t whole, padded, split;
+  dnnl_dims_t full = {N, C, H, W};
+  DN(dnnl_memory_desc_init_by_tag(&whole, 4, full, dnnl_f32, dnnl_nhwc));
+  KPCN_TRY(padded_view(&padded, N, C, H, W, Hp, Wp));
+  KPCN_TRY(s2b_view(&split, N, C, Hp, Wp, d, 1, dnnl_f32));
+  dnnl_memory_desc_t in_p; /* the padded buffer (or the image itself) as 6-D whole */
+  KPCN_TRY(s2b_view(&in_p, N, C, Hp, Wp, d, 0, dnnl_f32));
+  const int pads = Hp != H || Wp != W;
+  if (gather) {
+    if (pads) KPCN_TRY(kpcn_net_make_reorder(n, &y->pad[side], &whole, &padded, scratch));
+    KPCN_TRY(kpcn_net_make_reorder(n, &y->gather[side], &in_p, &split, scratch));
+  }
+  if (scatter) {
+    KPCN_TRY(kpcn_net_make_reorder(n, &y->scatter[side], &split, &in_p, scratch));
+    if (pads) KPCN_TRY(kpcn_net_make_reorder(n, &y->crop[side], &padded, &whole, scratch));
+  }
+  return KPCN_OK;
+}
+
 /* oneDNN 2.6 has no direct kernel for dilations >= 4 on AVX2 (nhwc falls back to im2col +
  * GEMM: ~3x slower, with an im2col scratchpad of 9x the layer input; nChw8c to reference
  * loops). A dilation-d conv equals an undilated one on the d x d interleaved sub-images of
- * its input, zero padding included, so for an inference layer whose direct kernel is such a
- * fallback the net gathers its input into that batch (a reorder), runs the undilated jit
+ * its input, zero padding included, so for an f32 layer whose direct forward kernel is such
+ * a fallback the net gathers its input into that batch (a reorder), runs the undilated jit
  * kernel and scatters the result back. Where d does not divide H or W the input is first
  * copied into a zero-bordered Hp x Wp buffer (the next multiples of d: the extra rows and
  * columns are exactly the zeros the conv's padding would read) and the result cropped from
- * one. *pd is replaced when this is used. */
+ * one. Training nets run the layer's backward the same way: the output gradient gathered
+ * (its padding rows are outputs that do not exist, so zero), the undilated backward-weights
+ * and backward-data kernels, the input gradient scattered (its padding rows dropped).
+ * *pd is replaced when this is used. */
 static kpcn_status try_space_to_batch(kpcn_net *n, int l, const dnnl_memory_desc_t *wany,
                                       const dnnl_memory_desc_t *bmd, size_t *scratch) {
   layer *y = &n->L[l];
   const int N = n->o.batch, H = n->o.height, W = n->o.width, d = y->d;
-  if (n->o.training || n->o.precision != KPCN_PREC_F32 || y->tag != dnnl_nhwc || d < 2 ||
-      !is_fallback(y->fwd_pd))
+  if (n->o.precision != KPCN_PREC_F32 || y->tag != dnnl_nhwc || d < 2 || !is_fallback(y->fwd_pd))
     return KPCN_OK;
   const int Hp = (H + d - 1) / d * d, Wp = (W + d - 1) / d * d;
   dnnl_dims_t sd = {(dnnl_dim_t)N * d * d, y->cin, Hp / d, Wp / d},
@@ -171,9 +199,9 @@ static kpcn_status try_space_to_batch(kpcn_net *n, int l, const dnnl_memory_desc
   DN(dnnl_memory_desc_init_by_tag(&smd, 4, sd, dnnl_f32, dnnl_nhwc));
   DN(dnnl_memory_desc_init_by_tag(&dmd, 4, dd, dnnl_f32, dnnl_nhwc));
   dnnl_convolution_desc_t cd;
-  DN(dnnl_dilated_convolution_forward_desc_init(&cd, dnnl_forward_inference,
-                                                dnnl_convolution_direct, &smd, wany, bmd, &dmd,
-                                                strides, dil, pad, pad));
+  DN(dnnl_dilated_convolution_forward_desc_init(
+      &cd, n->o.training ? dnnl_forward_training : dnnl_forward_inference, dnnl_convolution_direct,
+      &smd, wany, bmd, &dmd, strides, dil, pad, pad));
   dnnl_primitive_desc_t pd;
   if (dnnl_primitive_desc_create(&pd, &cd, y->has_relu ? n->attr_relu : n->attr, n->eng, NULL) !=
       dnnl_success)
@@ -185,6 +213,7 @@ static kpcn_status try_space_to_batch(kpcn_net *n, int l, const dnnl_memory_desc
   dnnl_primitive_desc_destroy(y->fwd_pd);
   y->fwd_pd = pd;
   y->s2b = 1;
+  y->s2b_md[0] = smd, y->s2b_md[1] = dmd;
   y->s2b_bytes[0] = dnnl_memory_desc_get_size(&smd);
   y->s2b_bytes[1] = dnnl_memory_desc_get_size(&dmd);
   y->s2b_hp = Hp, y->s2b_wp = Wp;
@@ -192,22 +221,9 @@ static kpcn_status try_space_to_batch(kpcn_net *n, int l, const dnnl_memory_desc
   if (s > *scratch) *scratch = s;
   KPCN_TRY(kpcn_net_mem(n, &y->ssrc, &smd, NULL));
   KPCN_TRY(kpcn_net_mem(n, &y->sdst, &dmd, NULL));
-  dnnl_memory_desc_t a, b;
-  if (Hp != H || Wp != W) {
-    dnnl_dims_t full_s = {N, y->cin, H, W}, full_d = {N, y->cout, H, W};
-    DN(dnnl_memory_desc_init_by_tag(&a, 4, full_s, dnnl_f32, dnnl_nhwc));
-    KPCN_TRY(padded_view(&b, N, y->cin, H, W, Hp, Wp));
-    KPCN_TRY(kpcn_net_make_reorder(n, &y->pad_in, &a, &b, scratch));
-    KPCN_TRY(padded_view(&a, N, y->cout, H, W, Hp, Wp));
-    DN(dnnl_memory_desc_init_by_tag(&b, 4, full_d, dnnl_f32, dnnl_nhwc));
-    KPCN_TRY(kpcn_net_make_reorder(n, &y->crop_out, &a, &b, scratch));
-  }
-  KPCN_TRY(s2b_view(&a, N, y->cin, Hp, Wp, d, 0, dnnl_f32));
-  KPCN_TRY(s2b_view(&b, N, y->cin, Hp, Wp, d, 1, dnnl_f32));
-  KPCN_TRY(kpcn_net_make_reorder(n, &y->s2b_in, &a, &b, scratch));
-  KPCN_TRY(s2b_view(&a, N, y->cout, Hp, Wp, d, 1, dnnl_f32));
-  KPCN_TRY(s2b_view(&b, N, y->cout, Hp, Wp, d, 0, dnnl_f32));
-  return kpcn_net_make_reorder(n, &y->s2b_out, &a, &b, scratch);
+  const int tr = n->o.training;
+  KPCN_TRY(make_s2b_side(n, y, 0, 1, tr, scratch));
+  return make_s2b_side(n, y, 1, tr, 1, scratch);
 }
 
 /* The activation layout of layer l. Explicit layouts apply to every layer. AUTO: nhwc, except
@@ -226,15 +242,17 @@ kpcn_status kpcn_net_choose_tag(kpcn_net *n, int l) {
     return KPCN_OK;
   const kpcn_arch *a = &n->model->arch;
   const double cin = kpcn_arch_layer_in(a, l), cout = kpcn_arch_layer_out(a, l);
-  if (16 * ceil(cin / 16) * 16 * ceil(cout / 16) > 1.15 * cin * cout) return KPCN_OK;
+  const int blk = kpcn_cpu_allows_avx512() ? 16 : 8;
+  const dnnl_format_tag_t btag = blk == 16 ? dnnl_nChw16c : dnnl_nChw8c;
+  if (blk * ceil(cin / blk) * blk * ceil(cout / blk) > 1.15 * cin * cout) return KPCN_OK;
   const int k = a->conv_size[l], d = a->dilation[l], pad = d * (k - 1) / 2;
   dnnl_dims_t sd = {n->o.batch, kpcn_arch_layer_in(a, l), n->o.height, n->o.width},
               dd = {n->o.batch, kpcn_arch_layer_out(a, l), n->o.height, n->o.width},
               wd = {dd[1], sd[1], k, k}, bd = {dd[1]}, strides = {1, 1}, dil = {d - 1, d - 1},
               pads = {pad, pad};
   dnnl_memory_desc_t smd, dmd, wmd, bmd;
-  DN(dnnl_memory_desc_init_by_tag(&smd, 4, sd, dnnl_f32, dnnl_nChw16c));
-  DN(dnnl_memory_desc_init_by_tag(&dmd, 4, dd, dnnl_f32, dnnl_nChw16c));
+  DN(dnnl_memory_desc_init_by_tag(&smd, 4, sd, dnnl_f32, btag));
+  DN(dnnl_memory_desc_init_by_tag(&dmd, 4, dd, dnnl_f32, btag));
   DN(dnnl_memory_desc_init_by_tag(&wmd, 4, wd, dnnl_f32, dnnl_format_tag_any));
   DN(dnnl_memory_desc_init_by_tag(&bmd, 1, bd, dnnl_f32, dnnl_x));
   dnnl_convolution_desc_t cd;
@@ -242,7 +260,7 @@ kpcn_status kpcn_net_choose_tag(kpcn_net *n, int l) {
                                                 &smd, &wmd, &bmd, &dmd, strides, dil, pads, pads));
   dnnl_primitive_desc_t pd;
   if (dnnl_primitive_desc_create(&pd, &cd, n->attr, n->eng, NULL) != dnnl_success) return KPCN_OK;
-  if (!kpcn_net_impl_is(pd, "ref")) y->tag = dnnl_nChw16c;
+  if (!kpcn_net_impl_is(pd, "ref") && (blk == 16 || d == 1)) y->tag = btag;
   dnnl_primitive_desc_destroy(pd);
   return KPCN_OK;
 }
@@ -319,9 +337,16 @@ kpcn_status kpcn_net_build_layer(kpcn_net *n, int l, const dnnl_memory_desc_t *s
   if (bf && !y->has_relu) DN(dnnl_memory_desc_init_by_tag(&y->ddst_md, 4, dd, dnnl_bf16, tag));
   dnnl_memory_desc_t dwany;
   DN(dnnl_memory_desc_init_by_tag(&dwany, 4, wd, dnnl_f32, dnnl_format_tag_any));
+  /* a space-to-batch layer's backward runs undilated on the sub-images, like its forward */
+  const dnnl_memory_desc_t *bsrc = y->s2b ? &y->s2b_md[0] : &y->src_md,
+                           *bdst = y->s2b ? &y->s2b_md[1] : &y->ddst_md;
+  if (y->s2b) {
+    dil[0] = dil[1] = 0;
+    pl[0] = pl[1] = pr[0] = pr[1] = (y->k - 1) / 2;
+  }
   dnnl_convolution_desc_t bwd;
-  DN(dnnl_dilated_convolution_backward_weights_desc_init(
-      &bwd, dnnl_convolution_direct, &y->src_md, &dwany, &bmd, &y->ddst_md, strides, dil, pl, pr));
+  DN(dnnl_dilated_convolution_backward_weights_desc_init(&bwd, dnnl_convolution_direct, bsrc,
+                                                         &dwany, &bmd, bdst, strides, dil, pl, pr));
   KPCN_TRY(
       kpcn_net_make_pd(n, &y->bwdw_pd, &bwd, n->attr, y->fwd_pd, "backward-weights", l, scratch));
   y->dw_md = *dnnl_primitive_desc_query_md(y->bwdw_pd, dnnl_query_diff_weights_md, 0);
@@ -331,18 +356,19 @@ kpcn_status kpcn_net_build_layer(kpcn_net *n, int l, const dnnl_memory_desc_t *s
   KPCN_TRY(kpcn_net_mem(n, &y->ddst, &y->ddst_md, NULL));
   KPCN_TRY(kpcn_net_make_reorder(n, &y->dw_out, &y->dw_md, &oihw, scratch));
   if (l > 0 || n->o.input_grad) {
-    DN(dnnl_dilated_convolution_backward_data_desc_init(&bwd, dnnl_convolution_direct, &y->src_md,
-                                                        &wany, &y->ddst_md, strides, dil, pl, pr));
+    DN(dnnl_dilated_convolution_backward_data_desc_init(&bwd, dnnl_convolution_direct, bsrc, &wany,
+                                                        bdst, strides, dil, pl, pr));
     KPCN_TRY(
         kpcn_net_make_pd(n, &y->bwdd_pd, &bwd, n->attr, y->fwd_pd, "backward-data", l, scratch));
     const dnnl_memory_desc_t *from = &oihw;
     dnnl_memory_desc_t iohw;
-    if (!bf) KPCN_TRY(try_bwdd_as_forward(n, l, strides, dil, pl, pr, &iohw, scratch));
+    if (!bf && !y->s2b) KPCN_TRY(try_bwdd_as_forward(n, l, strides, dil, pl, pr, &iohw, scratch));
     if (y->bwdd_fwd) from = &iohw;
     y->bw_md = *dnnl_primitive_desc_query_md(y->bwdd_pd, dnnl_query_weights_md, 0);
     DN(dnnl_primitive_create(&y->bwdd, y->bwdd_pd));
     KPCN_TRY(kpcn_net_mem(n, &y->bw, &y->bw_md, NULL));
     KPCN_TRY(kpcn_net_mem(n, &y->dsrc, &y->src_md, NULL));
+    if (y->s2b) KPCN_TRY(kpcn_net_mem(n, &y->sdsrc, &y->s2b_md[0], NULL));
     KPCN_TRY(kpcn_net_make_reorder(n, &y->bw_in, from, &y->bw_md, scratch));
     if (y->src_in.prim)
       KPCN_TRY(kpcn_net_make_reorder(n, &y->dsrc_out, &y->src_md, &n->L[l - 1].ddst_md, scratch));
