@@ -87,9 +87,10 @@ static void forward_vs_naive(int K, int n, int nc, int h, int w, float scale) {
   CHECK(memcmp(out, out2, nn * 4) == 0);
   CHECK(memcmp(wt, lg2, nl * 4) == 0);
   /* the same logits laid out pixel-major (nhwc, padded to K2+3 per pixel) and channel-
-   * blocked (nChw16c, channels padded to a multiple of 16) give bit-identical results */
-  const int blocks[2] = {K2, 16}, pstr[2] = {K2 + 3, 16};
-  for (int v = 0; v < 2; v++) {
+   * blocked (nChw16c and nChw8c, the AVX-512 and AVX2 training nets' layouts, channels padded
+   * to a multiple of the block) give bit-identical results */
+  const int blocks[3] = {K2, 16, 8}, pstr[3] = {K2 + 3, 16, 8};
+  for (int v = 0; v < 3; v++) {
     kpcn_logits_layout lay;
     lay.block = blocks[v], lay.pixel_stride = pstr[v];
     const int nb = (K2 + lay.block - 1) / lay.block;
@@ -202,7 +203,7 @@ static void backward_fd(int K, int n, int nc, int h, int w) {
 }
 
 /* kpcn_kpa_backward_layout: dlogits written planar (through the layout), pixel-major (nhwc,
- * padded to K2+3 per pixel) and channel-blocked (nChw16c) hold, slot for slot, the planar
+ * padded to K2+3 per pixel) and channel-blocked (nChw16c, nChw8c) hold, slot for slot, the planar
  * kpcn_kpa_backward's values (bit-identical) and zeros in every padding slot; dnoisy is unchanged.
  */
 static void backward_layouts(int K, int n, int nc, int h, int w) {
@@ -212,8 +213,9 @@ static void backward_layouts(int K, int n, int nc, int h, int w) {
   const size_t pl = c.pl, nl = c.nl, nn = c.nn;
   const float *nz = c.nz, *wt = c.wt, *r = c.r, *dl = c.dl, *dn = c.dn;
   float *dn2 = malloc(nn * 4);
-  const int blocks[3] = {1, K2, 16}, pstr[3] = {1, K2 + 3, 16}, nslots[3] = {1, K2 + 3, 16};
-  for (int v = 0; v < 3; v++) {
+  const int blocks[4] = {1, K2, 16, 8}, pstr[4] = {1, K2 + 3, 16, 8},
+            nslots[4] = {1, K2 + 3, 16, 8};
+  for (int v = 0; v < 4; v++) {
     kpcn_logits_layout lay;
     lay.block = blocks[v], lay.pixel_stride = pstr[v];
     const int nb = (K2 + lay.block - 1) / lay.block, slots = nslots[v];
