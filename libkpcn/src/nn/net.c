@@ -469,7 +469,7 @@ kpcn_status kpcn_net_set_branch(kpcn_net *n, kpcn_branch b) {
  * differently (the cpu preset's layers share one, so it is cleared once). */
 static kpcn_status s2b_gather(kpcn_net *n, layer *y, int side, const void *src, void *dst) {
   if (y->pad[side].prim) {
-    const int key[3] = {side ? y->cout : y->cin, y->s2b_hp, y->s2b_wp};
+    const int key[4] = {side ? y->cout : y->cin, (int)y->tag, y->s2b_hp, y->s2b_wp};
     if (memcmp(n->pbuf_zeroed, key, sizeof key)) {
       memset(n->pbuf[0], 0, n->pbuf_bytes);
       memcpy(n->pbuf_zeroed, key, sizeof key);

@@ -74,7 +74,7 @@ struct kpcn_net {
   void *sbuf[2];       /* space-to-batch layers' sides 0 and 1 in the batch layout */
   void *pbuf[2];       /* ... whole images padded to multiples of d: gathered from, scattered to */
   size_t pbuf_bytes;   /* size of pbuf[0] */
-  int pbuf_zeroed[3];  /* channels, Hp, Wp of the layout whose border pbuf[0] holds zeroed */
+  int pbuf_zeroed[4];  /* channels, tag, Hp, Wp of the layout whose border pbuf[0] holds zero */
   void *dbuf[2];       /* backward gradient ping-pong buffers */
   void *wbuf;          /* all primitive-layout weight copies */
   float *grads;        /* all gradients */

@@ -122,28 +122,37 @@ void kpcn_net_flip_weights(const layer *y, const float *w) {
             w[((size_t)o * y->cin + i) * kk + t];
 }
 
-/* A 6-D view of an N x C x H x W nhwc activation as N x C x H/d x d x W/d x d (row = hs*d + dy,
+/* Space-to-batch views. An activation laid out nhwc or channel-blocked (nChwBc) is, with
+ * channels split as Cb x B (nhwc: one block, B = C), N x Cb x H x W blocks of B floats. */
+static int s2b_block(const layer *y, int C) {
+  return y->tag == dnnl_nChw16c ? 16 : y->tag == dnnl_nChw8c ? 8 : C;
+}
+
+/* A 7-D view of an N x C x H x W activation as N x Cb x B x H/d x d x W/d x d (row = hs*d + dy,
  * column = ws*d + dx): whole (sub = 0) or as the d*d sub-images (dy, dx) of the batch
- * (dy*d + dx)*N + n, each H/d x W/d nhwc (sub = 1). A reorder between the two is the
- * space-to-batch gather (or its inverse). */
-static kpcn_status s2b_view(dnnl_memory_desc_t *md, int N, int C, int H, int W, int d, int sub,
-                            dnnl_data_type_t dt) {
-  const dnnl_dim_t hs = H / d, ws = W / d, c = C;
-  dnnl_dims_t dims = {N, C, hs, d, ws, d};
-  dnnl_dims_t whole = {(dnnl_dim_t)H * W * c, 1,     d * (dnnl_dim_t)W * c,
-                       (dnnl_dim_t)W * c,     d * c, c};
-  const dnnl_dim_t img = hs * ws * c;
-  dnnl_dims_t split = {img, 1, ws * c, d * (dnnl_dim_t)N * img, c, (dnnl_dim_t)N * img};
-  DN(dnnl_memory_desc_init_by_strides(md, 6, dims, dt, sub ? split : whole));
+ * (dy*d + dx)*N + n, each H/d x W/d in the same layout (sub = 1). A reorder between the two
+ * is the space-to-batch gather (or its inverse). */
+static kpcn_status s2b_view(dnnl_memory_desc_t *md, int N, int C, int B, int H, int W, int d,
+                            int sub) {
+  const dnnl_dim_t hs = H / d, ws = W / d, b = B, cb = C / B;
+  dnnl_dims_t dims = {N, cb, b, hs, d, ws, d};
+  dnnl_dims_t whole = {
+      cb * H * W * b, (dnnl_dim_t)H * W * b, 1, d * (dnnl_dim_t)W * b, (dnnl_dim_t)W * b, d * b, b};
+  const dnnl_dim_t img = cb * hs * ws * b;
+  dnnl_dims_t split = {img, hs * ws * b,        1, ws * b, d * (dnnl_dim_t)N * img,
+                       b,   (dnnl_dim_t)N * img};
+  DN(dnnl_memory_desc_init_by_strides(md, 7, dims, dnnl_f32, sub ? split : whole));
   return KPCN_OK;
 }
 
-/* N x C x H x W nhwc data of a buffer laid out as N x C x Hp x Wp nhwc (rows and columns
- * beyond H, W are padding). */
-static kpcn_status padded_view(dnnl_memory_desc_t *md, int N, int C, int H, int W, int Hp, int Wp) {
-  dnnl_dims_t dims = {N, C, H, W};
-  dnnl_dims_t st = {(dnnl_dim_t)Hp * Wp * C, 1, (dnnl_dim_t)Wp * C, C};
-  DN(dnnl_memory_desc_init_by_strides(md, 4, dims, dnnl_f32, st));
+/* N x Cb x B x H x W: the image of a buffer laid out for Hs x Ws (rows and columns beyond H,
+ * W are padding; Hs = H, Ws = W: the image itself). */
+static kpcn_status padded_view(dnnl_memory_desc_t *md, int N, int C, int B, int H, int W, int Hs,
+                               int Ws) {
+  const dnnl_dim_t b = B, cb = C / B;
+  dnnl_dims_t dims = {N, cb, b, H, W};
+  dnnl_dims_t st = {cb * Hs * Ws * b, (dnnl_dim_t)Hs * Ws * b, 1, (dnnl_dim_t)Ws * b, b};
+  DN(dnnl_memory_desc_init_by_strides(md, 5, dims, dnnl_f32, st));
   return KPCN_OK;
 }
 
@@ -153,14 +162,12 @@ static kpcn_status padded_view(dnnl_memory_desc_t *md, int N, int C, int H, int 
 static kpcn_status make_s2b_side(kpcn_net *n, layer *y, int side, int gather, int scatter,
                                  size_t *scratch) {
   const int N = n->o.batch, H = n->o.height, W = n->o.width, d = y->d;
-  const int C = side ? y->cout : y->cin, Hp = y->s2b_hp, Wp = y->s2b_wp;
-  dnnl_memory_desc_t whole, padded, split;
-  dnnl_dims_t full = {N, C, H, W};
-  DN(dnnl_memory_desc_init_by_tag(&whole, 4, full, dnnl_f32, dnnl_nhwc));
-  KPCN_TRY(padded_view(&padded, N, C, H, W, Hp, Wp));
-  KPCN_TRY(s2b_view(&split, N, C, Hp, Wp, d, 1, dnnl_f32));
-  dnnl_memory_desc_t in_p; /* the padded buffer (or the image itself) as 6-D whole */
-  KPCN_TRY(s2b_view(&in_p, N, C, Hp, Wp, d, 0, dnnl_f32));
+  const int C = side ? y->cout : y->cin, B = s2b_block(y, C), Hp = y->s2b_hp, Wp = y->s2b_wp;
+  dnnl_memory_desc_t whole, padded, split, in_p; /* in_p: the padded buffer (or the image) */
+  KPCN_TRY(padded_view(&whole, N, C, B, H, W, H, W));
+  KPCN_TRY(padded_view(&padded, N, C, B, H, W, Hp, Wp));
+  KPCN_TRY(s2b_view(&split, N, C, B, Hp, Wp, d, 1));
+  KPCN_TRY(s2b_view(&in_p, N, C, B, Hp, Wp, d, 0));
   const int pads = Hp != H || Wp != W;
   if (gather) {
     if (pads) KPCN_TRY(kpcn_net_make_reorder(n, &y->pad[side], &whole, &padded, scratch));
@@ -170,6 +177,27 @@ static kpcn_status make_s2b_side(kpcn_net *n, layer *y, int side, int gather, in
     KPCN_TRY(kpcn_net_make_reorder(n, &y->scatter[side], &split, &in_p, scratch));
     if (pads) KPCN_TRY(kpcn_net_make_reorder(n, &y->crop[side], &padded, &whole, scratch));
   }
+  return KPCN_OK;
+}
+
+/* *out = 1 if oneDNN has only a fallback backward-weights kernel for layer y as it stands
+ * (its dilation, its layout): on AVX2 every dilated f32 layer's (GEMM in nhwc, reference
+ * loops channel-blocked). */
+static kpcn_status bwdw_is_fallback(kpcn_net *n, const layer *y, const dnnl_memory_desc_t *wany,
+                                    const dnnl_memory_desc_t *bmd, int *out) {
+  const int pad = y->d * (y->k - 1) / 2;
+  dnnl_dims_t strides = {1, 1}, dil = {y->d - 1, y->d - 1}, pads = {pad, pad};
+  const dnnl_memory_desc_t *s = dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_src_md, 0),
+                           *d = dnnl_primitive_desc_query_md(y->fwd_pd, dnnl_query_dst_md, 0);
+  dnnl_convolution_desc_t cd;
+  DN(dnnl_dilated_convolution_backward_weights_desc_init(&cd, dnnl_convolution_direct, s, wany, bmd,
+                                                         d, strides, dil, pads, pads));
+  dnnl_primitive_desc_t pd;
+  *out = 1;
+  if (dnnl_primitive_desc_create(&pd, &cd, n->attr, n->eng, y->fwd_pd) != dnnl_success)
+    return KPCN_OK;
+  *out = is_fallback(pd);
+  dnnl_primitive_desc_destroy(pd);
   return KPCN_OK;
 }
 
@@ -189,15 +217,19 @@ static kpcn_status try_space_to_batch(kpcn_net *n, int l, const dnnl_memory_desc
                                       const dnnl_memory_desc_t *bmd, size_t *scratch) {
   layer *y = &n->L[l];
   const int N = n->o.batch, H = n->o.height, W = n->o.width, d = y->d;
-  if (n->o.precision != KPCN_PREC_F32 || y->tag != dnnl_nhwc || d < 2 || !is_fallback(y->fwd_pd))
+  if (n->o.precision != KPCN_PREC_F32 || d < 2 || y->cin % s2b_block(y, y->cin) ||
+      y->cout % s2b_block(y, y->cout))
     return KPCN_OK;
+  int fallback = is_fallback(y->fwd_pd);
+  if (!fallback && n->o.training) KPCN_TRY(bwdw_is_fallback(n, y, wany, bmd, &fallback));
+  if (!fallback) return KPCN_OK;
   const int Hp = (H + d - 1) / d * d, Wp = (W + d - 1) / d * d;
   dnnl_dims_t sd = {(dnnl_dim_t)N * d * d, y->cin, Hp / d, Wp / d},
               dd = {(dnnl_dim_t)N * d * d, y->cout, Hp / d, Wp / d};
   dnnl_dims_t strides = {1, 1}, dil = {0, 0}, pad = {(y->k - 1) / 2, (y->k - 1) / 2};
   dnnl_memory_desc_t smd, dmd;
-  DN(dnnl_memory_desc_init_by_tag(&smd, 4, sd, dnnl_f32, dnnl_nhwc));
-  DN(dnnl_memory_desc_init_by_tag(&dmd, 4, dd, dnnl_f32, dnnl_nhwc));
+  DN(dnnl_memory_desc_init_by_tag(&smd, 4, sd, dnnl_f32, y->tag));
+  DN(dnnl_memory_desc_init_by_tag(&dmd, 4, dd, dnnl_f32, y->tag));
   dnnl_convolution_desc_t cd;
   DN(dnnl_dilated_convolution_forward_desc_init(
       &cd, n->o.training ? dnnl_forward_training : dnnl_forward_inference, dnnl_convolution_direct,
@@ -210,6 +242,7 @@ static kpcn_status try_space_to_batch(kpcn_net *n, int l, const dnnl_memory_desc
     dnnl_primitive_desc_destroy(pd);
     return KPCN_OK;
   }
+  if (kpcn_net_impl_is(y->fwd_pd, "ref")) n->n_slow--; /* make_pd counted the one replaced */
   dnnl_primitive_desc_destroy(y->fwd_pd);
   y->fwd_pd = pd;
   y->s2b = 1;
@@ -224,6 +257,29 @@ static kpcn_status try_space_to_batch(kpcn_net *n, int l, const dnnl_memory_desc
   const int tr = n->o.training;
   KPCN_TRY(make_s2b_side(n, y, 0, 1, tr, scratch));
   return make_s2b_side(n, y, 1, tr, 1, scratch);
+}
+
+/* *out = 1 if oneDNN has a direct (not reference) f32 training forward kernel for a
+ * cin -> cout k x k conv of dilation d on N x H x W activations in layout tag. */
+static kpcn_status forward_is_direct(kpcn_net *n, int cin, int cout, int k, int d, int N, int H,
+                                     int W, dnnl_format_tag_t tag, int *out) {
+  const int pad = d * (k - 1) / 2;
+  dnnl_dims_t sd = {N, cin, H, W}, dd = {N, cout, H, W}, wd = {cout, cin, k, k}, bd = {cout},
+              strides = {1, 1}, dil = {d - 1, d - 1}, pads = {pad, pad};
+  dnnl_memory_desc_t smd, dmd, wmd, bmd;
+  DN(dnnl_memory_desc_init_by_tag(&smd, 4, sd, dnnl_f32, tag));
+  DN(dnnl_memory_desc_init_by_tag(&dmd, 4, dd, dnnl_f32, tag));
+  DN(dnnl_memory_desc_init_by_tag(&wmd, 4, wd, dnnl_f32, dnnl_format_tag_any));
+  DN(dnnl_memory_desc_init_by_tag(&bmd, 1, bd, dnnl_f32, dnnl_x));
+  dnnl_convolution_desc_t cd;
+  DN(dnnl_dilated_convolution_forward_desc_init(&cd, dnnl_forward_training, dnnl_convolution_direct,
+                                                &smd, &wmd, &bmd, &dmd, strides, dil, pads, pads));
+  dnnl_primitive_desc_t pd;
+  *out = 0;
+  if (dnnl_primitive_desc_create(&pd, &cd, n->attr, n->eng, NULL) != dnnl_success) return KPCN_OK;
+  *out = !kpcn_net_impl_is(pd, "ref");
+  dnnl_primitive_desc_destroy(pd);
+  return KPCN_OK;
 }
 
 /* The activation layout of layer l. Explicit layouts apply to every layer. AUTO: nhwc, except
@@ -241,27 +297,24 @@ kpcn_status kpcn_net_choose_tag(kpcn_net *n, int l) {
   if (n->o.layout != KPCN_LAYOUT_AUTO || !n->o.training || n->o.precision != KPCN_PREC_F32)
     return KPCN_OK;
   const kpcn_arch *a = &n->model->arch;
-  const double cin = kpcn_arch_layer_in(a, l), cout = kpcn_arch_layer_out(a, l);
+  const int cin = kpcn_arch_layer_in(a, l), cout = kpcn_arch_layer_out(a, l);
   const int blk = kpcn_cpu_allows_avx512() ? 16 : 8;
   const dnnl_format_tag_t btag = blk == 16 ? dnnl_nChw16c : dnnl_nChw8c;
-  if (blk * ceil(cin / blk) * blk * ceil(cout / blk) > 1.15 * cin * cout) return KPCN_OK;
-  const int k = a->conv_size[l], d = a->dilation[l], pad = d * (k - 1) / 2;
-  dnnl_dims_t sd = {n->o.batch, kpcn_arch_layer_in(a, l), n->o.height, n->o.width},
-              dd = {n->o.batch, kpcn_arch_layer_out(a, l), n->o.height, n->o.width},
-              wd = {dd[1], sd[1], k, k}, bd = {dd[1]}, strides = {1, 1}, dil = {d - 1, d - 1},
-              pads = {pad, pad};
-  dnnl_memory_desc_t smd, dmd, wmd, bmd;
-  DN(dnnl_memory_desc_init_by_tag(&smd, 4, sd, dnnl_f32, btag));
-  DN(dnnl_memory_desc_init_by_tag(&dmd, 4, dd, dnnl_f32, btag));
-  DN(dnnl_memory_desc_init_by_tag(&wmd, 4, wd, dnnl_f32, dnnl_format_tag_any));
-  DN(dnnl_memory_desc_init_by_tag(&bmd, 1, bd, dnnl_f32, dnnl_x));
-  dnnl_convolution_desc_t cd;
-  DN(dnnl_dilated_convolution_forward_desc_init(&cd, dnnl_forward_training, dnnl_convolution_direct,
-                                                &smd, &wmd, &bmd, &dmd, strides, dil, pads, pads));
-  dnnl_primitive_desc_t pd;
-  if (dnnl_primitive_desc_create(&pd, &cd, n->attr, n->eng, NULL) != dnnl_success) return KPCN_OK;
-  if (!kpcn_net_impl_is(pd, "ref") && (blk == 16 || d == 1)) y->tag = btag;
-  dnnl_primitive_desc_destroy(pd);
+  if (blk * ceil((double)cin / blk) * blk * ceil((double)cout / blk) > 1.15 * cin * cout)
+    return KPCN_OK;
+  const int k = a->conv_size[l], d = a->dilation[l];
+  int fast = 0;
+  KPCN_TRY(forward_is_direct(n, cin, cout, k, d, n->o.batch, n->o.height, n->o.width, btag, &fast));
+  if (blk == 8 && d > 1) {
+    /* AVX2: the dilated layer's kernels in nChw8c are reference loops (forward from d = 4,
+     * backward-weights from d = 2), so it goes blocked only where its channels fill whole
+     * blocks and the undilated kernel of space-to-batch exists */
+    fast = 0;
+    if (cin % blk == 0 && cout % blk == 0)
+      KPCN_TRY(forward_is_direct(n, cin, cout, k, 1, n->o.batch * d * d, (n->o.height + d - 1) / d,
+                                 (n->o.width + d - 1) / d, btag, &fast));
+  }
+  if (fast) y->tag = btag;
   return KPCN_OK;
 }
 
