@@ -2,6 +2,7 @@
  * than FMA latency x issue width on current x86 (4 cycles x 2 units), so the loop is bound
  * by throughput alone; the result is summed and returned so nothing is optimised away. */
 #include "machine_peak.h"
+#include "core/internal.h"
 
 #include <immintrin.h>
 #include <omp.h>
@@ -72,13 +73,16 @@ kt_machine_peak kt_measure_peak(int nthreads) {
   kt_machine_peak p = {0.0, 0.0, "avx2"};
   if (nthreads < 1) nthreads = omp_get_max_threads();
   __builtin_cpu_init();
-  if (__builtin_cpu_supports("avx512f")) {
+  /* under ONEDNN_MAX_CPU_ISA=AVX2 (kpcn_cpu_allows_avx512) the code runs as on an AVX2 CPU,
+   * so its share is of the AVX2 peak */
+  const int avx512 = __builtin_cpu_supports("avx512f") && kpcn_cpu_allows_avx512();
+  if (avx512) {
     p.isa = "avx512";
     p.fp32 = probe(0, nthreads);
   } else {
     p.fp32 = probe(1, nthreads);
   }
-  if (__builtin_cpu_supports("avx512bf16")) p.bf16 = probe(2, nthreads);
+  if (avx512 && __builtin_cpu_supports("avx512bf16")) p.bf16 = probe(2, nthreads);
   return p;
 }
 
