@@ -156,11 +156,12 @@ static int train(const char *preset, int iters, int nt) {
   printf("train %-5s fp32 batch %dx%dx%d, 1 branch: %6.2f it/s, %7.1f patches/s | %6.1f GFLOP/s "
          "end-to-end, %6.1f in convs (fwd %.0f%%, bwd %.0f%% of conv time) | kpa %4.1f%% | "
          "net %.0f MiB, peak RSS %.0f MiB, %d slow prims, %d layout switches, %d backward-data "
-         "as forward\n",
+         "as forward, %d space-to-batch\n",
          preset, N, S, S, iters / total, N * iters / total, flops_it * iters / total / 1e9,
          flops_it * iters / conv / 1e9, 100 * (s.fwd_conv_s - s0.fwd_conv_s) / conv,
          100 * (s.bwd_conv_s - s0.bwd_conv_s) / conv, 100 * kpa / total,
-         (double)s.bytes / 1048576.0, peak_rss_mib(), s.n_slow, s.n_relayout, s.n_bwdd_fwd);
+         (double)s.bytes / 1048576.0, peak_rss_mib(), s.n_slow, s.n_relayout, s.n_bwdd_fwd,
+         s.n_space_to_batch);
   fflush(stdout);
   kpcn_net_destroy(net);
   kpcn_model_destroy(m);
