@@ -65,6 +65,17 @@ static int is_fallback(const_dnnl_primitive_desc_t pd) {
          kpcn_net_impl_is(pd, "x64:gemm");
 }
 
+/* *slot (a primitive descriptor made by kpcn_net_make_pd) replaced by pd, a better kernel for
+ * the same job: the slow-kernel count forgets the old one, the scratchpad covers the new. */
+static void replace_pd(kpcn_net *n, dnnl_primitive_desc_t *slot, dnnl_primitive_desc_t pd,
+                       size_t *scratch) {
+  if (kpcn_net_impl_is(*slot, "ref")) n->n_slow--; /* make_pd counted the one replaced */
+  dnnl_primitive_desc_destroy(*slot);
+  *slot = pd;
+  const size_t s = kpcn_net_pd_scratch(pd);
+  if (s > *scratch) *scratch = s;
+}
+
 /* The gradient of a stride-1 "same" convolution with respect to its input is the forward
  * convolution of the output gradient with the weights transposed (in <-> out channels) and
  * flipped in space, at the same dilation and padding. Where oneDNN 2.6 has no direct
@@ -102,13 +113,9 @@ static kpcn_status try_bwdd_as_forward(kpcn_net *n, int l, const dnnl_dims_t str
     dnnl_primitive_desc_destroy(pd);
     return KPCN_ERR_OUT_OF_MEMORY;
   }
-  if (kpcn_net_impl_is(y->bwdd_pd, "ref")) n->n_slow--; /* make_pd counted the one replaced */
-  dnnl_primitive_desc_destroy(y->bwdd_pd);
-  y->bwdd_pd = pd;
+  replace_pd(n, &y->bwdd_pd, pd, scratch);
   y->bwdd_fwd = 1;
   n->n_bwdd_fwd++;
-  size_t sz = kpcn_net_pd_scratch(pd);
-  if (sz > *scratch) *scratch = sz;
   return KPCN_OK;
 }
 
@@ -242,16 +249,12 @@ static kpcn_status try_space_to_batch(kpcn_net *n, int l, const dnnl_memory_desc
     dnnl_primitive_desc_destroy(pd);
     return KPCN_OK;
   }
-  if (kpcn_net_impl_is(y->fwd_pd, "ref")) n->n_slow--; /* make_pd counted the one replaced */
-  dnnl_primitive_desc_destroy(y->fwd_pd);
-  y->fwd_pd = pd;
+  replace_pd(n, &y->fwd_pd, pd, scratch);
   y->s2b = 1;
   y->s2b_md[0] = smd, y->s2b_md[1] = dmd;
   y->s2b_bytes[0] = dnnl_memory_desc_get_size(&smd);
   y->s2b_bytes[1] = dnnl_memory_desc_get_size(&dmd);
   y->s2b_hp = Hp, y->s2b_wp = Wp;
-  const size_t s = kpcn_net_pd_scratch(pd);
-  if (s > *scratch) *scratch = s;
   KPCN_TRY(kpcn_net_mem(n, &y->ssrc, &smd, NULL));
   KPCN_TRY(kpcn_net_mem(n, &y->sdst, &dmd, NULL));
   const int tr = n->o.training;
