@@ -262,10 +262,10 @@ static kpcn_status try_space_to_batch(kpcn_net *n, int l, const dnnl_memory_desc
   return make_s2b_side(n, y, 1, tr, 1, scratch);
 }
 
-/* *out = 1 if oneDNN has a direct (not reference) f32 training forward kernel for a
- * cin -> cout k x k conv of dilation d on N x H x W activations in layout tag. */
-static kpcn_status forward_is_direct(kpcn_net *n, int cin, int cout, int k, int d, int N, int H,
-                                     int W, dnnl_format_tag_t tag, int *out) {
+/* *out = 1 if oneDNN has direct (not fallback) f32 training forward and backward-weights
+ * kernels for a cin -> cout k x k conv of dilation d on N x H x W activations in layout tag. */
+static kpcn_status kernels_are_direct(kpcn_net *n, int cin, int cout, int k, int d, int N, int H,
+                                      int W, dnnl_format_tag_t tag, int *out) {
   const int pad = d * (k - 1) / 2;
   dnnl_dims_t sd = {N, cin, H, W}, dd = {N, cout, H, W}, wd = {cout, cin, k, k}, bd = {cout},
               strides = {1, 1}, dil = {d - 1, d - 1}, pads = {pad, pad};
@@ -277,19 +277,30 @@ static kpcn_status forward_is_direct(kpcn_net *n, int cin, int cout, int k, int 
   dnnl_convolution_desc_t cd;
   DN(dnnl_dilated_convolution_forward_desc_init(&cd, dnnl_forward_training, dnnl_convolution_direct,
                                                 &smd, &wmd, &bmd, &dmd, strides, dil, pads, pads));
-  dnnl_primitive_desc_t pd;
+  dnnl_primitive_desc_t fwd, bwdw;
   *out = 0;
-  if (dnnl_primitive_desc_create(&pd, &cd, n->attr, n->eng, NULL) != dnnl_success) return KPCN_OK;
-  *out = !kpcn_net_impl_is(pd, "ref");
-  dnnl_primitive_desc_destroy(pd);
+  if (dnnl_primitive_desc_create(&fwd, &cd, n->attr, n->eng, NULL) != dnnl_success) return KPCN_OK;
+  dnnl_status_t st = dnnl_success;
+  if (!is_fallback(fwd)) {
+    st = dnnl_dilated_convolution_backward_weights_desc_init(
+        &cd, dnnl_convolution_direct, &smd, &wmd, &bmd, &dmd, strides, dil, pads, pads);
+    if (st == dnnl_success &&
+        dnnl_primitive_desc_create(&bwdw, &cd, n->attr, n->eng, fwd) == dnnl_success) {
+      *out = !is_fallback(bwdw);
+      dnnl_primitive_desc_destroy(bwdw);
+    }
+  }
+  dnnl_primitive_desc_destroy(fwd);
+  DN(st);
   return KPCN_OK;
 }
 
 /* The activation layout of layer l. Explicit layouts apply to every layer. AUTO: nhwc, except
- * for f32 training nets, where a layer runs channel-blocked (nChw16c) when oneDNN has a jit
- * forward kernel for it there (its reference kernel serves the dilation-8 layer in nChw16c)
- * and padding its channels to multiples of 16 adds at most 15 % to its work, with reorders
- * between layers of different layouts. Why: oneDNN 2.6's f32 backward-weights kernel is ~1.4x
+ * for f32 training nets, where a layer runs channel-blocked (nChw16c; nChw8c where the CPU
+ * lacks AVX-512) when oneDNN has jit forward and backward-weights kernels for it there, or
+ * for the undilated conv space-to-batch runs it as, and padding its channels to multiples of
+ * the block adds at most 15 % to its work, with reorders between layers of different
+ * layouts. Why: oneDNN 2.6's f32 backward-weights kernel is ~1.4x
  * faster on nChw16c than on nhwc (cpu preset, batch 16 of 64 x 64: 8.5 vs 12 ms per
  * 48-channel layer; 121 logits pad to 128), while the padding ate the gain where channels are
  * far from a multiple of 16 (paper preset, 100 -> 112: 288-315 vs 321 GFLOP/s in nhwc); the
@@ -307,16 +318,15 @@ kpcn_status kpcn_net_choose_tag(kpcn_net *n, int l) {
     return KPCN_OK;
   const int k = a->conv_size[l], d = a->dilation[l];
   int fast = 0;
-  KPCN_TRY(forward_is_direct(n, cin, cout, k, d, n->o.batch, n->o.height, n->o.width, btag, &fast));
-  if (blk == 8 && d > 1) {
-    /* AVX2: the dilated layer's kernels in nChw8c are reference loops (forward from d = 4,
-     * backward-weights from d = 2), so it goes blocked only where its channels fill whole
-     * blocks and the undilated kernel of space-to-batch exists */
-    fast = 0;
-    if (cin % blk == 0 && cout % blk == 0)
-      KPCN_TRY(forward_is_direct(n, cin, cout, k, 1, n->o.batch * d * d, (n->o.height + d - 1) / d,
-                                 (n->o.width + d - 1) / d, btag, &fast));
-  }
+  KPCN_TRY(
+      kernels_are_direct(n, cin, cout, k, d, n->o.batch, n->o.height, n->o.width, btag, &fast));
+  /* A dilated layer without them there (AVX2: reference loops for the forward from d = 4 and
+   * for backward-weights from d = 2; AVX-512: the forward at d = 8) still goes blocked where
+   * space-to-batch will carry it: its channels fill whole blocks and the undilated kernels
+   * exist. */
+  if (!fast && d > 1 && cin % blk == 0 && cout % blk == 0)
+    KPCN_TRY(kernels_are_direct(n, cin, cout, k, 1, n->o.batch * d * d, (n->o.height + d - 1) / d,
+                                (n->o.width + d - 1) / d, btag, &fast));
   if (fast) y->tag = btag;
   return KPCN_OK;
 }
