@@ -189,7 +189,7 @@ bool write_patches(const std::string &out, const OIIO::ImageBuf &noisy, const OI
     src.spp = n->spp;
     src.ref_spp = r ? r->spp : -1;
     uint32_t sid = 0;
-    if (kpcn_patch_source_depth_stats(&src, n.get()) != KPCN_OK ||
+    if (kpcn_patch_source_image_stats(&src, n.get()) != KPCN_OK ||
         kpcn_patchstore_add_source(w, &src, &sid) != KPCN_OK) {
       err = kpcn_last_error();
       kpcn_patchstore_abort(w);

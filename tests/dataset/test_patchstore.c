@@ -64,7 +64,7 @@ static void round_trip(kpcn_dtype dt) {
   src.variant = 3;
   src.spp = 16;
   src.ref_spp = 1024;
-  CHECK(kpcn_patch_source_depth_stats(&src, n) == KPCN_OK);
+  CHECK(kpcn_patch_source_image_stats(&src, n) == KPCN_OK);
   uint32_t id = 99;
   CHECK(kpcn_patchstore_add_source(w, &src, &id) == KPCN_OK && id == 0);
   int xs[3] = {0, 31, 10}, ys[3] = {0, 21, 5};
@@ -99,6 +99,10 @@ static void round_trip(kpcn_dtype dt) {
     sum += z;
   }
   CHECK(rs && rs->depth_min == (float)mn && rs->depth_max == (float)mx);
+  /* the whole image's exposure travels with the source (the trainer records the range) */
+  double ex = 0.0;
+  CHECK(kpcn_aov_exposure(n, &ex) == KPCN_OK && ex > 0.0);
+  CHECK(rs && src.exposure == ex && fabs(rs->exposure - ex) <= 1e-12 * ex);
   CHECK_CLOSE(rs ? rs->depth_mean : 0, sum / 1200, 1e-5, 0);
   float *buf = malloc(sizeof(float) * 33 * 81);
   const char *const *ch = kpcn_patchstore_channels(ps);

@@ -35,6 +35,22 @@ grep -Eq '"relmse": *([0-9.]+e-(1[0-9]|[2-9][0-9])|0)([,} ]|$)' "$D/em.json" ||
   fail "ensemble not equivariant to a mirror: $(cat "$D/em.json")"
 "$T" --json "$D/out_e.exr" "$D/out.exr" --relmse >"$D/ep.json" || fail "relmse"
 grep -Eq '"relmse": *0(\.0*)?([,} ]|$)' "$D/ep.json" && fail "ensemble equals the plain output"
+# exposure: the fixture's model records no exposure range, so the default (auto) is the
+# input as rendered (off); a fixed target changes the result; bad values are named
+"$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":exposure=off -o "$D/out_xo.exr" || fail "exposure=off"
+"$T" --json "$D/out_xo.exr" "$D/out.exr" --l1 >"$D/xo.json" || fail "l1"
+grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/xo.json" || fail "exposure=off differs from auto: $(cat "$D/xo.json")"
+"$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":exposure=0.05 -o "$D/out_x5.exr" || fail "exposure=0.05"
+"$T" --json "$D/out_x5.exr" "$D/out.exr" --l1 >"$D/x5.json" || fail "l1"
+grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/x5.json" && fail "exposure=0.05 equals the input as rendered"
+"$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":exposure=0.01,0.1 -o "$D/out_xr.exr" || fail "exposure=LO,HI"
+for bad in -1 0 nan abc 2,1 1, ,1; do
+  if "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":exposure=$bad -o "$D/bad.exr" 2>"$D/err"; then
+    fail "exposure=$bad accepted"
+  fi
+  grep -q exposure "$D/err" || fail "error does not name exposure: $(cat "$D/err")"
+  [ ! -e "$D/bad.exr" ] || fail "partial output written (exposure=$bad)"
+done
 if "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":ensemble=3 -o "$D/bad.exr" 2>"$D/err"; then
   fail "ensemble=3 accepted"
 fi

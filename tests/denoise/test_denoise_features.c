@@ -12,18 +12,18 @@
 static const float EPS = 0.01f;
 
 /* Naive reference of feature channel ch at (x, y), straight from the header comment. */
-static double pre(const kpcn_aov_set *a, int branch, int c, int x, int y) {
+static double pre(const kpcn_aov_set *a, int branch, double cs, int c, int x, int y) {
   size_t P = kpcn_aov_plane_size(a), i = (size_t)y * a->width + x;
   if (branch == KPCN_BRANCH_DIFFUSE)
-    return (double)a->buf[KPCN_BUF_DIFFUSE][c * P + i] /
+    return cs * a->buf[KPCN_BUF_DIFFUSE][c * P + i] /
            ((double)a->buf[KPCN_BUF_ALBEDO][c * P + i] + EPS);
-  double v = a->buf[KPCN_BUF_SPECULAR][c * P + i];
+  double v = cs * a->buf[KPCN_BUF_SPECULAR][c * P + i];
   return log(1.0 + (v > 0 ? v : 0));
 }
 static double gsrc(const kpcn_aov_set *a, int branch, const kpcn_features_norm *n, int g, int x,
                    int y) {
   size_t P = kpcn_aov_plane_size(a), i = (size_t)y * a->width + x;
-  if (g < 3) return pre(a, branch, g, x, y);
+  if (g < 3) return pre(a, branch, n->color_scale, g, x, y);
   if (g < 6) return a->buf[KPCN_BUF_NORMAL][(g - 3) * P + i];
   if (g < 9) return a->buf[KPCN_BUF_ALBEDO][(g - 6) * P + i];
   return ((double)a->buf[KPCN_BUF_DEPTH][i] - n->depth_offset) * n->depth_scale;
@@ -34,16 +34,17 @@ static double ref_feature(const kpcn_aov_set *a, int branch, const kpcn_features
                           int x, int y) {
   size_t P = kpcn_aov_plane_size(a), i = (size_t)y * a->width + x;
   int W = a->width, H = a->height;
-  if (ch < 3) return pre(a, branch, ch, x, y);
+  if (ch < 3) return pre(a, branch, n->color_scale, ch, x, y);
   if (ch == 3) {
     kpcn_buffer cb = branch == KPCN_BRANCH_DIFFUSE ? KPCN_BUF_DIFFUSE : KPCN_BUF_SPECULAR;
+    const double cs = n->color_scale;
     double s = 0;
     for (int c = 0; c < 3; c++) {
       double d = branch == KPCN_BRANCH_DIFFUSE ? a->buf[KPCN_BUF_ALBEDO][c * P + i] + (double)EPS
-                                               : 1.0 + fmax(0.0, a->buf[cb][c * P + i]);
+                                               : 1.0 + fmax(0.0, cs * a->buf[cb][c * P + i]);
       s += 1.0 / (d * d);
     }
-    return a->var[cb][i] * s / 3.0;
+    return cs * cs * a->var[cb][i] * s / 3.0;
   }
   if (ch < 7) return a->buf[KPCN_BUF_NORMAL][(ch - 4) * P + i];
   if (ch == 7) return a->var[KPCN_BUF_NORMAL][i];
@@ -119,11 +120,15 @@ static void test_values(void) {
     }
   CHECK_CLOSE(n.depth_offset, lo, 1e-6, 0);
   CHECK_CLOSE(n.depth_scale, 1.0 / (hi - lo), 1e-5, 0);
+  CHECK(n.color_scale == 1.0f);
 
   size_t Q = (size_t)W * H;
   float *f = malloc(sizeof(float) * Q * 36), *f1 = malloc(sizeof(float) * Q * 36);
   float *noisy = malloc(sizeof(float) * Q * 3);
-  for (int b = 0; b < 2; b++) {
+  /* as rendered, then at an exposure 7.5 times brighter (the colour scale) */
+  for (int run = 0; run < 4; run++) {
+    const int b = run % 2;
+    n.color_scale = run < 2 ? 1.0f : 7.5f;
     CHECK(kpcn_features_build(a, b, EPS, &n, f, noisy, 2) == KPCN_OK);
     int bad = 0;
     double worst = 0;

@@ -25,6 +25,10 @@ static kpcn_model *make_model_chain(uint64_t seed, int passes, int sw) {
   /* more passes: K = 7, so the tile pad the one-pass overlap max(4, 3) would give (6) is
    * short of the two-pass one, max(4 + 3, 3 + 3) = 7, and the tiling test would see it */
   if (passes > 1) arch.kernel_size = 7;
+  /* a recorded exposure range above the synthetic images' (~0.2): every denoise below runs
+   * with the input scaled up to its lower end */
+  arch.exposure_range[0] = 0.75f;
+  arch.exposure_range[1] = 3.0f;
   if (kpcn_features_set_arch(&arch) != KPCN_OK) return NULL;
   kpcn_model *m = NULL;
   if (kpcn_model_create(&arch, seed, &m) != KPCN_OK) return NULL;
@@ -52,6 +56,11 @@ static void reference(kpcn_model *m, const kpcn_aov_set *a, double *out) {
   size_t P = (size_t)W * H;
   kpcn_features_norm n;
   kpcn_features_norm_compute(a, &n);
+  /* the network sees the colour at the nearer end of the model's exposure range */
+  double e = 0.0;
+  kpcn_aov_exposure(a, &e);
+  const double lo = arch->exposure_range[0], hi = arch->exposure_range[1];
+  n.color_scale = e > 0.0 && e < lo ? (float)(lo / e) : e > hi ? (float)(hi / e) : 1.0f;
   float *feat = malloc(sizeof(float) * P * KPCN_FEATURES_COUNT);
   double *act = malloc(sizeof(double) * P * 64), *nxt = malloc(sizeof(double) * P * 64);
   double *filt[2] = {malloc(sizeof(double) * 3 * P), malloc(sizeof(double) * 3 * P)};
@@ -113,7 +122,8 @@ static void reference(kpcn_model *m, const kpcn_aov_set *a, double *out) {
     }
   }
   for (size_t i = 0; i < 3 * P; i++)
-    out[i] = filt[0][i] * ((double)a->buf[KPCN_BUF_ALBEDO][i] + arch->eps) + expm1(filt[1][i]);
+    out[i] = (filt[0][i] * ((double)a->buf[KPCN_BUF_ALBEDO][i] + arch->eps) + expm1(filt[1][i])) /
+             n.color_scale;
   free(feat);
   free(act);
   free(nxt);
@@ -555,7 +565,134 @@ static void test_ensemble(void) {
   kpcn_model_destroy(m);
 }
 
+/* Multiplies the colour buffers of a by s and their variances by s². */
+static void scale_colour(kpcn_aov_set *a, float s) {
+  const size_t P = kpcn_aov_plane_size(a);
+  const kpcn_buffer cb[3] = {KPCN_BUF_COLOR, KPCN_BUF_DIFFUSE, KPCN_BUF_SPECULAR};
+  for (int k = 0; k < 3; k++) {
+    for (size_t i = 0; i < 3 * P; i++)
+      a->buf[cb[k]][i] *= s;
+    for (size_t i = 0; i < P; i++)
+      a->var[cb[k]][i] *= s * s;
+  }
+}
+
+/* Exposure: the statistic against a hand-computed median, exact scaling and symmetry; the
+ * denoiser's output scales with its input exactly; bad targets and black frames. */
+static void test_exposure(void) {
+  /* 32x32: sixteen 8x8 blocks (the grid from the centre lands on multiples of 8), block k
+   * (row-major) of luminance k + 1, blocks 0, 5 and 10 black (not counted), a NaN and an
+   * Inf pixel in block 15 (skipped); the other blocks alternate 0.5 and 1.5 times their
+   * mean. Lit means: 2 3 4 5 7 8 9 10 12 13 14 15 16 -> median 9. */
+  kpcn_aov_set *k = synth_aov(32, 32, 5);
+  const size_t Pk = kpcn_aov_plane_size(k);
+  for (int y = 0; y < 32; y++)
+    for (int x = 0; x < 32; x++) {
+      const int blk = (x / 8) + 4 * (y / 8);
+      float v = (blk == 0 || blk == 5 || blk == 10) ? 0.0f : (float)(blk + 1);
+      if (blk != 15) v *= (x + y) % 2 ? 1.5f : 0.5f;
+      for (int c = 0; c < 3; c++) {
+        k->buf[KPCN_BUF_DIFFUSE][c * Pk + (size_t)y * 32 + x] = v;
+        k->buf[KPCN_BUF_SPECULAR][c * Pk + (size_t)y * 32 + x] = 0.0f;
+      }
+    }
+  k->buf[KPCN_BUF_DIFFUSE][31 * 32 + 30] = NAN;
+  k->buf[KPCN_BUF_SPECULAR][Pk + 30 * 32 + 31] = INFINITY;
+  double e = -1.0;
+  CHECK(kpcn_aov_exposure(k, &e) == KPCN_OK);
+  printf("exposure of the known-answer image: %.12g (want 9)\n", e);
+  CHECK(fabs(e - 9.0) < 1e-9);
+  kpcn_aov_destroy(k);
+
+  kpcn_model *m = make_model(11);
+  CHECK(m != NULL);
+  if (!m) return;
+  kpcn_aov_set *a = synth_aov(29, 23, 9), *b = synth_aov(29, 23, 9);
+  const size_t P = kpcn_aov_plane_size(a);
+  double ea = 0.0, eb = 0.0;
+  CHECK(kpcn_aov_exposure(a, &ea) == KPCN_OK && ea > 0.0 && ea < 0.75);
+  printf("exposure of the synthetic image: %.4g\n", ea);
+  scale_colour(b, 1024.0f);
+  CHECK(kpcn_aov_exposure(b, &eb) == KPCN_OK);
+  CHECK(eb == 1024.0 * ea);     /* a power of two scales every step exactly */
+  for (int i = 1; i < 8; i++) { /* odd sizes: blocks still map onto blocks */
+    kpcn_augment_xform xi;
+    kpcn_denoise_ensemble_xform(i, &xi);
+    kpcn_aov_set *t = NULL;
+    double et = 0.0;
+    CHECK(kpcn_augment_aov(&t, a, &xi, 1) == KPCN_OK);
+    CHECK(kpcn_aov_exposure(t, &et) == KPCN_OK);
+    CHECK(fabs(et - ea) <= 1e-12 * ea);
+    kpcn_aov_destroy(t);
+  }
+  /* the input's exposure was below the model's range, so the network saw it at the range's
+   * lower end: the reference (which reproduces that) is checked in test_reference_and_tiling;
+   * here the modes of the option. A fixed target: the result scales with the input, bit
+   * for bit. */
+  kpcn_denoiser_options o;
+  kpcn_denoiser_options_defaults(&o);
+  o.nthreads = 2;
+  o.tile = 16;
+  o.exposure_min = o.exposure_max = 0.37f;
+  float *oa = malloc(sizeof(float) * 3 * P), *ob = malloc(sizeof(float) * 3 * P);
+  float *oc = malloc(sizeof(float) * 3 * P);
+  CHECK(run_opts(m, a, &o, NULL, oa) == KPCN_OK);
+  CHECK(run_opts(m, b, &o, NULL, ob) == KPCN_OK);
+  size_t differ = 0;
+  for (size_t i = 0; i < 3 * P; i++)
+    differ += ob[i] != 1024.0f * oa[i];
+  CHECK(differ == 0);
+  /* ... which the input as rendered (0, inf) does not give */
+  o.exposure_min = 0.0f;
+  o.exposure_max = INFINITY;
+  CHECK(run_opts(m, b, &o, NULL, ob) == KPCN_OK);
+  double worst = 0.0;
+  for (size_t i = 0; i < 3 * P; i++)
+    worst = fmax(worst, fabs(ob[i] / 1024.0 - oa[i]) / (1e-3 + fabs(oa[i])));
+  printf("as rendered, input x1024 vs x1: max rel. difference %.3g\n", worst);
+  CHECK(worst > 1e-3);
+  /* a range holding the input's exposure leaves it as rendered, bit for bit */
+  CHECK(run_opts(m, a, &o, NULL, oc) == KPCN_OK);
+  o.exposure_min = (float)(0.5 * ea);
+  o.exposure_max = (float)(2.0 * ea);
+  CHECK(run_opts(m, a, &o, NULL, ob) == KPCN_OK);
+  CHECK(memcmp(ob, oc, sizeof(float) * 3 * P) == 0);
+  /* the model's range (defaults): the input is shown at its lower end, 0.75 */
+  kpcn_denoiser_options_defaults(&o);
+  o.nthreads = 2;
+  o.exposure_min = o.exposure_max = 0.75f;
+  CHECK(run_opts(m, a, &o, NULL, ob) == KPCN_OK);
+  kpcn_denoiser_options_defaults(&o);
+  o.nthreads = 2;
+  CHECK(run_opts(m, a, &o, NULL, oc) == KPCN_OK);
+  CHECK(memcmp(ob, oc, sizeof(float) * 3 * P) == 0);
+  /* bad ranges are named */
+  const float bad[][2] = {{-1.0f, 1.0f}, {2.0f, 1.0f}, {0.0f, 5.0f}, {NAN, NAN}, {1.0f, NAN}};
+  for (int i = 0; i < 5; i++) {
+    o.exposure_min = bad[i][0];
+    o.exposure_max = bad[i][1];
+    CHECK(run_opts(m, a, &o, NULL, oa) == KPCN_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(kpcn_last_error(), "exposure") != NULL);
+  }
+  scale_colour(a, 0.0f);
+  kpcn_denoiser *d = NULL;
+  kpcn_denoiser_options_defaults(&o);
+  CHECK(kpcn_denoiser_create_with_model(&d, m, &o) == KPCN_OK);
+  CHECK(kpcn_denoiser_execute_aov(d, a, oa) == KPCN_OK);
+  kpcn_denoise_stats st;
+  kpcn_denoiser_get_stats(d, &st);
+  CHECK(st.exposure == 0.0 && st.exposure_scale == 1.0);
+  kpcn_denoiser_destroy(d);
+  free(oa);
+  free(ob);
+  free(oc);
+  kpcn_aov_destroy(a);
+  kpcn_aov_destroy(b);
+  kpcn_model_destroy(m);
+}
+
 int main(void) {
+  test_exposure();
   test_reference_and_tiling(1, 0);
   test_reference_and_tiling(2, 0);
   test_reference_and_tiling(1, 1);

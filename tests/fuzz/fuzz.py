@@ -276,7 +276,8 @@ def fuzz_kps(fz, rng, n):
 # ---------------------------------------------------------------- kpcntool command chains
 CLI_CMDS = {
     "--augment": ["seed", "index", "shift", "mirror_v", "oneof"], "--colormap": ["map", "max"],
-    "--colorswap": ["perm", "all"], "--denoise": ["model", "method", "bf16", "tile", "ensemble"],
+    "--colorswap": ["perm", "all"],
+    "--denoise": ["model", "method", "bf16", "tile", "ensemble", "exposure"],
     "--errormap": ["channels", "display", "range", "eps", "allow_nonfinite", "metric"],
     "--info": [], "--l1": ["channels", "display", "range", "eps", "allow_nonfinite"],
     "--mirror": ["dir", "all"], "--mosaic": ["n", "labels", "font", "fontsize"],

@@ -126,17 +126,26 @@ static void m_arch_k(cJSON *h) {
   free(s);
   cJSON_Delete(a);
 }
-/* adds "key": v to the stored architecture */
-static void arch_add(cJSON *h, const char *key, double v) {
+/* adds "key": <the JSON text v> to the stored architecture */
+static void arch_set_raw(cJSON *h, const char *key, const char *v) {
   cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
   cJSON *a = cJSON_Parse(cJSON_GetObjectItem(meta, "kpcn.architecture")->valuestring);
-  cJSON_AddNumberToObject(a, key, v);
+  cJSON_AddItemToObject(a, key, cJSON_Parse(v));
   char *s = cJSON_PrintUnformatted(a);
   cJSON_ReplaceItemInObject(meta, "kpcn.architecture", cJSON_CreateString(s));
   free(s);
   cJSON_Delete(a);
 }
+static void arch_add(cJSON *h, const char *key, double v) {
+  char num[32];
+  snprintf(num, sizeof num, "%.17g", v);
+  arch_set_raw(h, key, num);
+}
 static void m_arch_passes(cJSON *h) { arch_add(h, "kpa_passes", 0); }
+static void m_exp_order(cJSON *h) { arch_set_raw(h, "exposure_range", "[2,1]"); }
+static void m_exp_neg(cJSON *h) { arch_set_raw(h, "exposure_range", "[-1,1]"); }
+static void m_exp_one(cJSON *h) { arch_set_raw(h, "exposure_range", "[1]"); }
+static void m_exp_str(cJSON *h) { arch_set_raw(h, "exposure_range", "[\"a\",1]"); }
 static void m_arch_sw2(cJSON *h) { arch_add(h, "source_weight", 2); }
 /* a source score channel the tensors do not have */
 static void m_arch_sw1(cJSON *h) { arch_add(h, "source_weight", 1); }
@@ -243,6 +252,21 @@ static void test_arch(void) {
   a.source_weight = 2;
   CHECK(kpcn_arch_validate(&a) == KPCN_ERR_INVALID_ARGUMENT);
   CHECK(strstr(kpcn_last_error(), "source_weight") != NULL);
+  /* exposure_range: absent when not recorded; recorded, it round-trips exactly */
+  a.source_weight = 0;
+  CHECK(kpcn_arch_validate(&a) == KPCN_OK);
+  js = kpcn_arch_to_json(&a);
+  CHECK(js && !strstr(js, "exposure_range"));
+  free(js);
+  a.exposure_range[0] = 0.0123456789f;
+  a.exposure_range[1] = 0.4f;
+  js = kpcn_arch_to_json(&a);
+  CHECK(js && strstr(js, "exposure_range") && kpcn_arch_from_json(js, &b) == KPCN_OK);
+  CHECK(memcmp(&a, &b, sizeof a) == 0);
+  free(js);
+  a.exposure_range[0] = 0.5f; /* above the highest */
+  CHECK(kpcn_arch_validate(&a) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "exposure_range") != NULL);
   kpcn_arch_preset("tiny", &a); /* conv radius 3 */
   kpcn_arch_set_inputs(&a, 3, names);
   a.kpa_passes = 3;
@@ -404,6 +428,10 @@ static void test_malformed(const blob *good) {
   mutated(good, "arch even K", m_arch_k, "kernel_size");
   mutated(good, "arch kpa_passes 0", m_arch_passes, "kpa_passes");
   mutated(good, "arch source_weight 2", m_arch_sw2, "source_weight");
+  mutated(good, "arch exposure_range [2,1]", m_exp_order, "exposure_range");
+  mutated(good, "arch exposure_range [-1,1]", m_exp_neg, "exposure_range");
+  mutated(good, "arch exposure_range [1]", m_exp_one, "exposure_range");
+  mutated(good, "arch exposure_range [a,1]", m_exp_str, "exposure_range");
   mutated(good, "arch source_weight vs shapes", m_arch_sw1, "shape");
   mutated(good, "inputs disagree", m_inputs, "kpcn.inputs");
   mutated(good, "no __metadata__", m_nometa, "__metadata__");

@@ -96,7 +96,7 @@ int tf_make_store(const char *path, int S, int w, int h, int count, unsigned see
   snprintf(src.scene, sizeof src.scene, "synthetic");
   snprintf(src.split, sizeof src.split, "train");
   src.spp = 4, src.ref_spp = 1024, src.width = w, src.height = h;
-  if (kpcn_patch_source_depth_stats(&src, n) != KPCN_OK) goto fail;
+  if (kpcn_patch_source_image_stats(&src, n) != KPCN_OK) goto fail;
   uint32_t id;
   if (kpcn_patchstore_add_source(wr, &src, &id) != KPCN_OK) goto fail;
   int per_row = (w - S) / 4 + 1;

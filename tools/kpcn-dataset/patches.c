@@ -244,7 +244,7 @@ int ds_cmd_patches(int argc, char **argv) {
     uint32_t sid = 0;
     if (kpcn_exr_read_aov(a, &noisy) != KPCN_OK || kpcn_exr_read_aov(b, &ref) != KPCN_OK ||
         kpcn_patches_select(&o, &n, &st, noisy, ref, &pi) != KPCN_OK ||
-        kpcn_patch_source_depth_stats(&src, noisy) != KPCN_OK) {
+        kpcn_patch_source_image_stats(&src, noisy) != KPCN_OK) {
       ds_err("patches: %s: %s", j->id, kpcn_last_error());
       rc = 1;
     }

@@ -1,10 +1,46 @@
 // kpcntool --denoise: pops an AOV image, pushes the denoised RGB image.
-//   --denoise:model=m.safetensors[:bf16=1][:tile=N][:ensemble=N]
+//   --denoise:model=m.safetensors[:bf16=1][:tile=N][:ensemble=N][:exposure=auto|off|T|LO,HI]
 //   --denoise:method=bilateral|nlmeans
 #include "kpcn/ops_denoise.h"
 #include "kpcntool.h"
 
+#include <cstdlib>
+#include <limits>
+
 namespace {
+
+// exposure=auto (the model's range), off (as rendered), T (always T) or LO,HI.
+bool parse_exposure(const std::string &v, kpcn::ops::DenoiseOptions &opt, std::string &err) {
+  if (v == "auto") {
+    opt.exposure_min = opt.exposure_max = 0.0f;
+    return true;
+  }
+  if (v == "off") {
+    opt.exposure_min = 0.0f;
+    opt.exposure_max = std::numeric_limits<float>::infinity();
+    return true;
+  }
+  const size_t comma = v.find(',');
+  double r[2] = {0.0, 0.0};
+  for (int i = 0; i < 2; i++) {
+    const std::string part = comma == std::string::npos ? v
+                             : i == 0                   ? v.substr(0, comma)
+                                                        : v.substr(comma + 1);
+    char *end = nullptr;
+    r[i] = std::strtod(part.c_str(), &end);
+    if (part.empty() || *end != '\0' || !(r[i] > 0.0 && r[i] < 1e30)) {
+      err = "exposure must be auto, off, a number > 0 or LO,HI with 0 < LO <= HI (got '" + v + "')";
+      return false;
+    }
+  }
+  if (r[0] > r[1]) {
+    err = "exposure range " + v + ": LO must be <= HI";
+    return false;
+  }
+  opt.exposure_min = (float)r[0];
+  opt.exposure_max = (float)r[1];
+  return true;
+}
 
 bool run_denoise(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
                  const std::vector<std::string> &, std::string &err) {
@@ -32,6 +68,7 @@ bool run_denoise(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
     return false;
   }
   opt.ensemble = (int)ensemble;
+  if (!parse_exposure(m.str("exposure", "auto"), opt, err)) return false;
   OIIO::ImageBuf src = ctx.pop();
   OIIO::ImageBuf dst;
   if (!kpcn::ops::denoise(dst, src, opt, {}, ctx.nthreads)) {
@@ -46,9 +83,10 @@ bool run_denoise(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
 bool reg = kpcntool::register_command(
     {"denoise",
      0,
-     {"model", "method", "bf16", "tile", "ensemble"},
+     {"model", "method", "bf16", "tile", "ensemble", "exposure"},
      "denoise the top AOV image (model=m.safetensors | method=bilateral|nlmeans, bf16=1, tile=N, "
-     "ensemble=2|4|8: average over mirrored/rotated copies)",
+     "ensemble=2|4|8: average over mirrored/rotated copies, exposure=auto|off|T|LO,HI: the "
+     "exposures the network is shown, default the model's training range)",
      run_denoise});
 
 } // namespace

@@ -67,6 +67,7 @@ typedef struct kpcn_patch_source {
   int width, height;          /* full image size */
   float depth_min, depth_max; /* over the whole noisy image, all pixels (misses are 0) */
   float depth_mean, depth_std;
+  double exposure; /* kpcn_aov_exposure of the whole noisy image; 0 = not recorded */
   char noisy[256]; /* file names, informative */
   char reference[256];
 } kpcn_patch_source;
@@ -81,8 +82,10 @@ typedef struct kpcn_patch_record {
   uint64_t reserved;
 } kpcn_patch_record;
 
-/* Computes the depth statistics of a noisy AOV set into src (needs the depth buffer). */
-kpcn_status kpcn_patch_source_depth_stats(kpcn_patch_source *src, const kpcn_aov_set *noisy);
+/* Computes the whole-image statistics of a noisy AOV set into src: size, depth statistics
+ * (needs the depth buffer) and, where diffuse and specular are present, the exposure
+ * (kpcn_aov_exposure; 0 otherwise). */
+kpcn_status kpcn_patch_source_image_stats(kpcn_patch_source *src, const kpcn_aov_set *noisy);
 
 /* ---- writing ---- */
 typedef struct kpcn_patchstore_writer kpcn_patchstore_writer;
@@ -139,6 +142,10 @@ const char *const *kpcn_patchstore_channels(const kpcn_patchstore *ps);
 int kpcn_patchstore_find_channel(const kpcn_patchstore *ps, const char *name);
 int kpcn_patchstore_nsources(const kpcn_patchstore *ps);
 const kpcn_patch_source *kpcn_patchstore_source(const kpcn_patchstore *ps, int i);
+/* Joins the exposures (kpcn_patch_source.exposure) of the store's training sources (split
+ * "train", or all when none is marked) into [*lo, *hi]: a range with *hi = 0 is empty. Sources
+ * without a recorded exposure are skipped; returns how many were joined. */
+int kpcn_patchstore_exposure_range(const kpcn_patchstore *ps, double *lo, double *hi);
 
 /* Copies patch i as C planar float32 planes into dst (C*S*S floats); rec optional.
  * Thread-safe (read-only mapping). */

@@ -43,8 +43,12 @@
  *    required; a missing one fails with KPCN_ERR_MISSING_CHANNEL naming it ("diffuse",
  *    "visibility.var" ...).
  *
+ *    Exposure: "diffuse" and "specular" above are the buffers times norm.color_scale
+ *    (variances times its square); 1 unless the denoiser normalises the exposure
+ *    (kpcn_denoiser_options.exposure).
+ *
  * 2. The kernel filters `noisy_pre` = feature channels 0..2 (the preprocessed noisy color).
- *    Recombination: c = diffuse_out * (albedo + eps) + exp(specular_out) - 1
+ *    Recombination: c = (diffuse_out * (albedo + eps) + exp(specular_out) - 1) / color_scale
  *    (seed eq. 4.4 has a sign typo: "+1").
  * ---------------------------------------------------------------------------------------
  */
@@ -91,10 +95,14 @@ kpcn_status kpcn_features_check_arch(const kpcn_arch *arch);
 typedef struct kpcn_features_norm {
   float depth_offset; /* subtracted from Z */
   float depth_scale;  /* multiplies (Z - offset); Z.var is multiplied by scale^2 */
+  float color_scale;  /* exposure: diffuse and specular are multiplied by it before the
+                         colour transforms (their variances by its square), so the
+                         network sees the image as if rendered that much brighter; the
+                         denoiser divides its result by it. 1 = as rendered. */
 } kpcn_features_norm;
 
 /* Computes the normalisation of the full image `aov` (needs depth; NaN/Inf depths are
- * ignored). */
+ * ignored). color_scale is set to 1 (the denoiser sets its own from kpcn_aov_exposure). */
 kpcn_status kpcn_features_norm_compute(const kpcn_aov_set *aov, kpcn_features_norm *norm);
 
 /* Builds the features of `branch` for the whole of `aov` (which may itself be a training
@@ -189,6 +197,15 @@ typedef struct kpcn_denoiser_options {
                              cost, plus one transformed copy of the input buffers and two
                              RGB images of memory. The transforms form a group, so the result
                              is exactly equivariant to them (up to float summation order). */
+  /* KPCN only: the exposures (kpcn_aov_exposure, kpcn/image.h) the network is shown. An
+   * input whose exposure e lies outside [exposure_min, exposure_max] is scaled to the nearer
+   * end before the network and the result scaled back, so renders in other units (100x
+   * brighter, 100x darker) are denoised as well as those the model was trained on; inside
+   * the range the input is denoised as rendered. Both 0 (the default): the model's
+   * arch.exposure_range (as rendered for a model that records none). min = max = T: every
+   * input is scaled to T, so denoise(s * img) = s * denoise(img) for any s > 0. min = 0,
+   * max = INFINITY: always as rendered. */
+  float exposure_min, exposure_max;
   kpcn_baseline_params bilateral;
   kpcn_baseline_params nlmeans;
 } kpcn_denoiser_options;
@@ -234,17 +251,19 @@ kpcn_status kpcn_denoiser_execute_aov(kpcn_denoiser *d, const kpcn_aov_set *aov,
 
 /* Timing of the last execute (seconds), for benchmarks. */
 typedef struct kpcn_denoise_stats {
-  double total_s;     /* whole execute, including input assembly */
-  double features_s;  /* feature building */
-  double net_s;       /* network forward (kpcn_net_forward) */
-  double conv_s;      /* part of net_s inside oneDNN convolution primitives */
-  double kpa_s;       /* softmax + kernel apply */
-  double other_s;     /* recombination, copies, net creation */
-  double conv_flops;  /* convolution FLOPs executed (both branches, overlap included) */
-  int tiles;          /* tiles processed (per branch) */
-  int tiles_total;    /* tiles of the grid (per branch) */
-  int tile_w, tile_h; /* output size of a full tile of that grid */
-  int nets_created;   /* oneDNN networks built (0 on a warm execute of an unchanged size) */
+  double total_s;        /* whole execute, including input assembly */
+  double features_s;     /* feature building */
+  double net_s;          /* network forward (kpcn_net_forward) */
+  double conv_s;         /* part of net_s inside oneDNN convolution primitives */
+  double kpa_s;          /* softmax + kernel apply */
+  double other_s;        /* recombination, copies, net creation */
+  double conv_flops;     /* convolution FLOPs executed (both branches, overlap included) */
+  int tiles;             /* tiles processed (per branch) */
+  int tiles_total;       /* tiles of the grid (per branch) */
+  int tile_w, tile_h;    /* output size of a full tile of that grid */
+  int nets_created;      /* oneDNN networks built (0 on a warm execute of an unchanged size) */
+  double exposure;       /* the input's kpcn_aov_exposure (0 when not measured) */
+  double exposure_scale; /* the colour scale the network saw the input at (1 = as rendered) */
 } kpcn_denoise_stats;
 void kpcn_denoiser_get_stats(const kpcn_denoiser *d, kpcn_denoise_stats *s);
 

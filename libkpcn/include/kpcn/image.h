@@ -136,6 +136,15 @@ int kpcn_aov_channel_lookup(const char *name, kpcn_buffer *buffer, int *channel,
 kpcn_status kpcn_aov_map_channels(const char *const *names, int n, int chan[KPCN_BUF_COUNT][3],
                                   int var[KPCN_BUF_COUNT], const char *what);
 
+/* Exposure of an image: the median, over 8x8 pixel blocks, of the block's mean luminance
+ * (Rec. 709 weights) of diffuse + specular, counting only blocks whose mean is finite and
+ * > 0 (black background is not "dark exposure"; non-finite pixels are skipped). Block means
+ * average 64 pixels, so the figure barely depends on the sample count; it scales with the
+ * image (exposure(s * img) = s * exposure(img), exactly for powers of two), and the blocks
+ * are laid out from the image centre outwards, so a mirrored or rotated copy of the image
+ * has the same exposure. *out = 0 when no block qualifies. Needs diffuse and specular. */
+kpcn_status kpcn_aov_exposure(const kpcn_aov_set *aov, double *out);
+
 /* Counts non-finite values in every present plane; returns the count and, if
  * first_name is non-NULL, the channel name of the first offender. */
 size_t kpcn_aov_count_nonfinite(const kpcn_aov_set *set, const char **first_name);

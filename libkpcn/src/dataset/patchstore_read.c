@@ -112,6 +112,12 @@ static kpcn_status parse_meta(kpcn_patchstore *ps, const char *path) {
     s->depth_max = (float)num(o, "depth_max", 0);
     s->depth_mean = (float)num(o, "depth_mean", 0);
     s->depth_std = (float)num(o, "depth_std", 0);
+    s->exposure = num(o, "exposure", 0); /* absent in stores written before it existed */
+    if (!(s->exposure >= 0.0) || !isfinite(s->exposure)) {
+      st = kpcn_fail(KPCN_ERR_FORMAT, "patch store '%s': sources[%d].exposure %g is not >= 0", path,
+                     i, s->exposure);
+      break;
+    }
   }
   cJSON_Delete(j);
   return st;
@@ -238,6 +244,21 @@ int kpcn_patchstore_find_channel(const kpcn_patchstore *ps, const char *name) {
 int kpcn_patchstore_nsources(const kpcn_patchstore *ps) { return ps ? ps->nsrc : 0; }
 const kpcn_patch_source *kpcn_patchstore_source(const kpcn_patchstore *ps, int i) {
   return ps && i >= 0 && i < ps->nsrc ? &ps->src[i] : NULL;
+}
+
+int kpcn_patchstore_exposure_range(const kpcn_patchstore *ps, double *lo, double *hi) {
+  if (!ps || !lo || !hi) return 0;
+  int any_train = 0, n = 0;
+  for (int i = 0; i < ps->nsrc; i++)
+    any_train |= strcmp(ps->src[i].split, "train") == 0;
+  for (int i = 0; i < ps->nsrc; i++) {
+    const double e = ps->src[i].exposure;
+    if ((any_train && strcmp(ps->src[i].split, "train") != 0) || !(e > 0.0)) continue;
+    *lo = *hi > 0.0 && *lo <= e ? *lo : e;
+    *hi = *hi >= e ? *hi : e;
+    n++;
+  }
+  return n;
 }
 
 const void *kpcn_patchstore_raw(const kpcn_patchstore *ps, uint64_t i) {

@@ -398,6 +398,7 @@ static cJSON *meta_json(const kpcn_patchstore_writer *w) {
     cJSON_AddNumberToObject(o, "depth_max", s->depth_max);
     cJSON_AddNumberToObject(o, "depth_mean", s->depth_mean);
     cJSON_AddNumberToObject(o, "depth_std", s->depth_std);
+    if (s->exposure > 0.0) cJSON_AddNumberToObject(o, "exposure", s->exposure);
     cJSON_AddStringToObject(o, "noisy", s->noisy);
     cJSON_AddStringToObject(o, "reference", s->reference);
     cJSON_AddItemToArray(srcs, o);
@@ -468,7 +469,7 @@ void kpcn_patchstore_abort(kpcn_patchstore_writer *w) {
   free_writer(w);
 }
 
-kpcn_status kpcn_patch_source_depth_stats(kpcn_patch_source *src, const kpcn_aov_set *noisy) {
+kpcn_status kpcn_patch_source_image_stats(kpcn_patch_source *src, const kpcn_aov_set *noisy) {
   if (!src || !noisy) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "depth stats: NULL");
   KPCN_TRY(
       kpcn_aov_require(noisy, KPCN_BUF_DEPTH, 0, noisy->scene[0] ? noisy->scene : "noisy image"));
@@ -491,5 +492,8 @@ kpcn_status kpcn_patch_source_depth_stats(kpcn_patch_source *src, const kpcn_aov
   src->depth_std = (float)sqrt(var > 0 ? var : 0);
   src->width = noisy->width;
   src->height = noisy->height;
+  src->exposure = 0.0;
+  if (noisy->buf[KPCN_BUF_DIFFUSE] && noisy->buf[KPCN_BUF_SPECULAR])
+    KPCN_TRY(kpcn_aov_exposure(noisy, &src->exposure));
   return KPCN_OK;
 }

@@ -2,6 +2,7 @@
 #include "core/internal.h"
 #include "denoise_internal.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -53,6 +54,13 @@ static double now_s(void) {
 static kpcn_status check_options(const kpcn_denoiser_options *o) {
   if (o->tile < 0)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: tile %d must be >= 0", o->tile);
+  if (!(o->exposure_min >= 0.0f && o->exposure_min <= o->exposure_max) ||
+      !isfinite(o->exposure_min) ||
+      (o->exposure_max > 0.0f && o->exposure_min == 0.0f && o->exposure_max != INFINITY))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "denoiser_create: exposure range [%g, %g] must be 0 < min <= max, "
+                     "0, 0 (the model's range) or 0, inf (as rendered)",
+                     (double)o->exposure_min, (double)o->exposure_max);
   if (o->ensemble < 0 || o->ensemble > KPCN_DENOISE_MAX_ENSEMBLE ||
       (o->ensemble > 1 && (o->ensemble & (o->ensemble - 1)) != 0))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
@@ -239,8 +247,9 @@ static kpcn_status assemble(const kpcn_denoiser *d, int W, int H, kpcn_aov_set *
   return KPCN_OK;
 }
 
-/* Runs the configured method on a planar AOV set into planar RGB out. */
-static kpcn_status run_method(kpcn_denoiser *d, const kpcn_aov_set *aov, float *out) {
+/* Runs the configured method on a planar AOV set into planar RGB out (the KPCN at colour
+ * scale `scale`; the baselines are exposure-invariant as they are). */
+static kpcn_status run_method(kpcn_denoiser *d, const kpcn_aov_set *aov, float scale, float *out) {
   d->prog.cancelled = 0;
   unsigned csr = kpcn_fast_fp_begin(d->opt.nthreads);
   kpcn_status s;
@@ -251,7 +260,8 @@ static kpcn_status run_method(kpcn_denoiser *d, const kpcn_aov_set *aov, float *
   case KPCN_DENOISE_NLMEANS:
     s = kpcn_baseline_nlmeans(aov, &d->opt.nlmeans, out, d->opt.nthreads, &d->prog);
     break;
-  default: s = kpcn_pipeline_run(d->model, aov, &d->opt, &d->prog, out, &d->stats, &d->cache);
+  default:
+    s = kpcn_pipeline_run(d->model, aov, &d->opt, scale, &d->prog, out, &d->stats, &d->cache);
   }
   kpcn_fast_fp_end(csr, d->opt.nthreads);
   return s;
@@ -279,11 +289,37 @@ static int ensemble_progress_fn(void *user, double f) {
   return kpcn_progress_report(e->outer, (e->k + f) / e->n);
 }
 
+/* The colour scale that brings the input's exposure into the KPCN's range (1 inside it,
+ * for the baselines, when the range is [0, inf) or not recorded, and for a black image). */
+static kpcn_status exposure_scale(kpcn_denoiser *d, const kpcn_aov_set *aov, float *scale) {
+  *scale = 1.0f;
+  if (d->opt.method != KPCN_DENOISE_KPCN) return KPCN_OK;
+  double lo = d->opt.exposure_min, hi = d->opt.exposure_max;
+  if (lo == 0.0 && hi == 0.0) { /* the model's */
+    const kpcn_arch *a = kpcn_model_arch(d->model);
+    lo = a->exposure_range[0];
+    hi = a->exposure_range[1];
+    if (hi == 0.0) return KPCN_OK;
+  }
+  if (lo == 0.0 && hi == INFINITY) return KPCN_OK;
+  double e;
+  KPCN_TRY(kpcn_aov_exposure(aov, &e));
+  d->stats.exposure = e;
+  if (!(e > 0.0)) return KPCN_OK;
+  const double t = e < lo ? lo : e > hi ? hi : e, s = t / e;
+  if (t != e && (float)s > 0.0f && isfinite((float)s)) *scale = (float)s;
+  return KPCN_OK;
+}
+
 /* run_method on each transform of the ensemble, mapped back and averaged into out. The
- * members are summed in a fixed order, so the result does not depend on threads. */
+ * members are summed in a fixed order, so the result does not depend on threads. The
+ * exposure is measured once, on the input as given, so every member sees the same scale. */
 static kpcn_status run_ensemble(kpcn_denoiser *d, const kpcn_aov_set *aov, float *out) {
   const int n = d->opt.ensemble > 1 ? d->opt.ensemble : 1;
-  if (n == 1) return run_method(d, aov, out);
+  float sc;
+  KPCN_TRY(exposure_scale(d, aov, &sc));
+  d->stats.exposure_scale = sc;
+  if (n == 1) return run_method(d, aov, sc, out);
   const int W = aov->width, H = aov->height, nt = d->opt.nthreads;
   const size_t N = 3 * kpcn_aov_plane_size(aov);
   float *member = kpcn_aligned_alloc(sizeof(float) * N, "ensemble member output");
@@ -306,11 +342,11 @@ static kpcn_status run_ensemble(kpcn_denoiser *d, const kpcn_aov_set *aov, float
     kpcn_augment_output_size(&x, W, H, &tw, &th);
     ep.k = k;
     if (k == 0) {
-      s = run_method(d, aov, back);
+      s = run_method(d, aov, sc, back);
     } else {
       kpcn_aov_set *t = NULL;
       s = kpcn_augment_aov(&t, aov, &x, nt);
-      if (s == KPCN_OK) s = run_method(d, t, member);
+      if (s == KPCN_OK) s = run_method(d, t, sc, member);
       kpcn_aov_destroy(t);
       kpcn_augment_inverse(&inv, &x, tw, th);
       if (s == KPCN_OK) s = kpcn_augment_planes(back, member, 3, NULL, tw, th, &inv, nt);

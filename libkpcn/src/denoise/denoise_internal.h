@@ -45,10 +45,12 @@ typedef struct kpcn_pipeline_cache {
 void kpcn_pipeline_cache_release(kpcn_pipeline_cache *c);
 
 /* Runs the two-branch KPCN on `aov` into out (planar RGB [3][H][W]) with o's tile, bf16,
- * nthreads and direct_conv; accumulates timings into *st. cache: kept between calls, or
- * NULL for a run that frees everything it allocates. */
+ * nthreads and direct_conv; the network sees the colour buffers times color_scale (> 0,
+ * kpcn_features_norm) and the result is divided by it. Accumulates timings into *st.
+ * cache: kept between calls, or NULL for a run that frees everything it allocates. */
 kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
-                              const kpcn_denoiser_options *o, kpcn_progress *prog, float *out,
-                              kpcn_denoise_stats *st, kpcn_pipeline_cache *cache);
+                              const kpcn_denoiser_options *o, float color_scale,
+                              kpcn_progress *prog, float *out, kpcn_denoise_stats *st,
+                              kpcn_pipeline_cache *cache);
 
 #endif

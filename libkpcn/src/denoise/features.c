@@ -65,6 +65,7 @@ kpcn_status kpcn_features_norm_compute(const kpcn_aov_set *aov, kpcn_features_no
   if (!(lo <= hi)) lo = hi = 0.0f; /* no finite depth at all */
   norm->depth_offset = lo;
   norm->depth_scale = (double)hi - (double)lo > 1e-12 ? (float)(1.0 / ((double)hi - lo)) : 1.0f;
+  norm->color_scale = 1.0f;
   return KPCN_OK;
 }
 
@@ -78,7 +79,8 @@ static kpcn_status require_inputs(const kpcn_aov_set *aov, int branch) {
   return KPCN_OK;
 }
 
-/* Preprocessed color of one channel: diffuse / (albedo + eps), or log(1 + specular). */
+/* Preprocessed color of one channel (col already exposure-scaled): diffuse / (albedo + eps),
+ * or log(1 + specular). */
 static inline float pre_color(int branch, float col, float alb, float eps) {
   if (branch == KPCN_BRANCH_DIFFUSE) return col / (alb + eps);
   return log1pf(col > 0.0f ? col : 0.0f);
@@ -126,7 +128,10 @@ kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, floa
   const float *cvar = aov->var[cb], *nvar = aov->var[KPCN_BUF_NORMAL],
               *avar = aov->var[KPCN_BUF_ALBEDO], *zvar = aov->var[KPCN_BUF_DEPTH],
               *vis = aov->buf[KPCN_BUF_VISIBILITY], *visvar = aov->var[KPCN_BUF_VISIBILITY];
-  const float zoff = nm.depth_offset, zs = nm.depth_scale;
+  const float zoff = nm.depth_offset, zs = nm.depth_scale, cs = nm.color_scale;
+  if (!(cs > 0.0f) || !isfinite(cs))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "features_build: color scale %g must be > 0",
+                     (double)cs);
   const size_t Q = (size_t)w * h;
   if (out_stride && out_stride < Q)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
@@ -158,7 +163,7 @@ kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, floa
           const size_t base = (size_t)c * P + (size_t)r * W + xa;
           float *dst = rows + (size_t)(slot * 3 + c) * rw;
           for (int x = 0; x < rw; x++)
-            dst[x] = pre_color(branch, col[base + x], alb[base + x], eps);
+            dst[x] = pre_color(branch, cs * col[base + x], alb[base + x], eps);
         }
         held[slot] = r;
       }
@@ -189,11 +194,12 @@ kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, floa
         float vscale = 0.0f;
         for (int c = 0; c < 3; c++) {
           const size_t k = c * P + i + xx;
+          const float v = cs * col[k];
           const float d =
-              branch == KPCN_BRANCH_DIFFUSE ? alb[k] + eps : 1.0f + (col[k] > 0.0f ? col[k] : 0.0f);
+              branch == KPCN_BRANCH_DIFFUSE ? alb[k] + eps : 1.0f + (v > 0.0f ? v : 0.0f);
           vscale += 1.0f / (d * d);
         }
-        cv[xx] = cvar[i + xx] * (vscale / 3.0f);
+        cv[xx] = cs * cs * cvar[i + xx] * (vscale / 3.0f);
       }
       float *fz = out + F_Z * S + o, *fzv = out + F_Z_VAR * S + o;
       for (int xx = 0; xx < w; xx++) {

@@ -189,8 +189,9 @@ static kpcn_status cache_net(kpcn_pipeline_cache *c, kpcn_model *model, kpcn_bra
 }
 
 kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
-                              const kpcn_denoiser_options *o, kpcn_progress *prog, float *out,
-                              kpcn_denoise_stats *st, kpcn_pipeline_cache *cache) {
+                              const kpcn_denoiser_options *o, float color_scale,
+                              kpcn_progress *prog, float *out, kpcn_denoise_stats *st,
+                              kpcn_pipeline_cache *cache) {
   const int tile = o->tile, nthreads = o->nthreads;
   const kpcn_arch *arch = kpcn_model_arch(model);
   KPCN_TRY(kpcn_features_check_arch(arch));
@@ -204,6 +205,8 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
   tile_grid(arch, W, H, pad, tile, &TW, &TH);
   kpcn_features_norm norm;
   KPCN_TRY(kpcn_features_norm_compute(aov, &norm));
+  norm.color_scale = color_scale;
+  const float inv_scale = 1.0f / color_scale; /* 1 exactly when the exposure is untouched */
 
   const int nx = (W + TW - 1) / TW, ny = (H + TH - 1) / TH, nt = nx * ny;
   st->tiles_total = nt;
@@ -288,7 +291,7 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
       st->net_s += tc - tb;
       st->kpa_s += td - tc;
       st->conv_flops += kpcn_arch_flops_per_pixel(arch) * (double)Q;
-      /* Invert the preprocessing on the core: c = d * (albedo + eps) + exp(s) - 1. */
+      /* Invert the preprocessing on the core: c = (d * (albedo + eps) + exp(s) - 1) / scale. */
 #pragma omp parallel for num_threads(nthr) schedule(static)
       for (int y = t->y0; y < t->y1; y++) {
         for (int c = 0; c < 3; c++) {
@@ -296,10 +299,10 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
           const size_t go = (size_t)c * P + (size_t)y * W;
           if (b == KPCN_BRANCH_DIFFUSE)
             for (int x = t->x0; x < t->x1; x++)
-              out[go + x] = f[x] * (alb[go + x] + eps);
+              out[go + x] = f[x] * (alb[go + x] + eps) * inv_scale;
           else
             for (int x = t->x0; x < t->x1; x++)
-              out[go + x] += expm1f(f[x]);
+              out[go + x] += expm1f(f[x]) * inv_scale;
         }
       }
       st->other_s += now_s() - td;

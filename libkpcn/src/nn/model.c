@@ -141,6 +141,16 @@ kpcn_status kpcn_model_set_kpa_passes(kpcn_model *m, int passes) {
   return KPCN_OK;
 }
 
+kpcn_status kpcn_model_set_exposure_range(kpcn_model *m, float lo, float hi) {
+  if (!m) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_set_exposure_range: NULL model");
+  kpcn_arch a = m->arch;
+  a.exposure_range[0] = lo;
+  a.exposure_range[1] = hi;
+  KPCN_TRY(kpcn_arch_validate(&a));
+  m->arch = a;
+  return KPCN_OK;
+}
+
 kpcn_status kpcn_model_add_source_weight(const kpcn_model *src, kpcn_model **out) {
   if (!src || !out)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_add_source_weight: NULL argument");

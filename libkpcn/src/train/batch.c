@@ -136,7 +136,7 @@ static kpcn_status one_sample(kpcn_trainer *t, int b, float *scr) {
     cur += pp;
   }
   /* depth normalisation of the SOURCE image (same as full-image inference) */
-  kpcn_features_norm norm = {0.0f, 1.0f};
+  kpcn_features_norm norm = {0.0f, 1.0f, 1.0f};
   if (src) {
     double range = (double)src->depth_max - (double)src->depth_min;
     norm.depth_offset = src->depth_min;

@@ -19,6 +19,9 @@ struct DenoiseOptions {
   bool bf16 = false; // bf16 convolutions
   int tile = 0;      // KPCN tile size in output pixels per side, 0 = automatic/untiled
   int ensemble = 1;  // self-ensemble size 1, 2, 4 or 8 (kpcn_denoiser_options.ensemble)
+  // exposures the network is shown (kpcn_denoiser_options.exposure_min/max): 0, 0 = the
+  // model's range; T, T = always T; 0, inf = as rendered
+  float exposure_min = 0.0f, exposure_max = 0.0f;
   // Baseline parameters; defaults of kpcn_denoiser_options_defaults when left alone.
   kpcn_denoiser_options c_options() const;
 };
