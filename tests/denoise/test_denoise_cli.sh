@@ -44,6 +44,12 @@ grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/xo.json" || fail "exposure=off differs f
 "$T" --json "$D/out_x5.exr" "$D/out.exr" --l1 >"$D/x5.json" || fail "l1"
 grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/x5.json" && fail "exposure=0.05 equals the input as rendered"
 "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":exposure=0.01,0.1 -o "$D/out_xr.exr" || fail "exposure=LO,HI"
+# --exposure reports the statistic and leaves the stack (the image is still written)
+"$T" "$D/aov.exr" --exposure --json -o "$D/same.exr" >"$D/ex.json" || fail "--exposure"
+grep -Eq '"exposure": *[0-9.]+(e-?[0-9]+)?[,}]' "$D/ex.json" || fail "no exposure: $(cat "$D/ex.json")"
+[ -s "$D/same.exr" ] || fail "--exposure consumed the image"
+"$T" "$D/aov.exr" --ch R,G,B --exposure 2>"$D/err" && fail "--exposure without diffuse accepted"
+grep -q diffuse "$D/err" || fail "--exposure error does not name diffuse: $(cat "$D/err")"
 for bad in -1 0 nan abc 2,1 1, ,1; do
   if "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":exposure=$bad -o "$D/bad.exr" 2>"$D/err"; then
     fail "exposure=$bad accepted"

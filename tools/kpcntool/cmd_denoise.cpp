@@ -1,6 +1,7 @@
 // kpcntool --denoise: pops an AOV image, pushes the denoised RGB image.
 //   --denoise:model=m.safetensors[:bf16=1][:tile=N][:ensemble=N][:exposure=auto|off|T|LO,HI]
 //   --denoise:method=bilateral|nlmeans
+#include "kpcn/oiio_convert.h"
 #include "kpcn/ops_denoise.h"
 #include "kpcntool.h"
 
@@ -79,6 +80,29 @@ bool run_denoise(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
   ctx.push(std::move(dst));
   return true;
 }
+
+// --exposure: the top AOV image's exposure (kpcn_aov_exposure), as a result; the stack is
+// left as it is.
+bool run_exposure(kpcntool::Context &ctx, const kpcntool::Modifiers &,
+                  const std::vector<std::string> &, std::string &err) {
+  kpcn::AovPtr set = kpcn::ops::to_aov_set(ctx.top(), err);
+  if (!set) return false;
+  double e = 0.0;
+  if (kpcn_aov_exposure(set.get(), &e) != KPCN_OK) {
+    err = kpcn_last_error();
+    return false;
+  }
+  ctx.add_result("exposure", e);
+  return true;
+}
+
+bool reg_exposure = kpcntool::register_command(
+    {"exposure",
+     0,
+     {},
+     "exposure of the top AOV image: median 8x8-block mean luminance of diffuse + specular "
+     "(what --denoise:exposure= compares with the model's range)",
+     run_exposure});
 
 bool reg = kpcntool::register_command(
     {"denoise",
