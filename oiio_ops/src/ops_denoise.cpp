@@ -41,13 +41,26 @@ bool denoise(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptio
   }
   kpcn_denoiser_options o = opt.c_options();
   o.nthreads = nthreads;
+  kpcn_denoiser *d = nullptr;
   kpcn_image *rgb = nullptr;
-  if (kpcn_denoise_aov(set.get(), &o, &rgb) != KPCN_OK) {
+  static const char *const names[3] = {"R", "G", "B"};
+  kpcn_status s = kpcn_denoiser_create(&d, &o);
+  if (s == KPCN_OK) s = kpcn_image_create(&rgb, set->width, set->height, 3, names);
+  if (s == KPCN_OK) s = kpcn_denoiser_execute_aov(d, set.get(), rgb->data);
+  kpcn_denoise_stats st{};
+  if (s == KPCN_OK) kpcn_denoiser_get_stats(d, &st);
+  kpcn_denoiser_destroy(d);
+  ImagePtr out(rgb);
+  if (s != KPCN_OK) {
     dst.errorfmt("denoise: {}", kpcn_last_error());
     return false;
   }
-  ImagePtr out(rgb);
   OIIO::ImageBuf full = from_kpcn_image(*out);
+  if (o.method == KPCN_DENOISE_KPCN && st.exposure > 0.0) {
+    // what the network was shown (docs/denoiser.md, "Exposure"), kept in the file's header
+    full.specmod().attribute("kpcn:exposure", (float)st.exposure);
+    full.specmod().attribute("kpcn:exposureScale", (float)st.exposure_scale);
+  }
   if (full.has_error()) {
     dst.errorfmt("denoise: {}", full.geterror());
     return false;

@@ -44,6 +44,12 @@ grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/xo.json" || fail "exposure=off differs f
 "$T" --json "$D/out_x5.exr" "$D/out.exr" --l1 >"$D/x5.json" || fail "l1"
 grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/x5.json" && fail "exposure=0.05 equals the input as rendered"
 "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":exposure=0.01,0.1 -o "$D/out_xr.exr" || fail "exposure=LO,HI"
+# a fixed exposure far from the input's: a note on stderr, and the header records the scale
+"$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":exposure=1e-6 -o "$D/out_x6.exr" 2>"$D/note" ||
+  fail "exposure=1e-6"
+grep -q "note: --denoise: the input's exposure" "$D/note" || fail "no exposure note: $(cat "$D/note")"
+"$T" "$D/aov.exr" --denoise:model="$D/model.safetensors" -o "$D/out2.exr" 2>"$D/note" || fail "plain"
+[ -s "$D/note" ] && fail "note without a scale: $(cat "$D/note")"
 # --exposure reports the statistic and leaves the stack (the image is still written)
 "$T" "$D/aov.exr" --exposure --json -o "$D/same.exr" >"$D/ex.json" || fail "--exposure"
 grep -Eq '"exposure": *[0-9.]+(e-?[0-9]+)?[,}]' "$D/ex.json" || fail "no exposure: $(cat "$D/ex.json")"

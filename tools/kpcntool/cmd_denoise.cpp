@@ -5,6 +5,7 @@
 #include "kpcn/ops_denoise.h"
 #include "kpcntool.h"
 
+#include <cstdio>
 #include <cstdlib>
 #include <limits>
 
@@ -77,6 +78,13 @@ bool run_denoise(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
     ctx.push(std::move(src)); // leave the stack as it was
     return false;
   }
+  const float scale = dst.spec().get_float_attribute("kpcn:exposureScale", 1.0f);
+  if (scale != 1.0f)
+    std::fprintf(stderr,
+                 "kpcntool: note: --denoise: the input's exposure %g is outside the exposure "
+                 "range in use; the network was shown it %.4gx as bright (exposure=off: as "
+                 "rendered)\n",
+                 (double)dst.spec().get_float_attribute("kpcn:exposure", 0.0f), (double)scale);
   ctx.push(std::move(dst));
   return true;
 }
