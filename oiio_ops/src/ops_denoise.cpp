@@ -18,8 +18,7 @@ kpcn_denoiser_options DenoiseOptions::c_options() const {
   o.bf16 = bf16 ? 1 : 0;
   o.tile = tile;
   o.ensemble = ensemble;
-  o.exposure_min = exposure_min;
-  o.exposure_max = exposure_max;
+  o.exposure = exposure;
   return o;
 }
 

@@ -35,28 +35,21 @@ grep -Eq '"relmse": *([0-9.]+e-(1[0-9]|[2-9][0-9])|0)([,} ]|$)' "$D/em.json" ||
   fail "ensemble not equivariant to a mirror: $(cat "$D/em.json")"
 "$T" --json "$D/out_e.exr" "$D/out.exr" --relmse >"$D/ep.json" || fail "relmse"
 grep -Eq '"relmse": *0(\.0*)?([,} ]|$)' "$D/ep.json" && fail "ensemble equals the plain output"
-# exposure: the fixture's model records no exposure range, so the default (auto) is the
-# input as rendered (off); a fixed target changes the result; bad values are named
+# exposure: the fixture's model records none, so the default (auto) is the input as
+# rendered (off); a fixed exposure changes the result; bad values are named
 "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":exposure=off -o "$D/out_xo.exr" || fail "exposure=off"
 "$T" --json "$D/out_xo.exr" "$D/out.exr" --l1 >"$D/xo.json" || fail "l1"
 grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/xo.json" || fail "exposure=off differs from auto: $(cat "$D/xo.json")"
 "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":exposure=0.05 -o "$D/out_x5.exr" || fail "exposure=0.05"
 "$T" --json "$D/out_x5.exr" "$D/out.exr" --l1 >"$D/x5.json" || fail "l1"
 grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/x5.json" && fail "exposure=0.05 equals the input as rendered"
-"$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":exposure=0.01,0.1 -o "$D/out_xr.exr" || fail "exposure=LO,HI"
-# a fixed exposure far from the input's: a note on stderr, and the header records the scale
-"$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":exposure=1e-6 -o "$D/out_x6.exr" 2>"$D/note" ||
-  fail "exposure=1e-6"
-grep -q "note: --denoise: the input's exposure" "$D/note" || fail "no exposure note: $(cat "$D/note")"
-"$T" "$D/aov.exr" --denoise:model="$D/model.safetensors" -o "$D/out2.exr" 2>"$D/note" || fail "plain"
-[ -s "$D/note" ] && fail "note without a scale: $(cat "$D/note")"
 # --exposure reports the statistic and leaves the stack (the image is still written)
 "$T" "$D/aov.exr" --exposure --json -o "$D/same.exr" >"$D/ex.json" || fail "--exposure"
 grep -Eq '"exposure": *[0-9.]+(e-?[0-9]+)?[,}]' "$D/ex.json" || fail "no exposure: $(cat "$D/ex.json")"
 [ -s "$D/same.exr" ] || fail "--exposure consumed the image"
 "$T" "$D/aov.exr" --ch R,G,B --exposure 2>"$D/err" && fail "--exposure without diffuse accepted"
 grep -q diffuse "$D/err" || fail "--exposure error does not name diffuse: $(cat "$D/err")"
-for bad in -1 0 nan abc 2,1 1, ,1; do
+for bad in -1 0 nan inf abc 2,1 1e40; do
   if "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":exposure=$bad -o "$D/bad.exr" 2>"$D/err"; then
     fail "exposure=$bad accepted"
   fi

@@ -25,10 +25,9 @@ static kpcn_model *make_model_chain(uint64_t seed, int passes, int sw) {
   /* more passes: K = 7, so the tile pad the one-pass overlap max(4, 3) would give (6) is
    * short of the two-pass one, max(4 + 3, 3 + 3) = 7, and the tiling test would see it */
   if (passes > 1) arch.kernel_size = 7;
-  /* a recorded exposure range above the synthetic images' (~0.2): every denoise below runs
-   * with the input scaled up to its lower end */
-  arch.exposure_range[0] = 0.75f;
-  arch.exposure_range[1] = 3.0f;
+  /* a recorded exposure above the synthetic images' (~0.33): every denoise below runs with
+   * the input scaled to it */
+  arch.exposure = 0.75f;
   if (kpcn_features_set_arch(&arch) != KPCN_OK) return NULL;
   kpcn_model *m = NULL;
   if (kpcn_model_create(&arch, seed, &m) != KPCN_OK) return NULL;
@@ -56,11 +55,10 @@ static void reference(kpcn_model *m, const kpcn_aov_set *a, double *out) {
   size_t P = (size_t)W * H;
   kpcn_features_norm n;
   kpcn_features_norm_compute(a, &n);
-  /* the network sees the colour at the nearer end of the model's exposure range */
+  /* the network sees the colour at the model's exposure */
   double e = 0.0;
   kpcn_aov_exposure(a, &e);
-  const double lo = arch->exposure_range[0], hi = arch->exposure_range[1];
-  n.color_scale = e > 0.0 && e < lo ? (float)(lo / e) : e > hi ? (float)(hi / e) : 1.0f;
+  n.color_scale = e > 0.0 && arch->exposure > 0.0f ? (float)(arch->exposure / e) : 1.0f;
   float *feat = malloc(sizeof(float) * P * KPCN_FEATURES_COUNT);
   double *act = malloc(sizeof(double) * P * 64), *nxt = malloc(sizeof(double) * P * 64);
   double *filt[2] = {malloc(sizeof(double) * 3 * P), malloc(sizeof(double) * 3 * P)};
@@ -610,7 +608,7 @@ static void test_exposure(void) {
   kpcn_aov_set *a = synth_aov(29, 23, 9), *b = synth_aov(29, 23, 9);
   const size_t P = kpcn_aov_plane_size(a);
   double ea = 0.0, eb = 0.0;
-  CHECK(kpcn_aov_exposure(a, &ea) == KPCN_OK && ea > 0.0 && ea < 0.75);
+  CHECK(kpcn_aov_exposure(a, &ea) == KPCN_OK && ea > 0.0 && ea < 0.5);
   printf("exposure of the synthetic image: %.4g\n", ea);
   scale_colour(b, 1024.0f);
   CHECK(kpcn_aov_exposure(b, &eb) == KPCN_OK);
@@ -625,15 +623,12 @@ static void test_exposure(void) {
     CHECK(fabs(et - ea) <= 1e-12 * ea);
     kpcn_aov_destroy(t);
   }
-  /* the input's exposure was below the model's range, so the network saw it at the range's
-   * lower end: the reference (which reproduces that) is checked in test_reference_and_tiling;
-   * here the modes of the option. A fixed target: the result scales with the input, bit
-   * for bit. */
+  /* A fixed exposure: the result scales with the input, bit for bit. */
   kpcn_denoiser_options o;
   kpcn_denoiser_options_defaults(&o);
   o.nthreads = 2;
   o.tile = 16;
-  o.exposure_min = o.exposure_max = 0.37f;
+  o.exposure = 0.37f;
   float *oa = malloc(sizeof(float) * 3 * P), *ob = malloc(sizeof(float) * 3 * P);
   float *oc = malloc(sizeof(float) * 3 * P);
   CHECK(run_opts(m, a, &o, NULL, oa) == KPCN_OK);
@@ -642,35 +637,32 @@ static void test_exposure(void) {
   for (size_t i = 0; i < 3 * P; i++)
     differ += ob[i] != 1024.0f * oa[i];
   CHECK(differ == 0);
-  /* ... which the input as rendered (0, inf) does not give */
-  o.exposure_min = 0.0f;
-  o.exposure_max = INFINITY;
+  /* ... which the input as rendered does not give */
+  o.exposure = KPCN_EXPOSURE_AS_RENDERED;
   CHECK(run_opts(m, b, &o, NULL, ob) == KPCN_OK);
   double worst = 0.0;
   for (size_t i = 0; i < 3 * P; i++)
     worst = fmax(worst, fabs(ob[i] / 1024.0 - oa[i]) / (1e-3 + fabs(oa[i])));
   printf("as rendered, input x1024 vs x1: max rel. difference %.3g\n", worst);
   CHECK(worst > 1e-3);
-  /* a range holding the input's exposure leaves it as rendered, bit for bit */
-  CHECK(run_opts(m, a, &o, NULL, oc) == KPCN_OK);
-  o.exposure_min = (float)(0.5 * ea);
-  o.exposure_max = (float)(2.0 * ea);
-  CHECK(run_opts(m, a, &o, NULL, ob) == KPCN_OK);
-  CHECK(memcmp(ob, oc, sizeof(float) * 3 * P) == 0);
-  /* the model's range (defaults): the input is shown at its lower end, 0.75 */
-  kpcn_denoiser_options_defaults(&o);
-  o.nthreads = 2;
-  o.exposure_min = o.exposure_max = 0.75f;
+  /* the default is the model's exposure (0.75): the same bits as asking for it, and
+   * equivariant too */
+  o.exposure = 0.75f;
   CHECK(run_opts(m, a, &o, NULL, ob) == KPCN_OK);
   kpcn_denoiser_options_defaults(&o);
   o.nthreads = 2;
+  o.tile = 16;
   CHECK(run_opts(m, a, &o, NULL, oc) == KPCN_OK);
   CHECK(memcmp(ob, oc, sizeof(float) * 3 * P) == 0);
-  /* bad ranges are named */
-  const float bad[][2] = {{-1.0f, 1.0f}, {2.0f, 1.0f}, {0.0f, 5.0f}, {NAN, NAN}, {1.0f, NAN}};
-  for (int i = 0; i < 5; i++) {
-    o.exposure_min = bad[i][0];
-    o.exposure_max = bad[i][1];
+  CHECK(run_opts(m, b, &o, NULL, ob) == KPCN_OK);
+  differ = 0;
+  for (size_t i = 0; i < 3 * P; i++)
+    differ += ob[i] != 1024.0f * oc[i];
+  CHECK(differ == 0);
+  /* bad exposures are named */
+  const float bad[] = {-2.0f, -0.5f, NAN, INFINITY};
+  for (int i = 0; i < 4; i++) {
+    o.exposure = bad[i];
     CHECK(run_opts(m, a, &o, NULL, oa) == KPCN_ERR_INVALID_ARGUMENT);
     CHECK(strstr(kpcn_last_error(), "exposure") != NULL);
   }
@@ -681,7 +673,7 @@ static void test_exposure(void) {
   CHECK(kpcn_denoiser_execute_aov(d, a, oa) == KPCN_OK);
   kpcn_denoise_stats st;
   kpcn_denoiser_get_stats(d, &st);
-  CHECK(st.exposure == 0.0 && st.exposure_scale == 1.0);
+  CHECK(st.exposure == 0.0 && st.exposure_scale == 1.0); /* a black frame: scale 1 */
   kpcn_denoiser_destroy(d);
   free(oa);
   free(ob);

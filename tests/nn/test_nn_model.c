@@ -142,10 +142,10 @@ static void arch_add(cJSON *h, const char *key, double v) {
   arch_set_raw(h, key, num);
 }
 static void m_arch_passes(cJSON *h) { arch_add(h, "kpa_passes", 0); }
-static void m_exp_order(cJSON *h) { arch_set_raw(h, "exposure_range", "[2,1]"); }
-static void m_exp_neg(cJSON *h) { arch_set_raw(h, "exposure_range", "[-1,1]"); }
-static void m_exp_one(cJSON *h) { arch_set_raw(h, "exposure_range", "[1]"); }
-static void m_exp_str(cJSON *h) { arch_set_raw(h, "exposure_range", "[\"a\",1]"); }
+static void m_exp_zero(cJSON *h) { arch_set_raw(h, "exposure", "0"); }
+static void m_exp_neg(cJSON *h) { arch_set_raw(h, "exposure", "-1"); }
+static void m_exp_arr(cJSON *h) { arch_set_raw(h, "exposure", "[1]"); }
+static void m_exp_str(cJSON *h) { arch_set_raw(h, "exposure", "\"a\""); }
 static void m_arch_sw2(cJSON *h) { arch_add(h, "source_weight", 2); }
 /* a source score channel the tensors do not have */
 static void m_arch_sw1(cJSON *h) { arch_add(h, "source_weight", 1); }
@@ -252,21 +252,20 @@ static void test_arch(void) {
   a.source_weight = 2;
   CHECK(kpcn_arch_validate(&a) == KPCN_ERR_INVALID_ARGUMENT);
   CHECK(strstr(kpcn_last_error(), "source_weight") != NULL);
-  /* exposure_range: absent when not recorded; recorded, it round-trips exactly */
+  /* exposure: absent when not recorded; recorded, it round-trips exactly */
   a.source_weight = 0;
   CHECK(kpcn_arch_validate(&a) == KPCN_OK);
   js = kpcn_arch_to_json(&a);
-  CHECK(js && !strstr(js, "exposure_range"));
+  CHECK(js && !strstr(js, "exposure"));
   free(js);
-  a.exposure_range[0] = 0.0123456789f;
-  a.exposure_range[1] = 0.4f;
+  a.exposure = 0.0123456789f;
   js = kpcn_arch_to_json(&a);
-  CHECK(js && strstr(js, "exposure_range") && kpcn_arch_from_json(js, &b) == KPCN_OK);
+  CHECK(js && strstr(js, "\"exposure\":") && kpcn_arch_from_json(js, &b) == KPCN_OK);
   CHECK(memcmp(&a, &b, sizeof a) == 0);
   free(js);
-  a.exposure_range[0] = 0.5f; /* above the highest */
+  a.exposure = -1.0f;
   CHECK(kpcn_arch_validate(&a) == KPCN_ERR_INVALID_ARGUMENT);
-  CHECK(strstr(kpcn_last_error(), "exposure_range") != NULL);
+  CHECK(strstr(kpcn_last_error(), "exposure") != NULL);
   kpcn_arch_preset("tiny", &a); /* conv radius 3 */
   kpcn_arch_set_inputs(&a, 3, names);
   a.kpa_passes = 3;
@@ -428,10 +427,10 @@ static void test_malformed(const blob *good) {
   mutated(good, "arch even K", m_arch_k, "kernel_size");
   mutated(good, "arch kpa_passes 0", m_arch_passes, "kpa_passes");
   mutated(good, "arch source_weight 2", m_arch_sw2, "source_weight");
-  mutated(good, "arch exposure_range [2,1]", m_exp_order, "exposure_range");
-  mutated(good, "arch exposure_range [-1,1]", m_exp_neg, "exposure_range");
-  mutated(good, "arch exposure_range [1]", m_exp_one, "exposure_range");
-  mutated(good, "arch exposure_range [a,1]", m_exp_str, "exposure_range");
+  mutated(good, "arch exposure 0", m_exp_zero, "exposure");
+  mutated(good, "arch exposure -1", m_exp_neg, "exposure");
+  mutated(good, "arch exposure [1]", m_exp_arr, "exposure");
+  mutated(good, "arch exposure \"a\"", m_exp_str, "exposure");
   mutated(good, "arch source_weight vs shapes", m_arch_sw1, "shape");
   mutated(good, "inputs disagree", m_inputs, "kpcn.inputs");
   mutated(good, "no __metadata__", m_nometa, "__metadata__");

@@ -63,10 +63,10 @@ static void usage(FILE *f) {
         "  weight averaging (SWA): the mean of the weights of snapshots of one run (model\n"
         "  files and/or checkpoints of one architecture)\n"
         "\n"
-        "usage: kpcn-train --exposure-range OUT.safetensors MODEL STORE.kps...\n"
-        "  a copy of MODEL (same weights) recording the exposure range of the training images\n"
-        "  of the patch stores it was trained on (a model trained by kpcn-train records it\n"
-        "  itself); the denoiser keeps inputs within it\n",
+        "usage: kpcn-train --record-exposure OUT.safetensors MODEL STORE.kps\n"
+        "  a copy of MODEL (same weights) recording the median exposure of the training images\n"
+        "  of the patch store it was trained on (a model trained by kpcn-train records it\n"
+        "  itself); the denoiser shows the network every input at that exposure\n",
         f);
 }
 
@@ -231,44 +231,41 @@ static int average_main(int argc, char **argv) {
   return 0;
 }
 
-static int exposure_range_main(int argc, char **argv) {
-  if (argc < 5) {
-    fprintf(stderr, "kpcn-train --exposure-range: expected OUT.safetensors MODEL STORE.kps...\n");
+static int record_exposure_main(int argc, char **argv) {
+  if (argc != 5) {
+    fprintf(stderr, "kpcn-train --record-exposure: expected OUT.safetensors MODEL STORE.kps\n");
     return 2;
   }
   kpcn_model *m = NULL;
+  kpcn_patchstore *ps = NULL;
+  double e = 0.0;
   kpcn_status st = kpcn_model_load(argv[3], &m);
-  double lo = 0.0, hi = 0.0;
-  for (int i = 4; i < argc && st == KPCN_OK; i++) {
-    kpcn_patchstore *ps = NULL;
-    st = kpcn_patchstore_open(&ps, argv[i], NULL, 0);
-    const int joined = st == KPCN_OK && kpcn_patchstore_exposure_range(ps, &lo, &hi);
-    kpcn_patchstore_close(ps);
-    if (st == KPCN_OK && !joined) {
-      fprintf(stderr,
-              "kpcn-train --exposure-range: patch store '%s' records no exposure of its training "
-              "images (written before kpcn-dataset recorded them: run kpcn-dataset patches "
-              "again)\n",
-              argv[i]);
-      kpcn_model_destroy(m);
-      return 1;
-    }
+  if (st == KPCN_OK) st = kpcn_patchstore_open(&ps, argv[4], NULL, 0);
+  if (st == KPCN_OK) st = kpcn_patchstore_exposure(ps, &e);
+  kpcn_patchstore_close(ps);
+  if (st == KPCN_OK && !(e > 0.0)) {
+    fprintf(stderr,
+            "kpcn-train --record-exposure: patch store '%s' records no exposure of its "
+            "training images (written before kpcn-dataset recorded them: run kpcn-dataset "
+            "patches again)\n",
+            argv[4]);
+    kpcn_model_destroy(m);
+    return 1;
   }
-  if (st == KPCN_OK) st = kpcn_model_set_exposure_range(m, (float)lo, (float)hi);
+  if (st == KPCN_OK) st = kpcn_model_set_exposure(m, (float)e);
   if (st == KPCN_OK) st = kpcn_model_save(m, argv[2]);
   kpcn_model_destroy(m);
   if (st != KPCN_OK) {
-    fprintf(stderr, "kpcn-train --exposure-range: %s\n", kpcn_last_error());
+    fprintf(stderr, "kpcn-train --record-exposure: %s\n", kpcn_last_error());
     return 1;
   }
-  printf("kpcn-train: %s = %s with exposure range [%.9g, %.9g]\n", argv[2], argv[3],
-         (double)(float)lo, (double)(float)hi);
+  printf("kpcn-train: %s = %s recording exposure %.9g\n", argv[2], argv[3], (double)(float)e);
   return 0;
 }
 
 int main(int argc, char **argv) {
   if (argc >= 3 && !strcmp(argv[1], "--compare")) return compare_main(argc, argv);
-  if (argc >= 2 && !strcmp(argv[1], "--exposure-range")) return exposure_range_main(argc, argv);
+  if (argc >= 2 && !strcmp(argv[1], "--record-exposure")) return record_exposure_main(argc, argv);
   if (argc >= 2 && !strcmp(argv[1], "--average")) return average_main(argc, argv);
   kpcn_train_settings s;
   kpcn_train_settings_defaults(&s);

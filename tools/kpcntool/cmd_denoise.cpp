@@ -1,46 +1,27 @@
 // kpcntool --denoise: pops an AOV image, pushes the denoised RGB image.
-//   --denoise:model=m.safetensors[:bf16=1][:tile=N][:ensemble=N][:exposure=auto|off|T|LO,HI]
+//   --denoise:model=m.safetensors[:bf16=1][:tile=N][:ensemble=N][:exposure=auto|off|E]
 //   --denoise:method=bilateral|nlmeans
 #include "kpcn/oiio_convert.h"
 #include "kpcn/ops_denoise.h"
 #include "kpcntool.h"
 
-#include <cstdio>
 #include <cstdlib>
-#include <limits>
 
 namespace {
 
-// exposure=auto (the model's range), off (as rendered), T (always T) or LO,HI.
+// exposure=auto (the model's), off (as rendered) or a number > 0.
 bool parse_exposure(const std::string &v, kpcn::ops::DenoiseOptions &opt, std::string &err) {
-  if (v == "auto") {
-    opt.exposure_min = opt.exposure_max = 0.0f;
+  if (v == "auto" || v == "off") {
+    opt.exposure = v == "auto" ? 0.0f : KPCN_EXPOSURE_AS_RENDERED;
     return true;
   }
-  if (v == "off") {
-    opt.exposure_min = 0.0f;
-    opt.exposure_max = std::numeric_limits<float>::infinity();
-    return true;
-  }
-  const size_t comma = v.find(',');
-  double r[2] = {0.0, 0.0};
-  for (int i = 0; i < 2; i++) {
-    const std::string part = comma == std::string::npos ? v
-                             : i == 0                   ? v.substr(0, comma)
-                                                        : v.substr(comma + 1);
-    char *end = nullptr;
-    r[i] = std::strtod(part.c_str(), &end);
-    if (part.empty() || *end != '\0' || !(r[i] > 0.0 && r[i] < 1e30)) {
-      err = "exposure must be auto, off, a number > 0 or LO,HI with 0 < LO <= HI (got '" + v + "')";
-      return false;
-    }
-  }
-  if (r[0] > r[1]) {
-    err = "exposure range " + v + ": LO must be <= HI";
+  char *end = nullptr;
+  const double e = std::strtod(v.c_str(), &end);
+  if (v.empty() || *end != '\0' || !(e > 0.0 && e < 1e30)) {
+    err = "exposure must be auto, off or a number > 0 (got '" + v + "')";
     return false;
   }
-  opt.exposure_min = (float)r[0];
-  opt.exposure_max = (float)r[1];
+  opt.exposure = (float)e;
   return true;
 }
 
@@ -78,13 +59,6 @@ bool run_denoise(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
     ctx.push(std::move(src)); // leave the stack as it was
     return false;
   }
-  const float scale = dst.spec().get_float_attribute("kpcn:exposureScale", 1.0f);
-  if (scale != 1.0f)
-    std::fprintf(stderr,
-                 "kpcntool: note: --denoise: the input's exposure %g is outside the exposure "
-                 "range in use; the network was shown it %.4gx as bright (exposure=off: as "
-                 "rendered)\n",
-                 (double)dst.spec().get_float_attribute("kpcn:exposure", 0.0f), (double)scale);
   ctx.push(std::move(dst));
   return true;
 }
@@ -109,7 +83,7 @@ bool reg_exposure = kpcntool::register_command(
      0,
      {},
      "exposure of the top AOV image: median 8x8-block mean luminance of diffuse + specular "
-     "(what --denoise:exposure= compares with the model's range)",
+     "(--denoise scales it to the model's exposure)",
      run_exposure});
 
 bool reg = kpcntool::register_command(
@@ -117,8 +91,8 @@ bool reg = kpcntool::register_command(
      0,
      {"model", "method", "bf16", "tile", "ensemble", "exposure"},
      "denoise the top AOV image (model=m.safetensors | method=bilateral|nlmeans, bf16=1, tile=N, "
-     "ensemble=2|4|8: average over mirrored/rotated copies, exposure=auto|off|T|LO,HI: the "
-     "exposures the network is shown, default the model's training range)",
+     "ensemble=2|4|8: average over mirrored/rotated copies, exposure=auto|off|E: the exposure "
+     "the network is shown every input at, default the model's)",
      run_denoise});
 
 } // namespace

@@ -142,10 +142,10 @@ const char *const *kpcn_patchstore_channels(const kpcn_patchstore *ps);
 int kpcn_patchstore_find_channel(const kpcn_patchstore *ps, const char *name);
 int kpcn_patchstore_nsources(const kpcn_patchstore *ps);
 const kpcn_patch_source *kpcn_patchstore_source(const kpcn_patchstore *ps, int i);
-/* Joins the exposures (kpcn_patch_source.exposure) of the store's training sources (split
- * "train", or all when none is marked) into [*lo, *hi]: a range with *hi = 0 is empty. Sources
- * without a recorded exposure are skipped; returns how many were joined. */
-int kpcn_patchstore_exposure_range(const kpcn_patchstore *ps, double *lo, double *hi);
+/* The median exposure (kpcn_patch_source.exposure) of the store's training sources (split
+ * "train", or all when none is marked), skipping sources without one; 0 when none has one
+ * (a store written before sources carried their exposure). */
+kpcn_status kpcn_patchstore_exposure(const kpcn_patchstore *ps, double *median);
 
 /* Copies patch i as C planar float32 planes into dst (C*S*S floats); rec optional.
  * Thread-safe (read-only mapping). */

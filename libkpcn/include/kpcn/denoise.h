@@ -197,18 +197,19 @@ typedef struct kpcn_denoiser_options {
                              cost, plus one transformed copy of the input buffers and two
                              RGB images of memory. The transforms form a group, so the result
                              is exactly equivariant to them (up to float summation order). */
-  /* KPCN only: the exposures (kpcn_aov_exposure, kpcn/image.h) the network is shown. An
-   * input whose exposure e lies outside [exposure_min, exposure_max] is scaled to the nearer
-   * end before the network and the result scaled back, so renders in other units (100x
-   * brighter, 100x darker) are denoised as well as those the model was trained on; inside
-   * the range the input is denoised as rendered. Both 0 (the default): the model's
-   * arch.exposure_range (as rendered for a model that records none). min = max = T: every
-   * input is scaled to T, so denoise(s * img) = s * denoise(img) for any s > 0. min = 0,
-   * max = INFINITY: always as rendered. */
-  float exposure_min, exposure_max;
+  /* KPCN only: the exposure (kpcn_aov_exposure, kpcn/image.h) the network is shown every
+   * input at: the input's colour is scaled to it before the network and the result scaled
+   * back, so renders in any units are denoised alike (denoise(s * img) = s * denoise(img),
+   * bit for bit for powers of two). 0 (the default): the model's arch.exposure, the median
+   * exposure of its training images (as rendered for a model that records none); > 0: that
+   * exposure; KPCN_EXPOSURE_AS_RENDERED: the input as rendered. */
+  float exposure;
   kpcn_baseline_params bilateral;
   kpcn_baseline_params nlmeans;
 } kpcn_denoiser_options;
+
+/* kpcn_denoiser_options.exposure: show the network the input as rendered. */
+#define KPCN_EXPOSURE_AS_RENDERED (-1.0f)
 
 void kpcn_denoiser_options_defaults(kpcn_denoiser_options *o);
 

@@ -66,11 +66,10 @@ typedef struct kpcn_arch {
    * The network can so mark an outlier once and every kernel that reaches it drops it
    * (docs/nn.md, "Source weights"). 0 (default): Bako 2017's kernels. */
   int source_weight;
-  /* Exposures (kpcn_aov_exposure, kpcn/image.h) of the noisy images the model was trained
-   * on, lowest and highest (kpcn-train records them from its patch store). The denoiser
-   * brings an input whose exposure lies outside to the nearer end (kpcn_denoiser_options).
-   * 0, 0: not recorded. */
-  float exposure_range[2];
+  /* The median exposure (kpcn_aov_exposure, kpcn/image.h) of the noisy images the model was
+   * trained on (kpcn-train records it from its patch store). The denoiser shows the network
+   * every input scaled to it (kpcn_denoiser_options.exposure). 0: not recorded. */
+  float exposure;
 } kpcn_arch;
 #define KPCN_NN_MAX_KPA_PASSES 3
 #define KPCN_KPA_SOURCE_EPS 1e-3f
@@ -153,9 +152,9 @@ kpcn_status kpcn_model_widen(const kpcn_model *m, int channels, uint64_t seed, k
  * KPCN_NN_MAX_KPA_PASSES): the weights are kept, so a fine-tune can start a multi-pass model
  * from a single-pass one. */
 kpcn_status kpcn_model_set_kpa_passes(kpcn_model *m, int passes);
-/* Records the exposures of the images the model was trained on (arch.exposure_range):
- * 0 < lo <= hi, or 0, 0 to clear. */
-kpcn_status kpcn_model_set_exposure_range(kpcn_model *m, float lo, float hi);
+/* Records the median exposure of the images the model was trained on (arch.exposure):
+ * > 0, or 0 to clear. */
+kpcn_status kpcn_model_set_exposure(kpcn_model *m, float exposure);
 /* A copy of m with arch.source_weight = 1 that computes the same function: the new source
  * score channel of each branch's output layer gets zero weights and bias, so every weight
  * w(q) starts equal and the normalised kernels are unchanged (up to rounding); training then

@@ -47,6 +47,9 @@ void kpcn_fast_fp_end(unsigned saved, int nthreads);
  * an AVX2 machine, which is how the tests cover the fallback paths on an AVX-512 host. */
 int kpcn_cpu_allows_avx512(void);
 
+/* Median of v[0..n) (sorts v; the mean of the two middle values for even n; 0 for n = 0). */
+double kpcn_median_inplace(double *v, size_t n);
+
 #define KPCN_TRY(expr)                                                                             \
   do {                                                                                             \
     kpcn_status _s = (expr);                                                                       \

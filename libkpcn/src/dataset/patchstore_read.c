@@ -246,19 +246,21 @@ const kpcn_patch_source *kpcn_patchstore_source(const kpcn_patchstore *ps, int i
   return ps && i >= 0 && i < ps->nsrc ? &ps->src[i] : NULL;
 }
 
-int kpcn_patchstore_exposure_range(const kpcn_patchstore *ps, double *lo, double *hi) {
-  if (!ps || !lo || !hi) return 0;
-  int any_train = 0, n = 0;
+kpcn_status kpcn_patchstore_exposure(const kpcn_patchstore *ps, double *median) {
+  if (!ps || !median) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patchstore_exposure: NULL");
+  *median = 0.0;
+  double *v = kpcn_alloc(sizeof(double) * (size_t)(ps->nsrc ? ps->nsrc : 1), "exposures");
+  if (!v) return KPCN_ERR_OUT_OF_MEMORY;
+  int any_train = 0;
+  size_t n = 0;
   for (int i = 0; i < ps->nsrc; i++)
     any_train |= strcmp(ps->src[i].split, "train") == 0;
-  for (int i = 0; i < ps->nsrc; i++) {
-    const double e = ps->src[i].exposure;
-    if ((any_train && strcmp(ps->src[i].split, "train") != 0) || !(e > 0.0)) continue;
-    *lo = *hi > 0.0 && *lo <= e ? *lo : e;
-    *hi = *hi >= e ? *hi : e;
-    n++;
-  }
-  return n;
+  for (int i = 0; i < ps->nsrc; i++)
+    if ((!any_train || strcmp(ps->src[i].split, "train") == 0) && ps->src[i].exposure > 0.0)
+      v[n++] = ps->src[i].exposure;
+  *median = kpcn_median_inplace(v, n);
+  free(v);
+  return KPCN_OK;
 }
 
 const void *kpcn_patchstore_raw(const kpcn_patchstore *ps, uint64_t i) {

@@ -54,13 +54,11 @@ static double now_s(void) {
 static kpcn_status check_options(const kpcn_denoiser_options *o) {
   if (o->tile < 0)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: tile %d must be >= 0", o->tile);
-  if (!(o->exposure_min >= 0.0f && o->exposure_min <= o->exposure_max) ||
-      !isfinite(o->exposure_min) ||
-      (o->exposure_max > 0.0f && o->exposure_min == 0.0f && o->exposure_max != INFINITY))
+  if (!(o->exposure >= 0.0f || o->exposure == KPCN_EXPOSURE_AS_RENDERED) || !isfinite(o->exposure))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "denoiser_create: exposure range [%g, %g] must be 0 < min <= max, "
-                     "0, 0 (the model's range) or 0, inf (as rendered)",
-                     (double)o->exposure_min, (double)o->exposure_max);
+                     "denoiser_create: exposure %g must be > 0, 0 (the model's) or "
+                     "KPCN_EXPOSURE_AS_RENDERED",
+                     (double)o->exposure);
   if (o->ensemble < 0 || o->ensemble > KPCN_DENOISE_MAX_ENSEMBLE ||
       (o->ensemble > 1 && (o->ensemble & (o->ensemble - 1)) != 0))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
@@ -289,25 +287,20 @@ static int ensemble_progress_fn(void *user, double f) {
   return kpcn_progress_report(e->outer, (e->k + f) / e->n);
 }
 
-/* The colour scale that brings the input's exposure into the KPCN's range (1 inside it,
- * for the baselines, when the range is [0, inf) or not recorded, and for a black image). */
+/* The colour scale that shows the KPCN the input at its exposure target (1 as rendered, for
+ * the baselines, for a model that records no exposure and for a black image). */
 static kpcn_status exposure_scale(kpcn_denoiser *d, const kpcn_aov_set *aov, float *scale) {
   *scale = 1.0f;
   if (d->opt.method != KPCN_DENOISE_KPCN) return KPCN_OK;
-  double lo = d->opt.exposure_min, hi = d->opt.exposure_max;
-  if (lo == 0.0 && hi == 0.0) { /* the model's */
-    const kpcn_arch *a = kpcn_model_arch(d->model);
-    lo = a->exposure_range[0];
-    hi = a->exposure_range[1];
-    if (hi == 0.0) return KPCN_OK;
-  }
-  if (lo == 0.0 && hi == INFINITY) return KPCN_OK;
+  const double t = d->opt.exposure > 0.0f    ? d->opt.exposure
+                   : d->opt.exposure == 0.0f ? kpcn_model_arch(d->model)->exposure
+                                             : 0.0;
+  if (!(t > 0.0)) return KPCN_OK;
   double e;
   KPCN_TRY(kpcn_aov_exposure(aov, &e));
   d->stats.exposure = e;
-  if (!(e > 0.0)) return KPCN_OK;
-  const double t = e < lo ? lo : e > hi ? hi : e, s = t / e;
-  if (t != e && (float)s > 0.0f && isfinite((float)s)) *scale = (float)s;
+  const double s = e > 0.0 ? t / e : 1.0;
+  if ((float)s > 0.0f && isfinite((float)s)) *scale = (float)s;
   return KPCN_OK;
 }
 

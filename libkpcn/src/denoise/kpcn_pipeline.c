@@ -41,11 +41,14 @@ static int tile_cmp(const void *a, const void *b) {
   return s->x0 < t->x0 ? -1 : s->x0 > t->x0;
 }
 
-/* Floats a padded tile pixel costs while its net runs: features, noisy and filtered colour
- * (four planes each, for source weights), two hidden activations (ping-pong) and the logits.
- * Matches peak RSS within ~10 %. */
-static size_t floats_per_pixel(const kpcn_arch *a) {
-  return KPCN_FEATURES_COUNT + 8 + 2 * (size_t)a->channels + (size_t)kpcn_arch_logit_channels(a);
+/* Bytes a padded tile pixel costs while its net runs: features, noisy and filtered colour
+ * (four planes each, for source weights), two hidden activations (ping-pong) and the logits,
+ * in float; a bf16 net holds its activations and a copy of its input in bf16 (the logits
+ * stay float). Matches peak RSS within ~10 %. */
+static size_t bytes_per_pixel(const kpcn_arch *a, int bf16) {
+  const size_t act = 2 * (size_t)a->channels * (bf16 ? 2 : 4);
+  const size_t in_copy = bf16 ? 2 * (size_t)KPCN_FEATURES_COUNT : 0;
+  return 4 * (KPCN_FEATURES_COUNT + 8 + (size_t)kpcn_arch_logit_channels(a)) + act + in_copy;
 }
 
 /* Pixels a tile is grown by on each side: at least one more than the overlap, and the padded
@@ -75,14 +78,16 @@ static int even_up(int n) { return (n + 1) & ~1; }
 /* Tile grid. An explicit tile size gives square tiles of that size. Otherwise (tile = 0)
  * the grid is the one with the least padded area (overlap is recomputed work) whose
  * largest padded tile fits KPCN_TILE_BUDGET_BYTES: a 1024x1024 frame with the cpu preset
- * runs as two 1024x512 tiles (4.3 % overlap) instead of four 512x512 ones (8.8 %), a 4K
+ * runs as two 1024x512 tiles in fp32 (4.3 % overlap) instead of four 512x512 ones (8.8 %)
+ * and as one tile in bf16 (its activations take half the bytes), a 4K
  * frame with the paper preset still stays far below 4 GiB. Ties go to fewer tiles. */
-static void tile_grid(const kpcn_arch *a, int W, int H, int pad, int tile, int *tw, int *th) {
+static void tile_grid(const kpcn_arch *a, int bf16, int W, int H, int pad, int tile, int *tw,
+                      int *th) {
   if (tile > 0) {
     *tw = *th = tile;
     return;
   }
-  const double budget = (double)KPCN_TILE_BUDGET_BYTES / (4.0 * (double)floats_per_pixel(a));
+  const double budget = (double)KPCN_TILE_BUDGET_BYTES / (double)bytes_per_pixel(a, bf16);
   double best = -1.0;
   int best_n = 0;
   *tw = *th = 64;
@@ -202,7 +207,7 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
   const float eps = arch->eps;
   const size_t P = kpcn_aov_plane_size(aov);
   int TW, TH;
-  tile_grid(arch, W, H, pad, tile, &TW, &TH);
+  tile_grid(arch, o->bf16, W, H, pad, tile, &TW, &TH);
   kpcn_features_norm norm;
   KPCN_TRY(kpcn_features_norm_compute(aov, &norm));
   norm.color_scale = color_scale;

@@ -7,11 +7,6 @@
 #include <math.h>
 #include <stdlib.h>
 
-static int cmp_double(const void *a, const void *b) {
-  const double x = *(const double *)a, y = *(const double *)b;
-  return (x > y) - (x < y);
-}
-
 /* Block index along an axis of n pixels: blocks of 8 laid out from the image centre
  * outwards (the central block of an odd axis has 7 pixels), so mirroring the axis maps
  * blocks onto blocks and the exposure is the same for every mirrored / rotated copy. */
@@ -57,10 +52,7 @@ kpcn_status kpcn_aov_exposure(const kpcn_aov_set *aov, double *out) {
   size_t n = 0; /* lit blocks' means, packed to the front of sum */
   for (size_t b = 0; b < nb; b++)
     if (cnt[b] > 0 && sum[b] > 0.0 && isfinite(sum[b])) sum[n++] = sum[b] / cnt[b];
-  if (n > 0) {
-    qsort(sum, n, sizeof(double), cmp_double);
-    *out = n % 2 ? sum[n / 2] : 0.5 * (sum[n / 2 - 1] + sum[n / 2]);
-  }
+  *out = kpcn_median_inplace(sum, n);
   free(sum), free(cnt), free(col);
   return KPCN_OK;
 }

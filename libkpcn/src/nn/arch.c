@@ -120,11 +120,9 @@ kpcn_status kpcn_arch_validate(const kpcn_arch *a) {
   if (a->source_weight != 0 && a->source_weight != 1)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.source_weight = %d: must be 0 or 1",
                      a->source_weight);
-  const float e0 = a->exposure_range[0], e1 = a->exposure_range[1];
-  if (!(e0 == 0.0f && e1 == 0.0f) && !(e0 > 0.0f && e0 <= e1 && isfinite(e1)))
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "arch.exposure_range = [%g, %g]: must be 0, 0 or 0 < lowest <= highest",
-                     (double)e0, (double)e1);
+  if (!(a->exposure >= 0.0f) || !isfinite(a->exposure))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.exposure = %g: must be >= 0 and finite",
+                     (double)a->exposure);
   if (!name_ok(a->name, KPCN_NN_NAME_LEN))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.name is empty or too long");
   if (!name_ok(a->preprocess, KPCN_NN_NAME_LEN))
@@ -193,11 +191,10 @@ char *kpcn_arch_to_json(const kpcn_arch *a) {
   /* written only when not 1, so single-pass models keep the bytes they always had */
   if (kpcn_arch_kpa_passes(a) != 1) cJSON_AddNumberToObject(o, "kpa_passes", a->kpa_passes);
   if (a->source_weight) cJSON_AddNumberToObject(o, "source_weight", a->source_weight);
-  if (a->exposure_range[1] > 0.0f) {
-    char r[80];
-    snprintf(r, sizeof r, "[%.9g,%.9g]", (double)a->exposure_range[0],
-             (double)a->exposure_range[1]);
-    cJSON_AddRawToObject(o, "exposure_range", r);
+  if (a->exposure > 0.0f) {
+    char e[32];
+    snprintf(e, sizeof e, "%.9g", (double)a->exposure);
+    cJSON_AddRawToObject(o, "exposure", e);
   }
   char *s = cJSON_PrintUnformatted(o);
   cJSON_Delete(o);
@@ -275,15 +272,12 @@ static kpcn_status from_json_obj(const cJSON *o, kpcn_arch *t) {
   t->source_weight = 0; /* likewise */
   if (cJSON_GetObjectItemCaseSensitive(o, "source_weight"))
     KPCN_TRY(get_int(o, "source_weight", &t->source_weight));
-  t->exposure_range[0] = t->exposure_range[1] = 0.0f; /* likewise */
-  const cJSON *er = cJSON_GetObjectItemCaseSensitive(o, "exposure_range");
-  if (er) {
-    const cJSON *lo = cJSON_GetArrayItem(er, 0), *hi = cJSON_GetArrayItem(er, 1);
-    if (!cJSON_IsArray(er) || cJSON_GetArraySize(er) != 2 || !cJSON_IsNumber(lo) ||
-        !cJSON_IsNumber(hi))
-      return kpcn_fail(KPCN_ERR_FORMAT, "architecture.exposure_range: not an array of 2 numbers");
-    t->exposure_range[0] = (float)lo->valuedouble;
-    t->exposure_range[1] = (float)hi->valuedouble;
+  t->exposure = 0.0f; /* likewise */
+  const cJSON *ex = cJSON_GetObjectItemCaseSensitive(o, "exposure");
+  if (ex) {
+    if (!cJSON_IsNumber(ex) || !(ex->valuedouble > 0.0) || ex->valuedouble > 1e30)
+      return kpcn_fail(KPCN_ERR_FORMAT, "architecture.exposure: not a number > 0");
+    t->exposure = (float)ex->valuedouble;
   }
   kpcn_status s = kpcn_arch_validate(t);
   if (s != KPCN_OK) {

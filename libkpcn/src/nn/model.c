@@ -141,11 +141,10 @@ kpcn_status kpcn_model_set_kpa_passes(kpcn_model *m, int passes) {
   return KPCN_OK;
 }
 
-kpcn_status kpcn_model_set_exposure_range(kpcn_model *m, float lo, float hi) {
-  if (!m) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_set_exposure_range: NULL model");
+kpcn_status kpcn_model_set_exposure(kpcn_model *m, float exposure) {
+  if (!m) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_set_exposure: NULL model");
   kpcn_arch a = m->arch;
-  a.exposure_range[0] = lo;
-  a.exposure_range[1] = hi;
+  a.exposure = exposure;
   KPCN_TRY(kpcn_arch_validate(&a));
   m->arch = a;
   return KPCN_OK;

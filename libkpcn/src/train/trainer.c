@@ -180,14 +180,15 @@ static kpcn_status setup_nets(kpcn_trainer *t) {
   return KPCN_OK;
 }
 
-/* The model learns the exposures of its training images (arch.exposure_range, which the
- * denoiser keeps inputs within): the store's training sources' range, joined with what an
- * init model already records. A store written before sources carried an exposure leaves
- * the range as it was. Deterministic in the store, so a resumed run has the same arch. */
-static kpcn_status record_exposure_range(kpcn_trainer *t) {
-  double lo = t->arch.exposure_range[0], hi = t->arch.exposure_range[1];
-  if (!kpcn_patchstore_exposure_range(t->ps, &lo, &hi)) return KPCN_OK;
-  KPCN_TRY(kpcn_model_set_exposure_range(t->model, (float)lo, (float)hi));
+/* The model records the median exposure of its training images (arch.exposure), at which the
+ * denoiser shows it every input: the store's, replacing an init model's (the model is now
+ * trained on this store). A store written before sources carried an exposure leaves it as
+ * it was. Deterministic in the store, so a resumed run has the same arch. */
+static kpcn_status record_exposure(kpcn_trainer *t) {
+  double m;
+  KPCN_TRY(kpcn_patchstore_exposure(t->ps, &m));
+  if (!(m > 0.0)) return KPCN_OK;
+  KPCN_TRY(kpcn_model_set_exposure(t->model, (float)m));
   t->arch = *kpcn_model_arch(t->model);
   return KPCN_OK;
 }
@@ -286,7 +287,7 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   t->passes = kpcn_arch_kpa_passes(&t->arch);
   GO(kpcn_patchstore_open(&t->ps, t->store_path, NULL, 0));
   GO(kt_batch_setup(t));
-  GO(record_exposure_range(t));
+  GO(record_exposure(t));
   GO(load_validation(t));
   GO(setup_nets(t));
   {

@@ -19,9 +19,9 @@ struct DenoiseOptions {
   bool bf16 = false; // bf16 convolutions
   int tile = 0;      // KPCN tile size in output pixels per side, 0 = automatic/untiled
   int ensemble = 1;  // self-ensemble size 1, 2, 4 or 8 (kpcn_denoiser_options.ensemble)
-  // exposures the network is shown (kpcn_denoiser_options.exposure_min/max): 0, 0 = the
-  // model's range; T, T = always T; 0, inf = as rendered
-  float exposure_min = 0.0f, exposure_max = 0.0f;
+  // the exposure the network is shown every input at (kpcn_denoiser_options.exposure):
+  // 0 = the model's, > 0 = that one, KPCN_EXPOSURE_AS_RENDERED = as rendered
+  float exposure = 0.0f;
   // Baseline parameters; defaults of kpcn_denoiser_options_defaults when left alone.
   kpcn_denoiser_options c_options() const;
 };
@@ -29,10 +29,9 @@ struct DenoiseOptions {
 // Denoises the AOV image `aovs` into dst (3 channels R,G,B, float). The whole image is
 // denoised (per-image normalisation needs it); roi (default: all) selects which part of
 // the result is stored in dst. Errors (missing buffer named, bad model ...) are reported
-// with dst.errorfmt and a false return. Where the KPCN measured the input's exposure
-// (exposure range in effect), dst's spec carries float attributes kpcn:exposure (the
-// input's, kpcn_aov_exposure) and kpcn:exposureScale (the factor the network was shown it
-// at, 1 inside the range).
+// with dst.errorfmt and a false return. Where the KPCN measured the input's exposure, dst's
+// spec carries float attributes kpcn:exposure (the input's, kpcn_aov_exposure) and
+// kpcn:exposureScale (the factor the network was shown it at).
 bool denoise(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptions &opt,
              OIIO::ROI roi = {}, int nthreads = 0);
 OIIO::ImageBuf denoise(const OIIO::ImageBuf &aovs, const DenoiseOptions &opt, OIIO::ROI roi = {},
