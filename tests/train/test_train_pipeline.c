@@ -760,6 +760,61 @@ static void test_batch_wiring(void) {
   kpcn_trainer_destroy(t);
 }
 
+/* normalize_exposure: the same batch as without it, its noisy colour and targets at the
+ * model's exposure (here set to 4x the source's): linear quantities x4, log-specular
+ * expm1(.)/4 the same; recombining the targets still gives the (scaled) reference. */
+static void test_batch_exposure(void) {
+  kpcn_train_settings s;
+  settings(&s, tf_tmp("x0.safetensors"));
+  kpcn_trainer *a = NULL, *b = NULL;
+  CHECK(kpcn_trainer_create(&a, &s) == KPCN_OK);
+  s.out_path = tf_tmp("x1.safetensors");
+  s.normalize_exposure = 1;
+  CHECK(kpcn_trainer_create(&b, &s) == KPCN_OK);
+  if (!a || !b) return;
+  const double e = kpcn_patchstore_source(b->ps, 0)->exposure;
+  CHECK(e > 0.0 && b->arch.exposure == (float)e);
+  b->arch.exposure = (float)(4.0 * e);
+  CHECK(kt_batch_assemble(a) == KPCN_OK && kt_batch_assemble(b) == KPCN_OK);
+  const size_t n = (size_t)a->N * 3 * a->P * a->P;
+  double lin = 0, spec = 0, comb = 0;
+  float *c = malloc(n * sizeof(float));
+  kpcn_recombine(b->target[0], b->target[1], b->albedo, b->arch.eps, n, c);
+  for (size_t i = 0; i < n; i++) {
+    const double r[4] = {b->noisy[0][i] / (4.0 * a->noisy[0][i]),
+                         b->target[0][i] / (4.0 * a->target[0][i]), b->refc[i] / (4.0 * a->refc[i]),
+                         0};
+    for (int k = 0; k < 3; k++)
+      if (isfinite(r[k]) && fabs(a->refc[i]) > 1e-6) lin = fmax(lin, fabs(r[k] - 1.0));
+    spec = fmax(spec, fabs(expm1(b->noisy[1][i]) / 4.0 - expm1(a->noisy[1][i])) /
+                          (1e-6 + fabs(expm1(a->noisy[1][i]))));
+    spec = fmax(spec, fabs(expm1(b->target[1][i]) / 4.0 - expm1(a->target[1][i])) /
+                          (1e-6 + fabs(expm1(a->target[1][i]))));
+    comb = fmax(comb, fabs(c[i] - b->refc[i]) / (fabs(b->refc[i]) + 1e-3));
+  }
+  printf("normalize_exposure x4: linear %.2g, specular %.2g, recombined %.2g\n", lin, spec, comb);
+  CHECK(lin < 1e-5 && spec < 1e-4 && comb < 1e-5);
+  free(c);
+  kpcn_trainer_destroy(a);
+  kpcn_trainer_destroy(b);
+  /* the checkpoint records the setting: resuming it without (or the reverse) is refused */
+  s.out_path = tf_tmp("x2.safetensors");
+  stop_at = 2;
+  s.progress = stop_cb;
+  int stopped = 0;
+  CHECK(kpcn_trainer_create(&b, &s) == KPCN_OK);
+  CHECK(b && kpcn_trainer_run(b, &stopped) == KPCN_OK && stopped == 1);
+  kpcn_trainer_destroy(b);
+  s.progress = NULL;
+  s.resume = 1;
+  s.normalize_exposure = 0;
+  CHECK(kpcn_trainer_create(&b, &s) == KPCN_ERR_FORMAT);
+  CHECK(strstr(kpcn_last_error(), "exposure") != NULL);
+  s.normalize_exposure = 1;
+  CHECK(kpcn_trainer_create(&b, &s) == KPCN_OK && kpcn_trainer_iteration(b) == 2);
+  kpcn_trainer_destroy(b);
+}
+
 int main(void) {
   static char store[512]; /* out of tf_tmp's pool, which wraps after 64 names */
   snprintf(store, sizeof store, "%s", tf_tmp("train.kps"));
@@ -769,6 +824,7 @@ int main(void) {
     return 1;
   }
   test_batch_wiring();
+  test_batch_exposure();
   test_determinism_and_resume();
   g_passes = 2;
   test_determinism_and_resume();

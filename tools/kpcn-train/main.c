@@ -52,6 +52,8 @@ static void usage(FILE *f) {
         "  --time-limit MINUTES      stop cleanly and checkpoint\n"
         "  --resume                  continue bit-exactly from the checkpoint\n"
         "  --no-colorswap --no-mirror --no-rotate --no-shift   disable augmentations\n"
+        "  --normalize-exposure      show every patch at the model's exposure (the median of\n"
+        "                            the store's; as the denoiser shows every input)\n"
         "  --quiet                   no log lines\n"
         "\n"
         "usage: kpcn-train --compare OUT.png [--x iter|elapsed_s] [--y COLUMN] [--title T]\n"
@@ -367,6 +369,7 @@ int main(int argc, char **argv) {
     else if (!strcmp(a, "--no-mirror")) s.augment.mirror = s.augment.mirror_v = 0;
     else if (!strcmp(a, "--no-rotate")) s.augment.rotate = 0;
     else if (!strcmp(a, "--no-shift")) s.crop_jitter = 0;
+    else if (!strcmp(a, "--normalize-exposure")) s.normalize_exposure = 1;
     else if (!strcmp(a, "--quiet")) g_quiet = 1;
     else {
       fprintf(stderr, "kpcn-train: unknown option '%s' (see --help)\n", a);

@@ -244,24 +244,28 @@ typedef struct kpcn_train_settings {
                               pipeline usually wants a smaller step than pre-training) */
   kpcn_augment_draw_settings augment; /* defaults of augment.h (colour swap, mirror, rot90) */
   int crop_jitter;                    /* 1: random crop offset (shift); 0: centred crop */
-  int batch;                          /* 16 */
-  int patch;                          /* P, 64 (<= store patch size) */
-  int64_t iters;                      /* total iterations, 1000 */
-  int64_t stage1_iters;               /* stage-1 iterations, default 0.6 * iters (seed 600k/1M) */
-  int nthreads;                       /* 0 = all cores */
-  int bf16;                           /* 1: bf16 convs, f32 weights/grads/Adam; 0 = f32 */
-  uint64_t seed;                      /* 1 */
-  int64_t log_every;                  /* CSV row every N iterations, 10 */
-  int64_t val_every;                  /* 0 = only at the end */
-  int64_t ckpt_every;                 /* 0 = only at the end / on stop */
-  double time_limit_s;                /* 0 = none: stop cleanly, checkpoint, stopped = 1 */
-  const char *out_path;               /* final model, required (written atomically) */
-  const char *ckpt_path;              /* NULL = "<out_path>.ckpt"; "" = none */
-  const char *csv_path;               /* NULL = "<out_path>.csv"; "" = none */
-  const char *plot_path;              /* NULL = "<out_path>.png"; "" = none */
-  const char *best_path;              /* NULL/"" = none: after every validation that improves the
-                                         best_by figure, the model is also written here (atomically) */
-  kpcn_val_select best_by;            /* KPCN_VAL_MEAN */
+  int normalize_exposure;   /* 1: each patch is shown at the model's exposure (arch.exposure, from
+                               the store: needs a store whose sources record theirs), as the
+                               denoiser shows every input: noisy colour and references scaled by
+                               arch.exposure / the source image's exposure. 0: as rendered */
+  int batch;                /* 16 */
+  int patch;                /* P, 64 (<= store patch size) */
+  int64_t iters;            /* total iterations, 1000 */
+  int64_t stage1_iters;     /* stage-1 iterations, default 0.6 * iters (seed 600k/1M) */
+  int nthreads;             /* 0 = all cores */
+  int bf16;                 /* 1: bf16 convs, f32 weights/grads/Adam; 0 = f32 */
+  uint64_t seed;            /* 1 */
+  int64_t log_every;        /* CSV row every N iterations, 10 */
+  int64_t val_every;        /* 0 = only at the end */
+  int64_t ckpt_every;       /* 0 = only at the end / on stop */
+  double time_limit_s;      /* 0 = none: stop cleanly, checkpoint, stopped = 1 */
+  const char *out_path;     /* final model, required (written atomically) */
+  const char *ckpt_path;    /* NULL = "<out_path>.ckpt"; "" = none */
+  const char *csv_path;     /* NULL = "<out_path>.csv"; "" = none */
+  const char *plot_path;    /* NULL = "<out_path>.png"; "" = none */
+  const char *best_path;    /* NULL/"" = none: after every validation that improves the
+                               best_by figure, the model is also written here (atomically) */
+  kpcn_val_select best_by;  /* KPCN_VAL_MEAN */
   const char *snapshot_dir; /* NULL/"" = none: every checkpoint (periodic, final) is also kept here
                                as ckpt_<iteration, 6 digits>.safetensors, for weight
                                averaging (kpcn_model_average); created if missing */

@@ -135,13 +135,23 @@ static kpcn_status one_sample(kpcn_trainer *t, int b, float *scr) {
     memcpy(cur, aug + (size_t)t->ch_var[bb] * pp, pp * sizeof(float));
     cur += pp;
   }
-  /* depth normalisation of the SOURCE image (same as full-image inference) */
+  /* depth normalisation of the SOURCE image (same as full-image inference), and its
+   * exposure scale when patches are shown at the model's exposure (kt_batch_setup checked
+   * that every training source records one) */
   kpcn_features_norm norm = {0.0f, 1.0f, 1.0f};
   if (src) {
     double range = (double)src->depth_max - (double)src->depth_min;
     norm.depth_offset = src->depth_min;
     norm.depth_scale = range >= 1e-12 ? (float)(1.0 / range) : 1.0f;
+    if (t->s.normalize_exposure) norm.color_scale = (float)(t->arch.exposure / src->exposure);
   }
+  if (norm.color_scale != 1.0f) /* the targets at the same exposure as the input */
+    for (int c = 0; c < 3; c++) {
+      const int ch[3] = {t->ch_ref_diff[c], t->ch_ref_spec[c], t->ch_ref_color[c]};
+      for (int k = 0; k < 3; k++)
+        for (size_t i = 0; i < pp; i++)
+          aug[(size_t)ch[k] * pp + i] *= norm.color_scale;
+    }
   float eps = t->arch.eps;
   size_t f3 = 3 * pp;
   for (int br = 0; br < KT_NB; br++)

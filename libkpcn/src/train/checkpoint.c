@@ -81,6 +81,7 @@ kpcn_status kt_checkpoint_save(kpcn_trainer *t, const char *path) {
   meta_i64(meta, "train.patch", t->P);
   meta_i64(meta, "train.stage1_iters", t->s.stage1_iters);
   cJSON_AddStringToObject(meta, "train.precision", t->s.bf16 ? "bf16" : "f32");
+  if (t->s.normalize_exposure) cJSON_AddStringToObject(meta, "train.normalize_exposure", "1");
   cJSON_AddStringToObject(meta, "train.loss1", kpcn_loss_name(t->s.loss1));
   cJSON_AddStringToObject(meta, "train.loss2", kpcn_loss_name(t->s.loss2));
   cJSON_AddItemToObject(root, "__metadata__", meta);
@@ -265,6 +266,11 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
   if (strcmp(prec ? prec : "f32", mine_prec))
     BAD("checkpoint '%s' was written with train.precision = %s, this run uses %s (--bf16)", path,
         prec ? prec : "f32 (no key: older checkpoint)", mine_prec);
+  /* absent in checkpoints of runs that showed patches as rendered */
+  const char *nx = meta_str(meta, "train.normalize_exposure");
+  if ((nx && !strcmp(nx, "1")) != (t->s.normalize_exposure != 0))
+    BAD("checkpoint '%s' was written %s exposure normalisation, this run %s it", path,
+        nx ? "with" : "without", t->s.normalize_exposure ? "uses" : "does not use");
   long long iter = 0, steps[2] = {0, 0};
   if ((st = meta_expect(meta, "train.iteration", 0, path, &iter)) ||
       (st = meta_expect(meta, "train.adam_steps.diffuse", 0, path, &steps[0])) ||

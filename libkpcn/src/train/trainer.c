@@ -187,6 +187,16 @@ static kpcn_status setup_nets(kpcn_trainer *t) {
 static kpcn_status record_exposure(kpcn_trainer *t) {
   double m;
   KPCN_TRY(kpcn_patchstore_exposure(t->ps, &m));
+  if (t->s.normalize_exposure)
+    for (int i = 0; i < kpcn_patchstore_nsources(t->ps); i++) {
+      const kpcn_patch_source *src = kpcn_patchstore_source(t->ps, i);
+      if (!(src->exposure > 0.0))
+        return kpcn_fail(KPCN_ERR_FORMAT,
+                         "normalize_exposure: patch store '%s' source %d (%s) records no "
+                         "exposure (written before kpcn-dataset recorded them: run kpcn-dataset "
+                         "patches again)",
+                         t->store_path, i, src->scene);
+    }
   if (!(m > 0.0)) return KPCN_OK;
   KPCN_TRY(kpcn_model_set_exposure(t->model, (float)m));
   t->arch = *kpcn_model_arch(t->model);
