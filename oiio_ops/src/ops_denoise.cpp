@@ -40,20 +40,13 @@ bool denoise(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptio
   }
   kpcn_denoiser_options o = opt.c_options();
   o.nthreads = nthreads;
-  kpcn_denoiser *d = nullptr;
   kpcn_image *rgb = nullptr;
-  static const char *const names[3] = {"R", "G", "B"};
-  kpcn_status s = kpcn_denoiser_create(&d, &o);
-  if (s == KPCN_OK) s = kpcn_image_create(&rgb, set->width, set->height, 3, names);
-  if (s == KPCN_OK) s = kpcn_denoiser_execute_aov(d, set.get(), rgb->data);
   kpcn_denoise_stats st{};
-  if (s == KPCN_OK) kpcn_denoiser_get_stats(d, &st);
-  kpcn_denoiser_destroy(d);
-  ImagePtr out(rgb);
-  if (s != KPCN_OK) {
+  if (kpcn_denoise_aov_stats(set.get(), &o, &rgb, &st) != KPCN_OK) {
     dst.errorfmt("denoise: {}", kpcn_last_error());
     return false;
   }
+  ImagePtr out(rgb);
   OIIO::ImageBuf full = from_kpcn_image(*out);
   if (o.method == KPCN_DENOISE_KPCN && st.exposure > 0.0) {
     // what the network was shown (docs/denoiser.md, "Exposure"), kept in the file's header

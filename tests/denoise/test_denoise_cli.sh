@@ -43,6 +43,7 @@ grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/xo.json" || fail "exposure=off differs f
 "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":exposure=0.05 -o "$D/out_x5.exr" || fail "exposure=0.05"
 "$T" --json "$D/out_x5.exr" "$D/out.exr" --l1 >"$D/x5.json" || fail "l1"
 grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/x5.json" && fail "exposure=0.05 equals the input as rendered"
+grep -aq 'kpcn:exposureScale' "$D/out_x5.exr" || fail "the output header records no exposure scale"
 # --exposure reports the statistic and leaves the stack (the image is still written)
 "$T" "$D/aov.exr" --exposure --json -o "$D/same.exr" >"$D/ex.json" || fail "--exposure"
 grep -Eq '"exposure": *[0-9.]+(e-?[0-9]+)?[,}]' "$D/ex.json" || fail "no exposure: $(cat "$D/ex.json")"

@@ -283,6 +283,10 @@ int kpcn_denoise_tile_overlap(const kpcn_arch *arch);
 /* Convenience: denoises an AOV set into a new 3-channel image (R, G, B). */
 kpcn_status kpcn_denoise_aov(const kpcn_aov_set *aov, const kpcn_denoiser_options *opts,
                              kpcn_image **out_rgb);
+/* The same, also returning the execute's stats (the exposure measured and the scale applied,
+ * timings); stats may be NULL. */
+kpcn_status kpcn_denoise_aov_stats(const kpcn_aov_set *aov, const kpcn_denoiser_options *opts,
+                                   kpcn_image **out_rgb, kpcn_denoise_stats *stats);
 
 #ifdef __cplusplus
 }

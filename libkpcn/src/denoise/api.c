@@ -399,8 +399,8 @@ kpcn_status kpcn_denoiser_execute_aov(kpcn_denoiser *d, const kpcn_aov_set *aov,
   return s;
 }
 
-kpcn_status kpcn_denoise_aov(const kpcn_aov_set *aov, const kpcn_denoiser_options *opts,
-                             kpcn_image **out_rgb) {
+kpcn_status kpcn_denoise_aov_stats(const kpcn_aov_set *aov, const kpcn_denoiser_options *opts,
+                                   kpcn_image **out_rgb, kpcn_denoise_stats *stats) {
   if (!aov || !out_rgb) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoise_aov: NULL argument");
   *out_rgb = NULL;
   kpcn_denoiser *d = NULL;
@@ -409,6 +409,7 @@ kpcn_status kpcn_denoise_aov(const kpcn_aov_set *aov, const kpcn_denoiser_option
   kpcn_image *img = NULL;
   kpcn_status s = kpcn_image_create(&img, aov->width, aov->height, 3, names);
   if (s == KPCN_OK) s = kpcn_denoiser_execute_aov(d, aov, img->data);
+  if (s == KPCN_OK && stats) kpcn_denoiser_get_stats(d, stats);
   kpcn_denoiser_destroy(d);
   if (s != KPCN_OK) {
     kpcn_image_destroy(img);
@@ -416,4 +417,9 @@ kpcn_status kpcn_denoise_aov(const kpcn_aov_set *aov, const kpcn_denoiser_option
   }
   *out_rgb = img;
   return KPCN_OK;
+}
+
+kpcn_status kpcn_denoise_aov(const kpcn_aov_set *aov, const kpcn_denoiser_options *opts,
+                             kpcn_image **out_rgb) {
+  return kpcn_denoise_aov_stats(aov, opts, out_rgb, NULL);
 }

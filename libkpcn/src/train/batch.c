@@ -136,8 +136,8 @@ static kpcn_status one_sample(kpcn_trainer *t, int b, float *scr) {
     cur += pp;
   }
   /* depth normalisation of the SOURCE image (same as full-image inference), and its
-   * exposure scale when patches are shown at the model's exposure (kt_batch_setup checked
-   * that every training source records one) */
+   * exposure scale when patches are shown at the model's exposure (record_exposure in
+   * trainer.c checked that every source records one) */
   kpcn_features_norm norm = {0.0f, 1.0f, 1.0f};
   if (src) {
     double range = (double)src->depth_max - (double)src->depth_min;
