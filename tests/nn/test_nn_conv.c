@@ -50,6 +50,15 @@ static void fill(float *p, size_t n, unsigned *rs, float scale) {
 }
 
 /* max |got - ref| <= rtol * max |ref| (normwise relative error) */
+/* Element i of logits in the layout's element type. */
+static float logit_value(const void *L, const kpcn_logits_layout *l, size_t i) {
+  if (!l->bf16) return ((const float *)L)[i];
+  const uint32_t u = (uint32_t)((const uint16_t *)L)[i] << 16;
+  float f;
+  memcpy(&f, &u, 4);
+  return f;
+}
+
 static double rel_err(const float *got, const double *ref, size_t n) {
   double mx = 0, e = 0;
   for (size_t i = 0; i < n; i++) {
@@ -75,9 +84,9 @@ static int native_backward_same(kpcn_net *net, const cfg *c, const float *in, co
   float *g1 = malloc(gn * 4), *din2 = malloc(nin * 4);
   for (size_t l = 0, o = 0; l < (size_t)np; o += P[l].count, l++)
     memcpy(g1 + o, P[l].grad, P[l].count * 4);
-  const float *nat;
+  const void *nat;
   kpcn_logits_layout lay;
-  int same = kpcn_net_forward_logits(net, in, &nat, &lay) == KPCN_OK;
+  int same = kpcn_net_forward_logits(net, in, &nat, &lay) == KPCN_OK && !lay.bf16;
   float *dnat = calloc((size_t)c->N * lay.image_stride, 4);
   for (int b = 0; b < c->N; b++)
     for (int t = 0; t < K2; t++)
@@ -147,7 +156,7 @@ static void check_vs_ref(const cfg *c, int seed) {
     kpcn_net_options oi = o;
     oi.training = 0, oi.input_grad = 0;
     kpcn_net *inf = NULL;
-    CHECK(kpcn_net_create(m, br, &oi, &inf) == KPCN_OK);
+    { kpcn_status si = kpcn_net_create(m, br, &oi, &inf); if (si != KPCN_OK) fprintf(stderr, "inference net: %s\n", kpcn_last_error()); CHECK(si == KPCN_OK); }
     float *lgi = malloc(nout * 4);
     if (inf && lgi) {
       CHECK(kpcn_net_forward(inf, in, lgi) == KPCN_OK);
@@ -205,15 +214,16 @@ static void check_vs_ref(const cfg *c, int seed) {
   if (net) {
     CHECK(kpcn_net_backward(net, dl, NULL) == KPCN_ERR_INVALID_ARGUMENT);
     /* the logits left in the net's own layout are the same numbers */
-    const float *nl;
+    const void *nl;
     kpcn_logits_layout lay;
     CHECK(kpcn_net_forward_logits(net, in, &nl, &lay) == KPCN_OK);
     int same = 1;
     for (int b = 0; b < c->N; b++)
       for (int t = 0; t < K2; t++)
         for (size_t p = 0; p < (size_t)c->H * c->W; p++)
-          same &= nl[b * lay.image_stride + (size_t)(t / lay.block) * lay.block_stride +
-                     p * (size_t)lay.pixel_stride + (size_t)(t % lay.block)] ==
+          same &= logit_value(nl, &lay,
+                              b * lay.image_stride + (size_t)(t / lay.block) * lay.block_stride +
+                                  p * (size_t)lay.pixel_stride + (size_t)(t % lay.block)) ==
                   lg2[((size_t)b * K2 + t) * c->H * c->W + p];
     CHECK(same);
     /* rebound to the other branch, the net computes what a net created for it computes */
@@ -414,6 +424,20 @@ static void bf16_vs_f32(void) {
      * and weights: a few 0.1 % rms; 3 % of the largest logit is a generous ceiling. */
     CHECK(rms_rel < 0.02);
     CHECK(e < 0.03 * mx);
+    /* left in the net, the logits are bf16, pixel-major, each pixel's K² = 121 in 128 slots
+     * (the padded logits layer), and they are the values the planar forward returned */
+    const void *nat = NULL;
+    kpcn_logits_layout lay;
+    CHECK(kpcn_net_forward_logits(n16, in, &nat, &lay) == KPCN_OK);
+    printf("bf16 net's own logits: bf16 %d, block %d, pixel stride %d\n", lay.bf16, lay.block,
+           lay.pixel_stride);
+    CHECK(lay.bf16 == 1 && lay.block == K2 && lay.pixel_stride == 128);
+    int same = 1;
+    for (int t = 0; t < K2; t++)
+      for (size_t p = 0; p < (size_t)H * W; p++)
+        same &= logit_value(nat, &lay, p * (size_t)lay.pixel_stride + (size_t)t) ==
+                l16[(size_t)t * H * W + p];
+    CHECK(same);
   }
   kpcn_net_destroy(n32);
   kpcn_net_destroy(n16);

@@ -88,30 +88,58 @@ static void forward_vs_naive(int K, int n, int nc, int h, int w, float scale) {
   CHECK(memcmp(wt, lg2, nl * 4) == 0);
   /* the same logits laid out pixel-major (nhwc, padded to K2+3 per pixel) and channel-
    * blocked (nChw16c and nChw8c, the AVX-512 and AVX2 training nets' layouts, channels padded
-   * to a multiple of the block) give bit-identical results */
-  const int blocks[3] = {K2, 16, 8}, pstr[3] = {K2 + 3, 16, 8};
-  for (int v = 0; v < 3; v++) {
-    kpcn_logits_layout lay;
-    lay.block = blocks[v], lay.pixel_stride = pstr[v];
+   * to a multiple of the block) give bit-identical results; so do bf16 logits (a bf16
+   * inference net's: pixel-major padded to a multiple of 16, blocked, planar) against the
+   * planar f32 forward of the same values */
+  uint16_t *lg16 = malloc(nl * 2);
+  float *lgr = malloc(nl * 4), *outr = malloc(nn * 4), *wtr = malloc(nl * 4);
+  for (size_t i = 0; i < nl; i++) {
+    lg16[i] = kt_bf16_round(lg[i]);
+    const uint32_t u = (uint32_t)lg16[i] << 16;
+    memcpy(&lgr[i], &u, 4);
+  }
+  CHECK(kpcn_kpa_forward(K, n, nc, h, w, lgr, nz, outr, wtr, 1) == KPCN_OK);
+  const int blocks[6] = {K2, 16, 8, K2, 16, 1}, pstr[6] = {K2 + 3, 16, 8, (K2 + 15) / 16 * 16, 16, 1};
+  for (int v = 0; v < 6; v++) {
+    kpcn_logits_layout lay = {0};
+    lay.block = blocks[v], lay.pixel_stride = pstr[v], lay.bf16 = v >= 3;
     const int nb = (K2 + lay.block - 1) / lay.block;
     lay.block_stride = pl * (size_t)lay.pixel_stride;
     lay.image_stride = (size_t)nb * lay.block_stride;
-    float *alt = malloc((size_t)n * lay.image_stride * 4);
-    for (size_t i = 0; i < (size_t)n * lay.image_stride; i++)
-      alt[i] = 1e30f; /* padding must never be read */
+    const size_t na = (size_t)n * lay.image_stride;
+    float *alt = malloc(na * 4);
+    uint16_t *alt16 = (uint16_t *)alt;
+    for (size_t i = 0; i < na; i++) /* padding must never be read */
+      if (lay.bf16)
+        alt16[i] = 0x7f80; /* +inf */
+      else
+        alt[i] = 1e30f;
     for (int b = 0; b < n; b++)
       for (int t = 0; t < K2; t++)
-        for (size_t p = 0; p < pl; p++)
-          alt[b * lay.image_stride + (size_t)(t / lay.block) * lay.block_stride +
-              p * (size_t)lay.pixel_stride + (size_t)(t % lay.block)] =
-              lg[((size_t)b * K2 + t) * pl + p];
+        for (size_t p = 0; p < pl; p++) {
+          const size_t at = b * lay.image_stride + (size_t)(t / lay.block) * lay.block_stride +
+                            p * (size_t)lay.pixel_stride + (size_t)(t % lay.block),
+                       from = ((size_t)b * K2 + t) * pl + p;
+          if (lay.bf16)
+            alt16[at] = lg16[from];
+          else
+            alt[at] = lg[from];
+        }
     memset(out2, 0, nn * 4);
     memset(lg2, 0, nl * 4);
     CHECK(kpcn_kpa_forward_layout(K, n, nc, h, w, alt, &lay, nz, out2, lg2, 2) == KPCN_OK);
-    CHECK(memcmp(out, out2, nn * 4) == 0);
-    CHECK(memcmp(wt, lg2, nl * 4) == 0);
+    CHECK(memcmp(lay.bf16 ? outr : out, out2, nn * 4) == 0);
+    CHECK(memcmp(lay.bf16 ? wtr : wt, lg2, nl * 4) == 0);
+    if (lay.bf16) { /* backward writes f32 dlogits only */
+      CHECK(kpcn_kpa_backward_layout(K, n, nc, h, w, wt, nz, out, alt, &lay, NULL, 1) ==
+            KPCN_ERR_INVALID_ARGUMENT);
+      lay.bf16 = 2;
+      CHECK(kpcn_kpa_forward_layout(K, n, nc, h, w, alt, &lay, nz, out2, NULL, 1) ==
+            KPCN_ERR_INVALID_ARGUMENT);
+    }
     free(alt);
   }
+  free(lg16), free(lgr), free(outr), free(wtr);
   free(lg), free(nz), free(out), free(wt), free(out2), free(lg2);
 }
 
@@ -216,7 +244,7 @@ static void backward_layouts(int K, int n, int nc, int h, int w) {
   const int blocks[4] = {1, K2, 16, 8}, pstr[4] = {1, K2 + 3, 16, 8},
             nslots[4] = {1, K2 + 3, 16, 8};
   for (int v = 0; v < 4; v++) {
-    kpcn_logits_layout lay;
+    kpcn_logits_layout lay = {0};
     lay.block = blocks[v], lay.pixel_stride = pstr[v];
     const int nb = (K2 + lay.block - 1) / lay.block, slots = nslots[v];
     lay.block_stride = pl * (size_t)lay.pixel_stride;
@@ -335,7 +363,7 @@ static void passes_check(int K, int passes, int sw, int n, int nc, int h, int w)
   /* the forward above left mid as the unperturbed forward's: redo it for the layout check */
   CHECK(kpcn_kpa_forward_passes(K, passes, sw, n, nc, h, w, lg, &planar, nz, mid, out, wt, 2) ==
         KPCN_OK);
-  kpcn_logits_layout blk = {0, 0, 16, 16};
+  kpcn_logits_layout blk = {0, 0, 16, 16, 0};
   blk.block_stride = pl * 16;
   blk.image_stride = (size_t)((LC + 15) / 16) * blk.block_stride;
   float *lgb = malloc((size_t)n * blk.image_stride * 4), *outb = malloc(nn * 4);
@@ -398,7 +426,7 @@ int main(void) {
   CHECK(kpcn_kpa_forward(4, 1, 3, 4, 4, &x, &x, &x, NULL, 1) == KPCN_ERR_INVALID_ARGUMENT);
   CHECK(kpcn_kpa_forward(3, 1, 3, 0, 4, &x, &x, &x, NULL, 1) != KPCN_OK);
   CHECK(kpcn_kpa_backward(3, 1, 3, 4, 4, NULL, &x, &x, &x, NULL, 1) == KPCN_ERR_INVALID_ARGUMENT);
-  kpcn_logits_layout bad = {16, 16, 16, 4}; /* pixels overlapping inside a block */
+  kpcn_logits_layout bad = {16, 16, 16, 4, 0}; /* pixels overlapping inside a block */
   CHECK(kpcn_kpa_forward_layout(3, 1, 3, 4, 4, &x, &bad, &x, &x, NULL, 1) ==
         KPCN_ERR_INVALID_ARGUMENT);
   /* ctest runs this test twice: as is, and as test_nn_kpa_avx2 with ONEDNN_MAX_CPU_ISA=AVX2,

@@ -65,3 +65,10 @@ int kt_have_bf16(const char *what) {
   printf("%s: bf16 skipped (no AVX-512 here)\n", what);
   return 0;
 }
+
+uint16_t kt_bf16_round(float f) {
+  uint32_t u;
+  memcpy(&u, &f, 4);
+  u += 0x7fffu + ((u >> 16) & 1u);
+  return (uint16_t)(u >> 16);
+}

@@ -3,6 +3,7 @@
 #ifndef KPCN_TESTUTIL_H
 #define KPCN_TESTUTIL_H
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 
 extern int kt_failures;
@@ -48,4 +49,8 @@ char *kt_slurp(const char *path, long *len);
 
 /* Deterministic PRNG for test data (xorshift). */
 float kt_randf(unsigned *state);
+
+/* The bfloat16 nearest to a finite float (ties to even), as its 16 bits: what oneDNN writes
+ * for a bf16 destination. */
+uint16_t kt_bf16_round(float f);
 #endif

@@ -244,11 +244,14 @@ kpcn_status kpcn_net_forward(kpcn_net *net, const float *input, float *logits);
 
 /* Where logit t of pixel (x, y) of image b lies: at
  *   b * image_stride + (t / block) * block_stride + (y * W + x) * pixel_stride + t % block
- * floats. Planar [N][K²][H][W]: block 1, block_stride H*W, pixel_stride 1; pixel-major
- * (nhwc): block >= K², pixel_stride K²; oneDNN's nChw16c: block 16, pixel_stride 16. */
+ * elements. Planar [N][K²][H][W]: block 1, block_stride H*W, pixel_stride 1; pixel-major
+ * (nhwc): block >= K², pixel_stride >= K² (a bf16 inference net pads it to a multiple of 16);
+ * oneDNN's nChw16c: block 16, pixel_stride 16. Elements are floats, or with bf16 = 1
+ * bfloat16 values (uint16_t holding a float's upper half: a bf16 inference net's logits). */
 typedef struct kpcn_logits_layout {
   size_t image_stride, block_stride;
   int block, pixel_stride;
+  int bf16;
 } kpcn_logits_layout;
 /* The planar layout of an N x K² x H x W tensor. */
 kpcn_logits_layout kpcn_logits_layout_planar(int K2, int h, int w);
@@ -256,8 +259,9 @@ kpcn_logits_layout kpcn_logits_layout_planar(int K2, int h, int w);
 /* Forward without the final reorder: *logits points at the last layer's output inside the
  * net (valid until the next forward or destroy) and *layout says how it is laid out, so the
  * kernel-prediction layer can read it in place (kpcn_kpa_forward_layout). When oneDNN's
- * layout is none of the above, the logits are reordered into a planar buffer of the net. */
-kpcn_status kpcn_net_forward_logits(kpcn_net *net, const float *input, const float **logits,
+ * layout is none of the above, the logits are reordered into a planar f32 buffer of the net.
+ * bf16 inference nets leave bf16 logits (layout->bf16 = 1; training nets: always f32). */
+kpcn_status kpcn_net_forward_logits(kpcn_net *net, const float *input, const void **logits,
                                     kpcn_logits_layout *layout);
 
 /* Backward of the last forward (training nets only): dlogits [N][K²][H][W] -> parameter
@@ -305,9 +309,9 @@ const char *kpcn_net_impl_name(const kpcn_net *net, int layer);
  * alias logits (in-place). */
 kpcn_status kpcn_kpa_forward(int K, int n, int nc, int h, int w, const float *logits,
                              const float *noisy, float *out, float *weights, int nthreads);
-/* Same, with logits in any layout kpcn_logits_layout describes (weights, when given, are
- * written planar). */
-kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const float *logits,
+/* Same, with logits in any layout kpcn_logits_layout describes, f32 or bf16 (weights, when
+ * given, are written planar f32). */
+kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const void *logits,
                                     const kpcn_logits_layout *layout, const float *noisy,
                                     float *out, float *weights, int nthreads);
 
@@ -319,7 +323,7 @@ kpcn_status kpcn_kpa_backward(int K, int n, int nc, int h, int w, const float *w
                               int nthreads);
 /* Same, with dlogits written in any layout kpcn_logits_layout describes (padding slots set
  * to zero), e.g. the one kpcn_net_forward_logits reported, for kpcn_net_backward_logits;
- * weights stay planar and dlogits must not alias them. */
+ * weights stay planar and dlogits must not alias them. The layout must be f32 (bf16 = 0). */
 kpcn_status kpcn_kpa_backward_layout(int K, int n, int nc, int h, int w, const float *weights,
                                      const float *noisy, const float *dout, float *dlogits,
                                      const kpcn_logits_layout *layout, float *dnoisy, int nthreads);
@@ -331,7 +335,7 @@ kpcn_status kpcn_kpa_backward_layout(int K, int n, int nc, int h, int w, const f
  * w·noisy and w, acc1 ([N][nc+1][H][W], written) their filtered values (numerators and the
  * weight sum), out ([N][nc][H][W]) the quotient. With N = 1, src1 may alias noisy and out
  * may alias acc1 (planes line up). weights as kpcn_kpa_forward_layout. */
-kpcn_status kpcn_kpa_forward_weighted(int K, int n, int nc, int h, int w, const float *logits,
+kpcn_status kpcn_kpa_forward_weighted(int K, int n, int nc, int h, int w, const void *logits,
                                       const kpcn_logits_layout *layout, const float *noisy,
                                       float *src1, float *acc1, float *out, float *weights,
                                       int nthreads);
@@ -342,7 +346,7 @@ kpcn_status kpcn_kpa_forward_weighted(int K, int n, int nc, int h, int w, const 
  * before the last, then with source weights src1 and acc1; weights as above (planar softmax,
  * optional). */
 kpcn_status kpcn_kpa_forward_passes(int K, int passes, int source_weight, int n, int nc, int h,
-                                    int w, const float *logits, const kpcn_logits_layout *layout,
+                                    int w, const void *logits, const kpcn_logits_layout *layout,
                                     const float *noisy, float *mid, float *out, float *weights,
                                     int nthreads);
 /* Its backward: dL/dlogits (in `layout`, as kpcn_kpa_backward_layout writes them, the source

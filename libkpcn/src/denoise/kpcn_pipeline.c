@@ -270,7 +270,7 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
       if (s != KPCN_OK) goto done;
       double tb = now_s();
       /* the kpa layer reads the logits where and as the net left them (no reorder) */
-      const float *logits;
+      const void *logits;
       kpcn_logits_layout lay;
       s = kpcn_net_forward_logits(net, feat, &logits, &lay);
       if (s != KPCN_OK) goto done;

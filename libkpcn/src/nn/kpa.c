@@ -43,6 +43,9 @@ static kpcn_status check_args(const char *fn, int K, int n, int nc, int h, int w
 }
 
 static kpcn_status check_layout(const char *fn, const kpcn_logits_layout *l, int K2) {
+  if (l->bf16 != 0 && l->bf16 != 1)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: logits layout bf16 = %d is not 0 or 1", fn,
+                     l->bf16);
   if (l->block < 1 || l->pixel_stride < 1 || (l->block < K2 && l->pixel_stride < l->block) ||
       (l->block >= K2 && l->pixel_stride < K2))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
@@ -58,6 +61,26 @@ static void padded_row(float *restrict row, const float *restrict src, int w, in
   memcpy(row + r, src, (size_t)w * sizeof(float));
   for (int x = 0; x < r; x++)
     row[r + w + x] = src[w - 1];
+}
+
+/* A bfloat16 (a float's upper 16 bits) as the float it stands for. */
+static inline float bf16_value(uint16_t v) {
+  union {
+    uint32_t u;
+    float f;
+  } c = {.u = (uint32_t)v << 16};
+  return c.f;
+}
+
+/* dst[j * ds + x] = value of src[x * ps + j] for x < w, j < nb: the bf16 logits' gather into
+ * tap-major rows where the vector path (softmax16) does not run; scalar, as it only takes the
+ * last < 16 pixels of a chunk (or every pixel on CPUs without AVX-512, where bf16 nets do not
+ * run). */
+static void gather_bf16(const uint16_t *restrict src, int ps, int w, int nb, float *restrict dst,
+                        size_t ds) {
+  for (int j = 0; j < nb; j++)
+    for (int x = 0; x < w; x++)
+      dst[(size_t)j * ds + x] = bf16_value(src[(size_t)x * ps + j]);
 }
 
 #define XB 32 /* pixels per register-blocked chunk */
@@ -96,32 +119,42 @@ static inline float exp_nonpos(float x) {
   return p * u.f;
 }
 
-/* For channels c < nch: o[c * os + i] = scale[i] * sum over the K² taps t of
- * wt[t][i] * pr[c][slot[dy]][dx + i] for i < n (scale NULL: 1); wt rows ws floats apart,
+/* For channels c < nch: o[c * os + i] = sc[i] * sum over the K² taps t of
+ * wt[t][i] * pr[c][slot[dy]][dx + i] for i < n (sc NULL: 1); wt rows ws floats apart,
  * padded source rows pw apart, K of them per channel, source row dy in slot[dy]. Inlined with
  * constant n = XB the accumulators are registers (a variable n only serves the row's last chunk);
  * with nch = 3 each weight is loaded once for all three colour channels instead of three times
- * (loads, not FMAs, bound this loop). */
+ * (loads, not FMAs, bound this loop).
+ * fused (inference): wt holds the logits and sc their per-pixel max; the softmax numerators
+ * e^(wt - sc) are made here, summed in tap order as the separate pass does, and the result
+ * divided by their sum (the same operations, so the same bits). The exponentials' arithmetic
+ * then runs beside this loop's loads instead of in a pass of its own that stored every
+ * numerator and this loop reloaded (the cpu preset's kernel layer, bf16 logits: -15 %). */
 static inline __attribute__((always_inline)) void
-apply_chunk(const int n, const int nch, int K, const float *restrict wt, size_t ws,
-            const float *restrict pr, int pw, const int *slot, const float *restrict scale,
-            float *restrict o, size_t os) {
-  float acc[3][XB];
-  for (int c = 0; c < nch; c++)
-    for (int i = 0; i < XB; i++)
+apply_chunk(const int n, const int nch, const int fused, int K, const float *restrict wt,
+            size_t ws, const float *restrict pr, int pw, const int *slot,
+            const float *restrict sc, float *restrict o, size_t os) {
+  float acc[3][XB], sum[XB];
+  for (int i = 0; i < XB; i++) {
+    sum[i] = 0.f;
+    for (int c = 0; c < nch; c++)
       acc[c][i] = 0.f;
+  }
   const size_t pc = (size_t)K * pw;
   for (int dy = 0; dy < K; dy++)
     for (int dx = 0; dx < K; dx++) {
       const float *restrict wr = wt + (size_t)(dy * K + dx) * ws;
       const float *restrict src = pr + (size_t)slot[dy] * pw + dx;
-      for (int i = 0; i < n; i++)
+      for (int i = 0; i < n; i++) {
+        const float wi = fused ? exp_nonpos(wr[i] - sc[i]) : wr[i];
+        if (fused) sum[i] += wi;
         for (int c = 0; c < nch; c++)
-          acc[c][i] += wr[i] * src[c * pc + i];
+          acc[c][i] += wi * src[c * pc + i];
+      }
     }
   for (int c = 0; c < nch; c++)
     for (int i = 0; i < n; i++)
-      o[c * os + i] = scale ? acc[c][i] * scale[i] : acc[c][i];
+      o[c * os + i] = fused ? acc[c][i] * (1.f / sum[i]) : sc ? acc[c][i] * sc[i] : acc[c][i];
 }
 
 #ifdef __AVX2__
@@ -209,9 +242,10 @@ __attribute__((target("avx512f"), always_inline)) static inline __m512 exp_nonpo
   p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(0.5f));
   p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.f));
   p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.f));
-  const __m512i e =
-      _mm512_slli_epi32(_mm512_add_epi32(_mm512_cvtps_epi32(nf), _mm512_set1_epi32(127)), 23);
-  return _mm512_mul_ps(p, _mm512_castsi512_ps(e));
+  /* p * 2^nf in one instruction instead of building 2^nf's exponent bits and multiplying
+   * (4): the same product, exact for the integral nf >= -126 here (the softmax's exp loop is
+   * bound by its arithmetic, 16 -> 13 instructions a tap). */
+  return _mm512_scalef_ps(p, nf);
 }
 
 /* The softmax numerators of pixels [0, 16 ng) of a chunk whose taps come in runs of 16
@@ -224,27 +258,36 @@ __attribute__((target("avx512f"), always_inline)) static inline __m512 exp_nonpo
  * apart; the hardware prefetcher lost them at every 4 KiB page, so each load also prefetches
  * its line of the next 16 pixels (1024-px rows, 121 taps, 2 threads: 29 -> 22 ms a tile).
  * Leaves the exponentials in wt and their sums in sum[0, 16 ng). */
-__attribute__((target("avx512f"))) static void softmax16(const float *L0,
-                                                         const kpcn_logits_layout *lay, int K2,
-                                                         int ng, float *wt, size_t ws, float *sum) {
-  const int bl = lay->block, ps = lay->pixel_stride;
+__attribute__((target("avx512f,avx512bw,avx512vl"))) static void
+softmax16(const void *L0, const kpcn_logits_layout *lay, int K2, int ng, float *wt, size_t ws,
+          float *sum, float *mx) {
+  const int bl = lay->block, ps = lay->pixel_stride, bf = lay->bf16;
+  const size_t es = bf ? 2 : 4; /* bytes per logit */
   for (int g = 0; g < ng; g++) {
     __m512 m = _mm512_set1_ps(-INFINITY);
     for (int t0 = 0; t0 < K2; t0 += 16) {
       const int nb = K2 - t0 < 16 ? K2 - t0 : 16;
-      const float *src =
-          L0 + (size_t)(t0 / bl) * lay->block_stride + (size_t)(t0 % bl) + (size_t)16 * g * ps;
+      const char *src = (const char *)L0 + es * ((size_t)(t0 / bl) * lay->block_stride +
+                                                 (size_t)(t0 % bl) + (size_t)16 * g * ps);
       const __mmask16 k = (__mmask16)((1u << nb) - 1u);
       __m512 r[16], row[16];
       for (int i = 0; i < 16; i++) {
-        _mm_prefetch((const char *)(src + (size_t)(i + 16) * ps), _MM_HINT_T0);
-        r[i] = _mm512_maskz_loadu_ps(k, src + (size_t)i * ps);
+        _mm_prefetch(src + es * (size_t)(i + 16) * ps, _MM_HINT_T0);
+        const char *p = src + es * (size_t)i * ps;
+        /* bf16: the upper halves of floats, widened by a shift */
+        r[i] = bf ? _mm512_castsi512_ps(_mm512_slli_epi32(
+                        _mm512_cvtepu16_epi32(_mm256_maskz_loadu_epi16(k, p)), 16))
+                  : _mm512_maskz_loadu_ps(k, (const float *)p);
       }
       transpose16_regs(r, row);
       for (int j = 0; j < nb; j++) {
         _mm512_storeu_ps(wt + (size_t)(t0 + j) * ws + 16 * g, row[j]);
         m = _mm512_max_ps(m, row[j]);
       }
+    }
+    if (mx) { /* fused: the apply loop exponentiates */
+      _mm512_storeu_ps(mx + 16 * g, m);
+      continue;
     }
     __m512 acc = _mm512_setzero_ps();
     for (int t = 0; t < K2; t++) {
@@ -258,9 +301,11 @@ __attribute__((target("avx512f"))) static void softmax16(const float *L0,
 }
 #endif
 
+/* 1: libkpcn's AVX-512 kernels may run (f32 logits); 2: also those reading bf16 (BW, VL). */
 static int have_avx512(void) {
 #ifdef KPCN_HAVE_T16
-  return kpcn_cpu_allows_avx512();
+  if (!kpcn_cpu_allows_avx512()) return 0;
+  return __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512vl") ? 2 : 1;
 #else
   return 0;
 #endif
@@ -364,7 +409,7 @@ static inline int *thread_state(int *last) {
  * them through L2. Planar logits are read in place and run whole rows (xc_n = w): 64-float
  * pieces of K² rows a plane apart defeated the prefetcher (1.4x slower). */
 KPCN_AVX512_CLONES static void fwd_row(int K, int nc, int h, int w, int xc_n, size_t ws, int b,
-                                       int y, const float *logits, const kpcn_logits_layout *lay,
+                                       int y, const void *logits, const kpcn_logits_layout *lay,
                                        const float *noisy, float *out, float *weights,
                                        float *restrict wt, int *last, int t16) {
   const int r = K / 2, K2 = K * K, pw = w + 2 * r;
@@ -372,28 +417,36 @@ KPCN_AVX512_CLONES static void fwd_row(int K, int nc, int h, int w, int xc_n, si
   float *restrict mx = wt + (size_t)K2 * ws, *restrict sum = mx + xc_n, *restrict pr = sum + xc_n;
   int slot[KPCN_NN_MAX_KERNEL];
   source_rows(K, nc, h, w, b, y, noisy, pr, last, slot);
-  const int planar = lay->block == 1 && lay->pixel_stride == 1;
+  const int planar = lay->block == 1 && lay->pixel_stride == 1 && !lay->bf16;
+  const size_t es = lay->bf16 ? 2 : 4; /* bytes per logit */
+  /* Normalized weights are only materialized when the caller keeps them (training); for
+   * inference the apply loop makes the numerators itself and divides by their sum once per
+   * output pixel (apply_chunk, fused). */
+  const int fused = weights == NULL;
   for (int xc = 0; xc < w; xc += xc_n) {
     const int n = w - xc < xc_n ? w - xc : xc_n;
     const float *L; /* logit 0 of pixel xc; logit t's row starts at L + t * lstride */
     size_t lstride;
-    int x1 = 0; /* pixels [0, x1) already hold their exponentials and sums */
+    int x1 = 0; /* pixels [0, x1) already hold their exponentials and sums (fused: maxima) */
     if (planar) {
-      L = logits + (size_t)y * w + xc, lstride = lay->block_stride;
+      L = (const float *)logits + (size_t)y * w + xc, lstride = lay->block_stride;
     } else {
       const int ps = lay->pixel_stride, bl = lay->block;
-      const float *L0 = logits + ((size_t)y * w + xc) * ps;
+      const char *L0 = (const char *)logits + es * ((size_t)y * w + xc) * ps;
 #ifdef KPCN_HAVE_T16
-      if (t16 && (bl % 16 == 0 || bl >= K2)) {
+      if ((lay->bf16 ? t16 == 2 : t16 > 0) && (bl % 16 == 0 || bl >= K2)) {
         x1 = n & ~15;
-        softmax16(L0, lay, K2, x1 / 16, wt, ws, sum);
+        softmax16(L0, lay, K2, x1 / 16, wt, ws, sum, fused ? mx : NULL);
       }
 #endif
       if (x1 < n)
         for (int t0 = 0; t0 < K2; t0 += bl) {
-          const float *src = L0 + (size_t)(t0 / bl) * lay->block_stride + (size_t)x1 * ps;
+          const char *src = L0 + es * ((size_t)(t0 / bl) * lay->block_stride + (size_t)x1 * ps);
           const int nb = K2 - t0 < bl ? K2 - t0 : bl;
-          transpose(src, ps, n - x1, nb, wt + (size_t)t0 * ws + x1, ws, t16);
+          if (lay->bf16)
+            gather_bf16((const uint16_t *)src, ps, n - x1, nb, wt + (size_t)t0 * ws + x1, ws);
+          else
+            transpose((const float *)src, ps, n - x1, nb, wt + (size_t)t0 * ws + x1, ws, t16);
         }
       L = wt, lstride = ws;
     }
@@ -404,29 +457,30 @@ KPCN_AVX512_CLONES static void fwd_row(int K, int nc, int h, int w, int xc_n, si
       for (int x = x1; x < n; x++)
         mx[x] = Lt[x] > mx[x] ? Lt[x] : mx[x]; /* fmaxf won't vectorize */
     }
-    for (int x = x1; x < n; x++)
-      sum[x] = 0.f;
-    for (int t = 0; t < K2; t++) {
-      float *wr = wt + (size_t)t * ws; /* may be Lt itself (gathered layouts): same element */
-      const float *Lt = L + (size_t)t * lstride;
+    if (!fused) {
+      for (int x = x1; x < n; x++)
+        sum[x] = 0.f;
+      for (int t = 0; t < K2; t++) {
+        float *wr = wt + (size_t)t * ws; /* may be Lt itself (gathered layouts): same element */
+        const float *Lt = L + (size_t)t * lstride;
 #pragma omp simd
-      for (int x = x1; x < n; x++) {
-        float e = exp_nonpos(Lt[x] - mx[x]);
-        wr[x] = e;
-        sum[x] += e;
+        for (int x = x1; x < n; x++) {
+          float e = exp_nonpos(Lt[x] - mx[x]);
+          wr[x] = e;
+          sum[x] += e;
+        }
       }
-    }
-    for (int x = 0; x < n; x++)
-      sum[x] = 1.f / sum[x];
-    /* Normalized weights are only materialized when the caller keeps them (training); for
-     * inference the 1/sum scale is applied once per output pixel instead of once per tap. */
-    const int scale_out = weights == NULL;
-    if (!scale_out)
+      for (int x = 0; x < n; x++)
+        sum[x] = 1.f / sum[x];
       for (int t = 0; t < K2; t++) {
         float *restrict wr = wt + (size_t)t * ws;
         for (int x = 0; x < n; x++)
           wr[x] *= sum[x];
       }
+    }
+    /* the weight rows the apply loop reads: the logits where they are (fused), else wt */
+    const float *A = fused ? L : wt;
+    const size_t as = fused ? lstride : ws;
     /* Apply: each block of XB pixels accumulates its K² taps in registers (one store per
      * pixel instead of K²), three channels at a time (RGB: the usual case) or one. */
     for (int c0 = 0; c0 < nc;) {
@@ -434,14 +488,21 @@ KPCN_AVX512_CLONES static void fwd_row(int K, int nc, int h, int w, int xc_n, si
       const float *prc = pr + (size_t)c0 * K * pw + xc;
       float *o = out + (size_t)c0 * plane + (size_t)y * w + xc;
       for (int x0 = 0; x0 < n; x0 += XB) {
-        const float *scale = scale_out ? sum + x0 : NULL;
-        /* constant width and channel count: the accumulators stay in registers */
-        if (n - x0 >= XB && nch == 3)
-          apply_chunk(XB, 3, K, wt + x0, ws, prc + x0, pw, slot, scale, o + x0, plane);
+        /* constant width, channel count and mode: the accumulators stay in registers */
+        const float *a = A + x0, *p = prc + x0;
+        float *ox = o + x0;
+        if (fused && n - x0 >= XB && nch == 3)
+          apply_chunk(XB, 3, 1, K, a, as, p, pw, slot, mx + x0, ox, plane);
+        else if (fused && n - x0 >= XB)
+          apply_chunk(XB, 1, 1, K, a, as, p, pw, slot, mx + x0, ox, plane);
+        else if (fused)
+          apply_chunk(n - x0, nch, 1, K, a, as, p, pw, slot, mx + x0, ox, plane);
+        else if (n - x0 >= XB && nch == 3)
+          apply_chunk(XB, 3, 0, K, a, as, p, pw, slot, NULL, ox, plane);
         else if (n - x0 >= XB)
-          apply_chunk(XB, 1, K, wt + x0, ws, prc + x0, pw, slot, scale, o + x0, plane);
+          apply_chunk(XB, 1, 0, K, a, as, p, pw, slot, NULL, ox, plane);
         else
-          apply_chunk(n - x0, nch, K, wt + x0, ws, prc + x0, pw, slot, scale, o + x0, plane);
+          apply_chunk(n - x0, nch, 0, K, a, as, p, pw, slot, NULL, ox, plane);
       }
       c0 += nch;
     }
@@ -459,10 +520,11 @@ kpcn_logits_layout kpcn_logits_layout_planar(int K2, int h, int w) {
   l.image_stride = (size_t)K2 * l.block_stride;
   l.block = 1;
   l.pixel_stride = 1;
+  l.bf16 = 0;
   return l;
 }
 
-kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const float *logits,
+kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const void *logits,
                                     const kpcn_logits_layout *layout, const float *noisy,
                                     float *out, float *weights, int nthreads) {
   KPCN_TRY(check_args("kpcn_kpa_forward", K, n, nc, h, w));
@@ -475,7 +537,7 @@ kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const fl
   /* per thread: softmax rows [K2][ws] of one chunk, its max and sum, nc x K padded rows. The
    * row stride ws is padded (kpcn_plane_stride) so the K2 rows the apply loop reads together
    * do not all fall on one cache set. */
-  const int planar = lay.block == 1 && lay.pixel_stride == 1;
+  const int planar = lay.block == 1 && lay.pixel_stride == 1 && !lay.bf16;
   const int xc_n = planar || w < XC ? w : XC;
   const size_t ws = kpcn_plane_stride((size_t)xc_n);
   const size_t scratch = (size_t)K2 * ws + 2 * (size_t)xc_n + (size_t)nc * K * (w + 2 * r) + 64;
@@ -490,7 +552,8 @@ kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const fl
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++) {
     const int b = (int)(row / h), y = (int)(row % h);
-    fwd_row(K, nc, h, w, xc_n, ws, b, y, logits + (size_t)b * lay.image_stride, &lay,
+    fwd_row(K, nc, h, w, xc_n, ws, b, y,
+            (const char *)logits + (size_t)b * lay.image_stride * (lay.bf16 ? 2 : 4), &lay,
             noisy + (size_t)b * nc * plane, out + (size_t)b * nc * plane,
             weights ? weights + (size_t)b * K2 * plane : NULL, thread_scratch(buf, scratch),
             thread_state(last), t16);
@@ -681,6 +744,9 @@ kpcn_status kpcn_kpa_backward_layout(int K, int n, int nc, int h, int w, const f
                                      const kpcn_logits_layout *layout, float *dnoisy,
                                      int nthreads) {
   if (!layout) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_kpa_backward_layout: NULL layout");
+  if (layout->bf16)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "kpcn_kpa_backward_layout: dlogits are written as f32 (layout bf16 = 1)");
   if (dlogits == weights)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
                      "kpcn_kpa_backward_layout: dlogits may not alias weights");

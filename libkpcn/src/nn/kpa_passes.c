@@ -11,6 +11,7 @@
 #include "kpcn/nn.h"
 
 #include <math.h>
+#include <stdint.h>
 
 /* Offset of the source score (channel K²) of pixel q of image b in a logits layout. */
 static size_t score_at(const kpcn_logits_layout *l, int K2, int b, size_t q) {
@@ -18,11 +19,21 @@ static size_t score_at(const kpcn_logits_layout *l, int K2, int b, size_t q) {
          q * (size_t)l->pixel_stride + (size_t)(K2 % l->block);
 }
 
+/* Element i of logits stored as the layout says (f32 or bf16). */
+static float logit_at(const void *logits, const kpcn_logits_layout *l, size_t i) {
+  if (!l->bf16) return ((const float *)logits)[i];
+  union {
+    uint32_t u;
+    float f;
+  } c = {.u = (uint32_t)((const uint16_t *)logits)[i] << 16};
+  return c.f;
+}
+
 static inline float source_weight(float s) {
   return KPCN_KPA_SOURCE_EPS + (1.0f - KPCN_KPA_SOURCE_EPS) / (1.0f + expf(-s));
 }
 
-kpcn_status kpcn_kpa_forward_weighted(int K, int n, int nc, int h, int w, const float *logits,
+kpcn_status kpcn_kpa_forward_weighted(int K, int n, int nc, int h, int w, const void *logits,
                                       const kpcn_logits_layout *layout, const float *noisy,
                                       float *src1, float *acc1, float *out, float *weights,
                                       int nthreads) {
@@ -37,7 +48,7 @@ kpcn_status kpcn_kpa_forward_weighted(int K, int n, int nc, int h, int w, const 
     float *s1 = src1 + (size_t)b * (nc + 1) * pl;
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (size_t q = 0; q < pl; q++) {
-      const float wq = source_weight(logits[score_at(layout, K2, b, q)]);
+      const float wq = source_weight(logit_at(logits, layout, score_at(layout, K2, b, q)));
       for (int c = 0; c < nc; c++)
         s1[c * pl + q] = wq * nz[c * pl + q];
       s1[nc * pl + q] = wq;
@@ -128,7 +139,7 @@ static kpcn_status check_chain(const char *fn, int passes, int source_weight, co
 }
 
 kpcn_status kpcn_kpa_forward_passes(int K, int passes, int source_weight, int n, int nc, int h,
-                                    int w, const float *logits, const kpcn_logits_layout *layout,
+                                    int w, const void *logits, const kpcn_logits_layout *layout,
                                     const float *noisy, float *mid, float *out, float *weights,
                                     int nthreads) {
   KPCN_TRY(check_chain("kpcn_kpa_forward_passes", passes, source_weight, mid));

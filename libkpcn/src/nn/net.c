@@ -239,13 +239,14 @@ static kpcn_status bind_buffers(kpcn_net *n, size_t scratch) {
   return KPCN_OK;
 }
 
-/* The kpa layer reads planar, pixel-major and channel-blocked f32 layouts in place (see
- * kpcn_logits_layout); anything else oneDNN might pick returns 0 (then we reorder). */
+/* The kpa layer reads planar, pixel-major and channel-blocked f32 or bf16 layouts in place
+ * (see kpcn_logits_layout); anything else oneDNN might pick returns 0 (then we reorder). */
 static int logits_layout_of(const dnnl_memory_desc_t *md, int C, int H, int W,
                             kpcn_logits_layout *out) {
-  if (md->ndims != 4 || md->data_type != dnnl_f32 || md->format_kind != dnnl_blocked ||
-      md->offset0 != 0)
+  if (md->ndims != 4 || (md->data_type != dnnl_f32 && md->data_type != dnnl_bf16) ||
+      md->format_kind != dnnl_blocked || md->offset0 != 0)
     return 0;
+  out->bf16 = md->data_type == dnnl_bf16;
   const dnnl_blocking_desc_t *b = &md->format_desc.blocking;
   const dnnl_dim_t *st = b->strides;
   if (st[2] != (dnnl_dim_t)W * st[3]) return 0; /* rows of pixels must be contiguous */
@@ -314,9 +315,13 @@ static kpcn_status build(kpcn_net *n) {
   KPCN_TRY(kpcn_net_make_reorder(n, &n->in, &user_in, &n->L[0].src_md, &scratch));
   const layer *last = &n->L[n->nl - 1];
   dnnl_dims_t od = {N, last->cout, H, W};
-  dnnl_memory_desc_t user_out;
+  dnnl_memory_desc_t user_out, logits_md = last->dst_md;
   DN(dnnl_memory_desc_init_by_tag(&user_out, 4, od, dnnl_f32, dnnl_nchw));
-  KPCN_TRY(kpcn_net_make_reorder(n, &n->out, &last->dst_md, &user_out, &scratch));
+  if (last->cpad != last->cout) { /* the first cout channels of the padded output */
+    const dnnl_dims_t zero = {0, 0, 0, 0};
+    DN(dnnl_memory_desc_init_submemory(&logits_md, &last->dst_md, od, zero));
+  }
+  KPCN_TRY(kpcn_net_make_reorder(n, &n->out, &logits_md, &user_out, &scratch));
   n->native_ok = logits_layout_of(&last->dst_md, last->cout, H, W, &n->native);
   if (n->o.training) {
     KPCN_TRY(kpcn_net_make_reorder(n, &n->dout_in, &user_out, &last->ddst_md, &scratch));
@@ -426,6 +431,7 @@ void kpcn_net_destroy(kpcn_net *n) {
     if (n->o.training) kpcn_aligned_free(y->act);
     kpcn_aligned_free(y->rin);
     kpcn_aligned_free(y->wflip);
+    kpcn_aligned_free(y->wpad);
   }
   kpcn_net_free_reorder(&n->in);
   kpcn_net_free_reorder(&n->out);
@@ -492,10 +498,16 @@ static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
   KPCN_TRY(kpcn_net_run_reorder(n, &n->in, input, n->xbuf));
   for (int l = 0; l < n->nl; l++) {
     layer *y = &n->L[l];
-    KPCN_TRY(kpcn_net_run_reorder_1t(n, &y->w_in, m->w[n->branch][l], y->wp));
+    const float *w = m->w[n->branch][l], *b = m->b[n->branch][l];
+    if (y->cpad != y->cout) { /* the padded rows stay zero */
+      memcpy(y->wpad, w, sizeof(float) * (size_t)y->cout * y->cin * y->k * y->k);
+      memcpy(y->bpad, b, sizeof(float) * (size_t)y->cout);
+      w = y->wpad, b = y->bpad;
+    }
+    KPCN_TRY(kpcn_net_run_reorder_1t(n, &y->w_in, w, y->wp));
     if (y->src_in.prim)
       KPCN_TRY(kpcn_net_run_reorder(n, &y->src_in, n->L[l - 1].act, y->rin ? y->rin : n->rbuf));
-    DN(dnnl_memory_set_data_handle(y->bias, m->b[n->branch][l]));
+    DN(dnnl_memory_set_data_handle(y->bias, (void *)b));
     if (y->s2b) {
       void *src = NULL;
       DN(dnnl_memory_get_data_handle(y->src, &src));
@@ -527,7 +539,7 @@ kpcn_status kpcn_net_forward(kpcn_net *n, const float *input, float *logits) {
   return s;
 }
 
-kpcn_status kpcn_net_forward_logits(kpcn_net *n, const float *input, const float **logits,
+kpcn_status kpcn_net_forward_logits(kpcn_net *n, const float *input, const void **logits,
                                     kpcn_logits_layout *layout) {
   if (!n || !input || !logits || !layout)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_forward_logits: NULL argument");
@@ -542,7 +554,7 @@ kpcn_status kpcn_net_forward_logits(kpcn_net *n, const float *input, const float
   n->st.fwd_s += now_s() - t0;
   n->st.n_fwd++;
   thr_pop(g);
-  *logits = n->native_ok ? (const float *)n->L[n->nl - 1].act : n->planar_logits;
+  *logits = n->native_ok ? (const void *)n->L[n->nl - 1].act : (const void *)n->planar_logits;
   *layout = n->native_ok ? n->native : kpcn_logits_layout_planar(C, H, W);
   return s;
 }

@@ -23,6 +23,10 @@ typedef struct reorder {
 
 typedef struct layer {
   int cin, cout, k, d, has_relu;
+  /* Output channels the primitive computes: cout, or for an inference net's pixel-major
+   * logits layer cout rounded up to 16, the extra rows zero (net_layer.c, pad_logits). */
+  int cpad;
+  float *wpad, *bpad; /* ... then the model's weights and bias are copied into these first */
   dnnl_memory_desc_t src_md, dst_md, w_md, bw_md, dw_md;
   dnnl_memory_desc_t ddst_md; /* dst gradient: dst_md, but bf16 for bf16 f32-logits layers */
   dnnl_primitive_desc_t fwd_pd, bwdd_pd, bwdw_pd, relu_pd;

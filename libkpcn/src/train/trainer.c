@@ -369,7 +369,7 @@ void kpcn_trainer_get_timing(const kpcn_trainer *t, kpcn_train_timing *out) {
  * softmax weights in t->logits -> out */
 static kpcn_status branch_forward(kpcn_trainer *t, int b) {
   double t0 = kt_now();
-  const float *lg;
+  const void *lg;
   KPCN_TRY(kpcn_net_forward_logits(t->net[b], t->feat[b], &lg, &t->lay[b]));
   if (!t->dlogits[b]) {
     t->dlogits[b] = kpcn_alloc(sizeof(float) * (size_t)t->N * t->lay[b].image_stride, "dlogits");
