@@ -42,13 +42,16 @@ static int tile_cmp(const void *a, const void *b) {
 }
 
 /* Bytes a padded tile pixel costs while its net runs: features, noisy and filtered colour
- * (four planes each, for source weights), two hidden activations (ping-pong) and the logits,
- * in float; a bf16 net holds its activations and a copy of its input in bf16 (the logits
- * stay float). Matches peak RSS within ~10 %. */
+ * (four planes each, for source weights) in float; two hidden activations (ping-pong) and
+ * the logits (their channels padded to 16: net.c's padded logits layer, or the blocked
+ * Winograd output), in float, or in bf16 for a bf16 net, which also holds a bf16 copy of its
+ * input. Matches peak RSS within ~10 %. */
 static size_t bytes_per_pixel(const kpcn_arch *a, int bf16) {
-  const size_t act = 2 * (size_t)a->channels * (bf16 ? 2 : 4);
+  const size_t es = bf16 ? 2 : 4;
+  const size_t act = 2 * (size_t)a->channels * es;
+  const size_t logits = (((size_t)kpcn_arch_logit_channels(a) + 15) & ~(size_t)15) * es;
   const size_t in_copy = bf16 ? 2 * (size_t)KPCN_FEATURES_COUNT : 0;
-  return 4 * (KPCN_FEATURES_COUNT + 8 + (size_t)kpcn_arch_logit_channels(a)) + act + in_copy;
+  return 4 * (KPCN_FEATURES_COUNT + 8) + act + logits + in_copy;
 }
 
 /* Pixels a tile is grown by on each side: at least one more than the overlap, and the padded
