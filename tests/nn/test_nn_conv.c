@@ -156,7 +156,11 @@ static void check_vs_ref(const cfg *c, int seed) {
     kpcn_net_options oi = o;
     oi.training = 0, oi.input_grad = 0;
     kpcn_net *inf = NULL;
-    { kpcn_status si = kpcn_net_create(m, br, &oi, &inf); if (si != KPCN_OK) fprintf(stderr, "inference net: %s\n", kpcn_last_error()); CHECK(si == KPCN_OK); }
+    {
+      kpcn_status si = kpcn_net_create(m, br, &oi, &inf);
+      if (si != KPCN_OK) fprintf(stderr, "inference net: %s\n", kpcn_last_error());
+      CHECK(si == KPCN_OK);
+    }
     float *lgi = malloc(nout * 4);
     if (inf && lgi) {
       CHECK(kpcn_net_forward(inf, in, lgi) == KPCN_OK);

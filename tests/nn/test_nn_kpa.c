@@ -99,7 +99,8 @@ static void forward_vs_naive(int K, int n, int nc, int h, int w, float scale) {
     memcpy(&lgr[i], &u, 4);
   }
   CHECK(kpcn_kpa_forward(K, n, nc, h, w, lgr, nz, outr, wtr, 1) == KPCN_OK);
-  const int blocks[6] = {K2, 16, 8, K2, 16, 1}, pstr[6] = {K2 + 3, 16, 8, (K2 + 15) / 16 * 16, 16, 1};
+  const int blocks[6] = {K2, 16, 8, K2, 16, 1},
+            pstr[6] = {K2 + 3, 16, 8, (K2 + 15) / 16 * 16, 16, 1};
   for (int v = 0; v < 6; v++) {
     kpcn_logits_layout lay = {0};
     lay.block = blocks[v], lay.pixel_stride = pstr[v], lay.bf16 = v >= 3;

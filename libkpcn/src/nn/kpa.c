@@ -129,11 +129,12 @@ static inline float exp_nonpos(float x) {
  * e^(wt - sc) are made here, summed in tap order as the separate pass does, and the result
  * divided by their sum (the same operations, so the same bits). The exponentials' arithmetic
  * then runs beside this loop's loads instead of in a pass of its own that stored every
- * numerator and this loop reloaded (the cpu preset's kernel layer, bf16 logits: -15 %). */
+ * numerator and this loop reloaded (the cpu preset's kernel layer on 1024², bf16 logits,
+ * 2 threads: 37.8 -> 36.7-37.2 ms). */
 static inline __attribute__((always_inline)) void
-apply_chunk(const int n, const int nch, const int fused, int K, const float *restrict wt,
-            size_t ws, const float *restrict pr, int pw, const int *slot,
-            const float *restrict sc, float *restrict o, size_t os) {
+apply_chunk(const int n, const int nch, const int fused, int K, const float *restrict wt, size_t ws,
+            const float *restrict pr, int pw, const int *slot, const float *restrict sc,
+            float *restrict o, size_t os) {
   float acc[3][XB], sum[XB];
   for (int i = 0; i < XB; i++) {
     sum[i] = 0.f;
