@@ -4,6 +4,8 @@
 
 #include "kpcn/common.h"
 #include <stdarg.h>
+#include <stdint.h>
+#include <string.h>
 
 /* Records an error for the calling thread and returns s, so call sites read
  *   return kpcn_fail(KPCN_ERR_IO, "cannot open '%s': %s", path, strerror(errno)); */
@@ -49,6 +51,14 @@ int kpcn_cpu_allows_avx512(void);
 
 /* Median of v[0..n) (sorts v; the mean of the two middle values for even n; 0 for n = 0). */
 double kpcn_median_inplace(double *v, size_t n);
+
+/* The float a bfloat16 stands for (its 16 bits are the float's upper half). */
+static inline float kpcn_bf16_to_float(uint16_t v) {
+  const uint32_t u = (uint32_t)v << 16;
+  float f;
+  memcpy(&f, &u, sizeof f);
+  return f;
+}
 
 #define KPCN_TRY(expr)                                                                             \
   do {                                                                                             \

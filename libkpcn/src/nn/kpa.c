@@ -63,15 +63,6 @@ static void padded_row(float *restrict row, const float *restrict src, int w, in
     row[r + w + x] = src[w - 1];
 }
 
-/* A bfloat16 (a float's upper 16 bits) as the float it stands for. */
-static inline float bf16_value(uint16_t v) {
-  union {
-    uint32_t u;
-    float f;
-  } c = {.u = (uint32_t)v << 16};
-  return c.f;
-}
-
 /* dst[j * ds + x] = value of src[x * ps + j] for x < w, j < nb: the bf16 logits' gather into
  * tap-major rows where the vector path (softmax16) does not run; scalar, as it only takes the
  * last < 16 pixels of a chunk (or every pixel on CPUs without AVX-512, where bf16 nets do not
@@ -80,7 +71,7 @@ static void gather_bf16(const uint16_t *restrict src, int ps, int w, int nb, flo
                         size_t ds) {
   for (int j = 0; j < nb; j++)
     for (int x = 0; x < w; x++)
-      dst[(size_t)j * ds + x] = bf16_value(src[(size_t)x * ps + j]);
+      dst[(size_t)j * ds + x] = kpcn_bf16_to_float(src[(size_t)x * ps + j]);
 }
 
 #define XB 32 /* pixels per register-blocked chunk */

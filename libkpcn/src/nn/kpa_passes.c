@@ -21,12 +21,7 @@ static size_t score_at(const kpcn_logits_layout *l, int K2, int b, size_t q) {
 
 /* Element i of logits stored as the layout says (f32 or bf16). */
 static float logit_at(const void *logits, const kpcn_logits_layout *l, size_t i) {
-  if (!l->bf16) return ((const float *)logits)[i];
-  union {
-    uint32_t u;
-    float f;
-  } c = {.u = (uint32_t)((const uint16_t *)logits)[i] << 16};
-  return c.f;
+  return l->bf16 ? kpcn_bf16_to_float(((const uint16_t *)logits)[i]) : ((const float *)logits)[i];
 }
 
 static inline float source_weight(float s) {
