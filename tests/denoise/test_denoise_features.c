@@ -2,6 +2,7 @@
  * written from the documented formulas; region == crop; patch inputs with the full
  * image's norm; inverse transforms and the recombination's derivatives by finite
  * differences; missing buffers named. */
+#include <float.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -191,6 +192,67 @@ static void test_values(void) {
   kpcn_aov_destroy(a);
 }
 
+/* Pixel-major output (a net's input buffer): the planar features, transposed, as floats or
+ * as bf16 rounded the way vcvtneps2bf16 rounds; slots past the features untouched. A region
+ * 33 pixels wide (two 16-pixel blocks and a tail) at an offset. The *_avx2 variant of this
+ * test runs the scalar path, the default one the AVX-512 path where the CPU has it. */
+static void test_pixels(void) {
+  const int W = 37, H = 9, rx = 3, ry = 2, rw = 33, rh = 6, NF = KPCN_FEATURES_COUNT;
+  kpcn_aov_set *a = synth_aov(W, H, 11);
+  CHECK(a != NULL);
+  if (!a) return;
+  kpcn_features_norm n;
+  CHECK(kpcn_features_norm_compute(a, &n) == KPCN_OK);
+  const size_t Q = (size_t)rw * rh;
+  float *pl = malloc(sizeof(float) * Q * NF), *np0 = malloc(sizeof(float) * Q * 3),
+        *np1 = malloc(sizeof(float) * Q * 3);
+  for (int b = 0; b < 2; b++) {
+    CHECK(kpcn_features_build_region(a, b, EPS, &n, rx, ry, rw, rh, pl, 0, np0, 2) == KPCN_OK);
+    for (int bf16 = 0; bf16 < 2; bf16++) {
+      const int ps = bf16 ? 48 : 40;
+      const size_t es = bf16 ? 2 : 4;
+      unsigned char *px = malloc(es * Q * ps);
+      memset(px, 0x5a, es * Q * ps); /* the sentinel in the slots past the features */
+      CHECK(kpcn_features_build_region_pixels(a, b, EPS, &n, rx, ry, rw, rh, px, ps, bf16, np1,
+                                              2) == KPCN_OK);
+      CHECK(memcmp(np0, np1, sizeof(float) * Q * 3) == 0);
+      int bad = 0, touched = 0;
+      for (size_t q = 0; q < Q; q++) {
+        for (int c = 0; c < NF; c++) {
+          const float v = pl[(size_t)c * Q + q];
+          if (bf16) {
+            uint32_t u;
+            memcpy(&u, &v, 4);
+            const uint16_t want =
+                fabsf(v) < FLT_MIN ? (uint16_t)((u >> 16) & 0x8000u) : kt_bf16_round(v);
+            bad += ((const uint16_t *)px)[q * ps + c] != want;
+          } else {
+            bad += memcmp(px + 4 * (q * ps + c), &v, 4) != 0;
+          }
+        }
+        for (size_t k = es * (q * ps + NF); k < es * (q + 1) * ps; k++)
+          touched += px[k] != 0x5a;
+      }
+      if (bad || touched)
+        fprintf(stderr, "pixels: branch %d bf16 %d: %d wrong, %d padding bytes written\n", b, bf16,
+                bad, touched);
+      CHECK(bad == 0 && touched == 0);
+      free(px);
+    }
+  }
+  float dummy[64];
+  CHECK(kpcn_features_build_region_pixels(a, 0, EPS, &n, 0, 0, 1, 1, dummy, NF - 1, 0, NULL, 1) ==
+        KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_features_build_region_pixels(a, 0, EPS, &n, 0, 0, 1, 1, dummy, NF, 2, NULL, 1) ==
+        KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_features_build_region_pixels(a, 0, EPS, &n, 0, 0, 1, 1, NULL, NF, 0, NULL, 1) ==
+        KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_features_build_region_pixels(a, 0, EPS, &n, 30, 0, 8, 1, dummy, NF, 0, NULL, 1) ==
+        KPCN_ERR_INVALID_ARGUMENT);
+  free(pl), free(np0), free(np1);
+  kpcn_aov_destroy(a);
+}
+
 /* Inverse transforms and the derivatives of the recombination by central differences. */
 static void test_transforms(void) {
   enum { N = 64 };
@@ -244,6 +306,7 @@ static void test_transforms(void) {
 int main(void) {
   test_names();
   test_values();
+  test_pixels();
   test_transforms();
   return kt_summary("test_denoise_features");
 }

@@ -137,6 +137,10 @@ static void check_vs_ref(const cfg *c, int seed) {
   kpcn_status s = kpcn_net_create(m, br, &o, &net);
   if (s != KPCN_OK) fprintf(stderr, "net create: %s\n", kpcn_last_error());
   CHECK(s == KPCN_OK);
+  if (net) { /* a training net has no input buffer to write into, so no NULL input */
+    CHECK(kpcn_net_input_buffer(net, NULL, NULL) == NULL);
+    CHECK(kpcn_net_forward(net, NULL, lg) == KPCN_ERR_INVALID_ARGUMENT);
+  }
   if (net) {
     /* the net flushes denormals while it runs and gives the caller's threads their own
      * floating-point mode back (kpcn_fast_fp_begin/_end) */
@@ -442,6 +446,28 @@ static void bf16_vs_f32(void) {
         same &= logit_value(nat, &lay, p * (size_t)lay.pixel_stride + (size_t)t) ==
                 l16[(size_t)t * H * W + p];
     CHECK(same);
+    /* the input written pixel-major into the net's own buffer (bf16 rounded to nearest
+     * even, as oneDNN's reorder does) and input = NULL: the same logits, bit for bit */
+    for (int v = 0; v < 2; v++) {
+      kpcn_net *net = v ? n16 : n32;
+      const float *want = v ? l16 : l32;
+      int ps = 0, bf = -1;
+      void *xin = kpcn_net_input_buffer(net, &ps, &bf);
+      CHECK(xin != NULL && ps >= 27 && bf == v);
+      if (!xin) continue;
+      for (size_t p = 0; p < (size_t)H * W; p++)
+        for (int c = 0; c < 27; c++) {
+          const float x = in[(size_t)c * H * W + p];
+          if (bf)
+            ((uint16_t *)xin)[p * ps + c] = kt_bf16_round(x);
+          else
+            ((float *)xin)[p * ps + c] = x;
+        }
+      float *got = malloc(nout * 4);
+      CHECK(kpcn_net_forward(net, NULL, got) == KPCN_OK);
+      CHECK(memcmp(got, want, nout * 4) == 0);
+      free(got);
+    }
   }
   kpcn_net_destroy(n32);
   kpcn_net_destroy(n16);

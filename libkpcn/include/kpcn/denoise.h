@@ -125,6 +125,17 @@ kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, floa
                                        float *out_planar, size_t out_stride, float *noisy_pre,
                                        int nthreads);
 
+/* Same features, pixel-major: feature c of region pixel (x, y) at
+ * out[(y * w + x) * pixel_stride + c] (pixel_stride >= KPCN_FEATURES_COUNT; the slots past
+ * the features are left as they are), as floats or, with bf16 = 1, as bfloat16 rounded to
+ * nearest even the way vcvtneps2bf16 does (denormals to zero). That is the layout of a net's
+ * own input buffer (kpcn_net_input_buffer), so the net can start without its input reorder:
+ * the denoiser builds its features this way where the net allows it. */
+kpcn_status kpcn_features_build_region_pixels(const kpcn_aov_set *aov, int branch, float eps,
+                                              const kpcn_features_norm *norm, int x0, int y0, int w,
+                                              int h, void *out, int pixel_stride, int bf16,
+                                              float *noisy_pre, int nthreads);
+
 /* ---- Forward/inverse colour transforms (per element, n = number of floats) ---- */
 
 /* Diffuse demodulation: out[i] = diffuse[i] / (albedo[i] + eps). Used for training

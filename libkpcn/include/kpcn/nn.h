@@ -239,8 +239,17 @@ void kpcn_net_destroy(kpcn_net *net);
 kpcn_status kpcn_net_set_branch(kpcn_net *net, kpcn_branch b);
 
 /* Forward: input [N][n_inputs][H][W] fp32 (planes input_plane_stride apart) -> logits
- * [N][K²][H][W] fp32. Re-reads the model's weights each call. */
+ * [N][K²][H][W] fp32. Re-reads the model's weights each call. input may be NULL when the
+ * caller has written it into kpcn_net_input_buffer (then no input reorder runs). */
 kpcn_status kpcn_net_forward(kpcn_net *net, const float *input, float *logits);
+
+/* The buffer the first layer reads, when it is pixel-major (an inference net whose first
+ * layer runs nhwc, as on AVX-512 CPUs): input c of pixel (x, y) of image b at
+ * ((b * H + y) * W + x) * pixel_stride + c, floats or (bf16 = 1) bfloat16. Writing the input
+ * there and passing input = NULL to kpcn_net_forward[_logits] skips the net's input reorder
+ * (a transposing conversion of n_inputs planes). NULL for training nets and other layouts;
+ * valid until the net is destroyed. */
+void *kpcn_net_input_buffer(kpcn_net *net, int *pixel_stride, int *bf16);
 
 /* Where logit t of pixel (x, y) of image b lies: at
  *   b * image_stride + (t / block) * block_stride + (y * W + x) * pixel_stride + t % block

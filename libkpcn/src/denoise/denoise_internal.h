@@ -29,6 +29,11 @@ kpcn_status kpcn_baseline_nlmeans(const kpcn_aov_set *aov, const kpcn_baseline_p
  * kpcn_pipeline.c chooses the grid with the least overlap that fits it). */
 #define KPCN_TILE_BUDGET_BYTES ((size_t)1 << 30)
 
+/* Whether kpcn_features_build_region_pixels has its vector path here for this element type
+ * (AVX-512 with BW, VL and, for bf16, BF16). Elsewhere it runs scalar, slower than a net's
+ * own input reorder, so the pipeline builds planar features there. */
+int kpcn_features_pixels_fast(int bf16);
+
 /* What the KPCN pipeline keeps from one execute to the next (the denoiser owns one, as an
  * OIDN filter keeps its buffers): one network, rebound to either branch, and the tile
  * buffers. A warm execute of the same size then creates no oneDNN primitive and touches no

@@ -1,6 +1,8 @@
 /* Network input preprocessing shared by inference and training (kpcn/denoise.h §1).
  * The single place that defines what the network sees. */
 #include "core/internal.h"
+#include "core/transpose16.h"
+#include "denoise/denoise_internal.h"
 #include "kpcn/denoise.h"
 
 #include <math.h>
@@ -99,10 +101,76 @@ static void grad_row(const float *restrict r, const float *restrict u, const flo
   }
 }
 
-kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, float eps,
-                                       const kpcn_features_norm *norm, int x0, int y0, int w, int h,
-                                       float *out, size_t out_stride, float *noisy_pre,
-                                       int nthreads) {
+/* The bfloat16 nearest to f (ties to even), as vcvtneps2bf16 rounds: denormals flush to
+ * (signed) zero, NaN stays a quiet NaN. */
+static uint16_t bf16_rne(float f) {
+  uint32_t u;
+  memcpy(&u, &f, 4);
+  if ((u & 0x7f800000u) == 0x7f800000u && (u & 0x007fffffu)) return (uint16_t)((u >> 16) | 0x40u);
+  if ((u & 0x7f800000u) == 0) return (uint16_t)((u >> 16) & 0x8000u);
+  u += 0x7fffu + ((u >> 16) & 1u);
+  return (uint16_t)(u >> 16);
+}
+
+/* dst[x * ps + c] = rows[c * rs + x] for c < nc, x < w: one row of planar features to the
+ * pixel-major layout of a net's input, as floats or bf16. */
+static void emit_pixels(const float *rows, size_t rs, int nc, int w, void *dst, int ps, int bf16) {
+  for (int x = 0; x < w; x++)
+    for (int c = 0; c < nc; c++) {
+      const float v = rows[(size_t)c * rs + x];
+      if (bf16)
+        ((uint16_t *)dst)[(size_t)x * ps + c] = bf16_rne(v);
+      else
+        ((float *)dst)[(size_t)x * ps + c] = v;
+    }
+}
+
+#ifdef KPCN_HAVE_T16
+/* The same with 16 x 16 register transposes (16 pixels x up to 16 channels a block, masked
+ * at the row's and the channels' ends) and vcvtneps2bf16 for bf16: the conversion oneDNN's
+ * reorder uses, so a net fed this way sees the bits its own input reorder would give it. */
+__attribute__((target("avx512f,avx512bw,avx512vl,avx512bf16"))) static void
+emit_pixels16(const float *rows, size_t rs, int nc, int w, void *dst, int ps, int bf16) {
+  for (int x0 = 0; x0 < w; x0 += 16) {
+    const int np = w - x0 < 16 ? w - x0 : 16;
+    const __mmask16 pm = (__mmask16)((1u << np) - 1u);
+    for (int c0 = 0; c0 < nc; c0 += 16) {
+      const int nb = nc - c0 < 16 ? nc - c0 : 16;
+      const __mmask16 cm = (__mmask16)((1u << nb) - 1u);
+      __m512 r[16], row[16];
+      for (int i = 0; i < 16; i++)
+        r[i] = i < nb ? _mm512_maskz_loadu_ps(pm, rows + (size_t)(c0 + i) * rs + x0)
+                      : _mm512_setzero_ps();
+      transpose16_regs(r, row);
+      for (int j = 0; j < np; j++) {
+        const size_t at = (size_t)(x0 + j) * ps + c0;
+        if (bf16)
+          _mm256_mask_storeu_epi16((uint16_t *)dst + at, cm, (__m256i)_mm512_cvtneps_pbh(row[j]));
+        else
+          _mm512_mask_storeu_ps((float *)dst + at, cm, row[j]);
+      }
+    }
+  }
+}
+#endif
+
+int kpcn_features_pixels_fast(int bf16) {
+#ifdef KPCN_HAVE_T16
+  return kpcn_cpu_allows_avx512() && __builtin_cpu_supports("avx512bw") &&
+         __builtin_cpu_supports("avx512vl") && (!bf16 || __builtin_cpu_supports("avx512bf16"));
+#else
+  (void)bf16;
+  return 0;
+#endif
+}
+
+/* Builds the features into planar planes S floats apart (out, may be NULL) or, when px is
+ * non-NULL, pixel-major into px (pixel stride ps, floats or bf16) through a per-thread row
+ * buffer. */
+static kpcn_status build_region(const kpcn_aov_set *aov, int branch, float eps,
+                                const kpcn_features_norm *norm, int x0, int y0, int w, int h,
+                                float *out, size_t out_stride, void *px, int ps, int bf16,
+                                float *noisy_pre, int nthreads) {
   if (!aov) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "features_build: aov is NULL");
   if (!kpcn_branch_name(branch))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "features_build: bad branch %d", branch);
@@ -144,14 +212,22 @@ kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, floa
    * rows y-1, y, y+1 of columns [xa, xb] in a three-row ring, so every value is computed
    * once; everything else is row loops the compiler vectorizes. */
   const int xa = x0 > 0 ? x0 - 1 : 0, xb = x0 + w < W ? x0 + w : W - 1, rw = xb - xa + 1;
-  float *ring = kpcn_alloc(sizeof(float) * 9 * (size_t)rw * (size_t)nt, "feature rows");
+  /* per thread: the colour ring, and for pixel-major output one row of every feature */
+  const size_t per = 9 * (size_t)rw + (px ? (size_t)KPCN_FEATURES_COUNT * w : 0);
+  float *ring = kpcn_alloc(sizeof(float) * per * (size_t)nt, "feature rows");
   if (!ring) return KPCN_ERR_OUT_OF_MEMORY;
+  const int e16 = px ? kpcn_features_pixels_fast(bf16) : 0;
+  const size_t es = bf16 ? 2 : 4;
 
 #pragma omp parallel num_threads(nt)
   {
     const int t = omp_get_thread_num(), T = omp_get_num_threads();
     const int ya = (int)((int64_t)h * t / T), yb = (int)((int64_t)h * (t + 1) / T);
-    float *rows = ring + (size_t)9 * rw * t; /* [slot 3][channel 3][rw] */
+    float *rows = ring + per * t;                    /* [slot 3][channel 3][rw] */
+    float *prow = px ? rows + (size_t)9 * rw : NULL; /* [feature][w] */
+    /* where this row's features go: planes S apart at offset o, or prow's rows */
+    float *const ob = px ? prow : out;
+    const size_t Sb = px ? (size_t)w : S;
     int held[3] = {-1, -1, -1};
     for (int yy = ya; yy < yb; yy++) {
       const int y = y0 + yy, ym = y > 0 ? y - 1 : 0, yp = y < H - 1 ? y + 1 : H - 1;
@@ -167,29 +243,29 @@ kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, floa
         }
         held[slot] = r;
       }
-      const size_t o = (size_t)yy * w, i = (size_t)y * W + x0;
+      const size_t o = (size_t)yy * w, i = (size_t)y * W + x0, oo = px ? 0 : o;
       for (int c = 0; c < 3; c++) {
         const float *cur = rows + (size_t)((y % 3) * 3 + c) * rw;
         const float *up = rows + (size_t)((ym % 3) * 3 + c) * rw;
         const float *dn = rows + (size_t)((yp % 3) * 3 + c) * rw;
         if (noisy_pre) memcpy(noisy_pre + c * Q + o, cur + (x0 - xa), sizeof(float) * w);
-        if (!out) continue;
-        memcpy(out + (F_COLOR + c) * S + o, cur + (x0 - xa), sizeof(float) * w);
-        memcpy(out + (F_N + c) * S + o, nrm + c * P + i, sizeof(float) * w);
-        memcpy(out + (F_ALB + c) * S + o, alb + c * P + i, sizeof(float) * w);
-        grad_row(cur, up, dn, xa, x0, w, W, 0.0f, 1.0f, out + (F_DX + c) * S + o,
-                 out + (F_DY + c) * S + o);
+        if (!ob) continue;
+        memcpy(ob + (F_COLOR + c) * Sb + oo, cur + (x0 - xa), sizeof(float) * w);
+        memcpy(ob + (F_N + c) * Sb + oo, nrm + c * P + i, sizeof(float) * w);
+        memcpy(ob + (F_ALB + c) * Sb + oo, alb + c * P + i, sizeof(float) * w);
+        grad_row(cur, up, dn, xa, x0, w, W, 0.0f, 1.0f, ob + (F_DX + c) * Sb + oo,
+                 ob + (F_DY + c) * Sb + oo);
         const size_t rc = c * P + (size_t)y * W, ru = c * P + (size_t)ym * W,
                      rd = c * P + (size_t)yp * W;
         grad_row(nrm + rc, nrm + ru, nrm + rd, 0, x0, w, W, 0.0f, 1.0f,
-                 out + (F_DX + 3 + c) * S + o, out + (F_DY + 3 + c) * S + o);
+                 ob + (F_DX + 3 + c) * Sb + oo, ob + (F_DY + 3 + c) * Sb + oo);
         grad_row(alb + rc, alb + ru, alb + rd, 0, x0, w, W, 0.0f, 1.0f,
-                 out + (F_DX + 6 + c) * S + o, out + (F_DY + 6 + c) * S + o);
+                 ob + (F_DX + 6 + c) * Sb + oo, ob + (F_DY + 6 + c) * Sb + oo);
       }
-      if (!out) continue;
+      if (!ob) continue;
       /* color variance in the preprocessed space: var / d² averaged over the channels, with
        * d the derivative's inverse (albedo + eps, or 1 + specular) */
-      float *cv = out + F_COLOR_VAR * S + o;
+      float *cv = ob + F_COLOR_VAR * Sb + oo;
       for (int xx = 0; xx < w; xx++) {
         float vscale = 0.0f;
         for (int c = 0; c < 3; c++) {
@@ -201,21 +277,51 @@ kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, floa
         }
         cv[xx] = cs * cs * cvar[i + xx] * (vscale / 3.0f);
       }
-      float *fz = out + F_Z * S + o, *fzv = out + F_Z_VAR * S + o;
+      float *fz = ob + F_Z * Sb + oo, *fzv = ob + F_Z_VAR * Sb + oo;
       for (int xx = 0; xx < w; xx++) {
         fz[xx] = (z[i + xx] - zoff) * zs;
         fzv[xx] = zvar[i + xx] * zs * zs;
       }
-      memcpy(out + F_N_VAR * S + o, nvar + i, sizeof(float) * w);
-      memcpy(out + F_ALB_VAR * S + o, avar + i, sizeof(float) * w);
-      memcpy(out + F_VIS * S + o, vis + i, sizeof(float) * w);
-      memcpy(out + F_VIS_VAR * S + o, visvar + i, sizeof(float) * w);
+      memcpy(ob + F_N_VAR * Sb + oo, nvar + i, sizeof(float) * w);
+      memcpy(ob + F_ALB_VAR * Sb + oo, avar + i, sizeof(float) * w);
+      memcpy(ob + F_VIS * Sb + oo, vis + i, sizeof(float) * w);
+      memcpy(ob + F_VIS_VAR * Sb + oo, visvar + i, sizeof(float) * w);
       grad_row(z + (size_t)y * W, z + (size_t)ym * W, z + (size_t)yp * W, 0, x0, w, W, zoff, zs,
-               out + (F_DX + 9) * S + o, out + (F_DY + 9) * S + o);
+               ob + (F_DX + 9) * Sb + oo, ob + (F_DY + 9) * Sb + oo);
+      if (px) {
+        void *dst = (char *)px + es * (size_t)yy * w * ps;
+#ifdef KPCN_HAVE_T16
+        if (e16)
+          emit_pixels16(prow, Sb, KPCN_FEATURES_COUNT, w, dst, ps, bf16);
+        else
+#endif
+          emit_pixels(prow, Sb, KPCN_FEATURES_COUNT, w, dst, ps, bf16);
+      }
     }
   }
   free(ring);
   return KPCN_OK;
+}
+
+kpcn_status kpcn_features_build_region(const kpcn_aov_set *aov, int branch, float eps,
+                                       const kpcn_features_norm *norm, int x0, int y0, int w, int h,
+                                       float *out, size_t out_stride, float *noisy_pre,
+                                       int nthreads) {
+  return build_region(aov, branch, eps, norm, x0, y0, w, h, out, out_stride, NULL, 0, 0, noisy_pre,
+                      nthreads);
+}
+
+kpcn_status kpcn_features_build_region_pixels(const kpcn_aov_set *aov, int branch, float eps,
+                                              const kpcn_features_norm *norm, int x0, int y0, int w,
+                                              int h, void *out, int pixel_stride, int bf16,
+                                              float *noisy_pre, int nthreads) {
+  if (!out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "features_build: pixel output is NULL");
+  if (pixel_stride < KPCN_FEATURES_COUNT || (bf16 != 0 && bf16 != 1))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "features_build: pixel stride %d < %d features or bf16 = %d not 0/1",
+                     pixel_stride, KPCN_FEATURES_COUNT, bf16);
+  return build_region(aov, branch, eps, norm, x0, y0, w, h, NULL, 0, out, pixel_stride, bf16,
+                      noisy_pre, nthreads);
 }
 
 kpcn_status kpcn_features_build(const kpcn_aov_set *aov, int branch, float eps,

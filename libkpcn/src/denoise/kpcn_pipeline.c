@@ -268,14 +268,24 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
       st->other_s += now_s() - tn;
       const size_t Q = (size_t)t->pw * t->ph;
       double ta = now_s();
-      s = kpcn_features_build_region(aov, b, eps, &norm, t->px0, t->py0, t->pw, t->ph, feat,
-                                     kpcn_plane_stride(Q), noisy, nthreads);
+      /* Where the net reads pixel-major input, the features are built straight into its
+       * input buffer (no planar f32 planes written and then reordered by the net: the cpu
+       * preset's 1024² bf16 frame ~3 % faster); elsewhere planar. Same bits either way. */
+      int ips = 0, ibf = 0;
+      void *xin = kpcn_net_input_buffer(net, &ips, &ibf);
+      if (xin && !kpcn_features_pixels_fast(ibf)) xin = NULL;
+      if (xin)
+        s = kpcn_features_build_region_pixels(aov, b, eps, &norm, t->px0, t->py0, t->pw, t->ph, xin,
+                                              ips, ibf, noisy, nthreads);
+      else
+        s = kpcn_features_build_region(aov, b, eps, &norm, t->px0, t->py0, t->pw, t->ph, feat,
+                                       kpcn_plane_stride(Q), noisy, nthreads);
       if (s != KPCN_OK) goto done;
       double tb = now_s();
       /* the kpa layer reads the logits where and as the net left them (no reorder) */
       const void *logits;
       kpcn_logits_layout lay;
-      s = kpcn_net_forward_logits(net, feat, &logits, &lay);
+      s = kpcn_net_forward_logits(net, xin ? NULL : feat, &logits, &lay);
       if (s != KPCN_OK) goto done;
       double tc = now_s();
       /* every pass filters the previous one's result with the same kernels; the noisy

@@ -495,7 +495,7 @@ static kpcn_status s2b_scatter(kpcn_net *n, layer *y, int side, const void *src,
 
 static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
   const kpcn_model *m = n->model;
-  KPCN_TRY(kpcn_net_run_reorder(n, &n->in, input, n->xbuf));
+  if (input) KPCN_TRY(kpcn_net_run_reorder(n, &n->in, input, n->xbuf)); /* else already there */
   for (int l = 0; l < n->nl; l++) {
     layer *y = &n->L[l];
     const float *w = m->w[n->branch][l], *b = m->b[n->branch][l];
@@ -527,9 +527,40 @@ static kpcn_status forward(kpcn_net *n, const float *input, float *logits) {
   return logits ? kpcn_net_run_reorder(n, &n->out, n->L[n->nl - 1].act, logits) : KPCN_OK;
 }
 
+/* Pixel stride of the net's input buffer when it is pixel-major (inference nets), else 0. */
+static int input_pixel_stride(const kpcn_net *n) {
+  const dnnl_memory_desc_t *md = &n->L[0].src_md;
+  if (n->o.training || md->ndims != 4 || md->format_kind != dnnl_blocked || md->offset0 != 0 ||
+      (md->data_type != dnnl_f32 && md->data_type != dnnl_bf16))
+    return 0;
+  const dnnl_blocking_desc_t *b = &md->format_desc.blocking;
+  const dnnl_dim_t *st = b->strides, ps = st[3];
+  const dnnl_dim_t H = n->o.height, W = n->o.width;
+  return b->inner_nblks == 0 && st[1] == 1 && ps >= md->dims[1] && st[2] == W * ps &&
+                 st[0] == H * W * ps
+             ? (int)ps
+             : 0;
+}
+
+void *kpcn_net_input_buffer(kpcn_net *n, int *pixel_stride, int *bf16) {
+  const int ps = n ? input_pixel_stride(n) : 0;
+  if (!ps) return NULL;
+  if (pixel_stride) *pixel_stride = ps;
+  if (bf16) *bf16 = n->L[0].src_md.data_type == dnnl_bf16;
+  return n->xbuf;
+}
+
+/* input NULL: the caller wrote it into kpcn_net_input_buffer */
+static kpcn_status check_input(const kpcn_net *n, const float *input, const char *fn) {
+  if (!input && !input_pixel_stride(n))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "%s: NULL input, and the net has no pixel-major input buffer to read", fn);
+  return KPCN_OK;
+}
+
 kpcn_status kpcn_net_forward(kpcn_net *n, const float *input, float *logits) {
-  if (!n || !input || !logits)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_forward: NULL argument");
+  if (!n || !logits) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_forward: NULL argument");
+  KPCN_TRY(check_input(n, input, "kpcn_net_forward"));
   thr_guard g = thr_push(n->nt);
   double t0 = now_s();
   kpcn_status s = forward(n, input, logits);
@@ -541,8 +572,9 @@ kpcn_status kpcn_net_forward(kpcn_net *n, const float *input, float *logits) {
 
 kpcn_status kpcn_net_forward_logits(kpcn_net *n, const float *input, const void **logits,
                                     kpcn_logits_layout *layout) {
-  if (!n || !input || !logits || !layout)
+  if (!n || !logits || !layout)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_forward_logits: NULL argument");
+  KPCN_TRY(check_input(n, input, "kpcn_net_forward_logits"));
   const int N = n->o.batch, H = n->o.height, W = n->o.width, C = n->L[n->nl - 1].cout;
   if (!n->native_ok && !n->planar_logits) {
     n->planar_logits = kpcn_net_alloc(n, sizeof(float) * (size_t)N * C * H * W, "planar logits");
