@@ -26,8 +26,11 @@ kpcn_status kpcn_baseline_nlmeans(const kpcn_aov_set *aov, const kpcn_baseline_p
                                   float *out, int nthreads, kpcn_progress *prog);
 
 /* Memory for one padded tile's buffers when no tile size is given (tile_grid in
- * kpcn_pipeline.c chooses the grid with the least overlap that fits it). */
-#define KPCN_TILE_BUDGET_BYTES ((size_t)1 << 30)
+ * kpcn_pipeline.c chooses the grid with the least overlap that fits it): an eighth of the
+ * machine's physical memory, clamped to [MIN, MAX] (kpcn_tile_budget_bytes). */
+#define KPCN_TILE_BUDGET_MIN ((size_t)1 << 30)
+#define KPCN_TILE_BUDGET_MAX ((size_t)3 << 30)
+size_t kpcn_tile_budget_bytes(void);
 
 /* Whether kpcn_features_build_region_pixels has its vector path here for this element type
  * (AVX-512 with BW, VL and, for bf16, BF16). Elsewhere it runs scalar, slower than a net's

@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 static double now_s(void) {
   struct timespec ts;
@@ -54,6 +55,20 @@ static size_t bytes_per_pixel(const kpcn_arch *a, int bf16) {
   return 4 * (KPCN_FEATURES_COUNT + 8) + act + logits + in_copy;
 }
 
+/* Why an eighth of the memory, up to 3 GiB: overlap is recomputed work, so the fewer tiles
+ * the faster (a 1024² frame on the Zen 4: the paper preset 190 -> 206 GFLOP/s in fp32 and
+ * 395 -> 415 in bf16 as one tile; the cpu preset's fp32 230 -> 229-247), and the paper preset
+ * needs 2.9 GB of buffers for that; at 3 GiB its 4K frame still peaks below the 4 GiB the
+ * denoiser promises (the AOV set and output come on top). Smaller machines keep 1 GiB tiles
+ * (a 4K paper frame: ~1.7 GiB). */
+size_t kpcn_tile_budget_bytes(void) {
+  const long pages = sysconf(_SC_PHYS_PAGES), psz = sysconf(_SC_PAGESIZE);
+  size_t b = pages > 0 && psz > 0 ? (size_t)pages * (size_t)psz / 8 : 0;
+  if (b < KPCN_TILE_BUDGET_MIN) b = KPCN_TILE_BUDGET_MIN;
+  if (b > KPCN_TILE_BUDGET_MAX) b = KPCN_TILE_BUDGET_MAX;
+  return b;
+}
+
 /* Pixels a tile is grown by on each side: at least one more than the overlap, and the padded
  * origin is then rounded down to even (so up to pad + 1 on the left/top). The Winograd logits
  * layer (net.c) computes 2x2 output blocks anchored at the tile's origin and its rounding
@@ -80,17 +95,17 @@ static int even_up(int n) { return (n + 1) & ~1; }
 
 /* Tile grid. An explicit tile size gives square tiles of that size. Otherwise (tile = 0)
  * the grid is the one with the least padded area (overlap is recomputed work) whose
- * largest padded tile fits KPCN_TILE_BUDGET_BYTES: a 1024x1024 frame with the cpu preset
- * runs as two 1024x512 tiles in fp32 (4.3 % overlap) instead of four 512x512 ones (8.8 %)
- * and as one tile in bf16 (its activations take half the bytes), a 4K
- * frame with the paper preset still stays far below 4 GiB. Ties go to fewer tiles. */
+ * largest padded tile fits kpcn_tile_budget_bytes(): with a 3 GiB budget a 1024x1024 frame
+ * runs as one tile with either preset and precision; with 1 GiB the cpu preset's runs as two
+ * 1024x512 tiles in fp32 (4.3 % overlap) instead of four 512x512 ones (8.8 %) and as one in
+ * bf16. Ties go to fewer tiles. */
 static void tile_grid(const kpcn_arch *a, int bf16, int W, int H, int pad, int tile, int *tw,
                       int *th) {
   if (tile > 0) {
     *tw = *th = tile;
     return;
   }
-  const double budget = (double)KPCN_TILE_BUDGET_BYTES / (double)bytes_per_pixel(a, bf16);
+  const double budget = (double)kpcn_tile_budget_bytes() / (double)bytes_per_pixel(a, bf16);
   double best = -1.0;
   int best_n = 0;
   *tw = *th = 64;
