@@ -12,6 +12,16 @@
 #include <stdio.h>
 #include <string.h>
 
+/* As in nn/kpa.c: GCC will not if-convert the float compares of log1p_nonneg's loops (so not
+ * vectorize them) while FP exceptions are assumed observable; this file never inspects them.
+ * No FMA contraction either: a vectorized loop and its scalar remainder contracted
+ * log1p_nonneg's products differently, so a pixel's feature depended on where its tile began
+ * (untiled vs tile=16 differed in the last bits); without contraction every path rounds each
+ * operation alike. */
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC optimize("no-trapping-math", "fp-contract=off")
+#endif
+
 static const char *const k_names[KPCN_FEATURES_COUNT] = {
     "color.R",     "color.G", "color.B",      "color.var",      "N.X",         "N.Y",
     "N.Z",         "N.var",   "albedo.R",     "albedo.G",       "albedo.B",    "albedo.var",
@@ -81,11 +91,38 @@ static kpcn_status require_inputs(const kpcn_aov_set *aov, int branch) {
   return KPCN_OK;
 }
 
+/* log(1 + x) for x >= 0 (finite), in plain arithmetic the compiler vectorizes: glibc's
+ * log1pf is a scalar call, and it was a third of the specular branch's feature building.
+ * The classic float method (as in fdlibm). u = 1 + x is rounded; c = (1 + x - u) / u is the
+ * first-order correction for that rounding. Then u = 2^k m with m in [sqrt(2)/2, sqrt(2)),
+ * f = m - 1, s = f / (2 + f), and log m = f - f²/2 + s (f²/2 + R(s²)) with R's degree-4
+ * minimax coefficients. Small x is exact to the last bit (u = 1: the result is x).
+ * test_denoise_features compares it with double log1p over [0, 3.4e38]. */
+static inline float log1p_nonneg(float x) {
+  const float u = 1.0f + x;
+  uint32_t iu;
+  memcpy(&iu, &u, 4);
+  iu += 0x3f800000u - 0x3f3504f3u; /* k counts from sqrt(2)/2 */
+  const int k = (int)(iu >> 23) - 0x7f;
+  iu = (iu & 0x007fffffu) + 0x3f3504f3u;
+  float m;
+  memcpy(&m, &iu, 4);
+  /* u - 1 (k < 2) and u - x (k >= 2) are exact: Sterbenz. Both are computed and one is
+   * selected (a branch here kept the loops from vectorizing). */
+  const float c_hi = 1.0f - (u - x), c_lo = x - (u - 1.0f);
+  const float c = (k >= 2 ? c_hi : c_lo) / u;
+  const float f = m - 1.0f, s = f / (2.0f + f), z = s * s, w = z * z;
+  const float R =
+      z * (0.66666662693f + w * 0.28498786688f) + w * (0.40000972152f + w * 0.24279078841f);
+  const float hfsq = 0.5f * f * f, dk = (float)k;
+  return s * (hfsq + R) + (dk * 9.0580006145e-06f + c) - hfsq + f + dk * 6.9313812256e-01f;
+}
+
 /* Preprocessed color of one channel (col already exposure-scaled): diffuse / (albedo + eps),
  * or log(1 + specular). */
 static inline float pre_color(int branch, float col, float alb, float eps) {
   if (branch == KPCN_BRANCH_DIFFUSE) return col / (alb + eps);
-  return log1pf(col > 0.0f ? col : 0.0f);
+  return log1p_nonneg(col > 0.0f ? col : 0.0f);
 }
 
 /* Central differences of one source row over the region's columns, edges clamped:
@@ -238,8 +275,12 @@ static kpcn_status build_region(const kpcn_aov_set *aov, int branch, float eps,
         for (int c = 0; c < 3; c++) {
           const size_t base = (size_t)c * P + (size_t)r * W + xa;
           float *dst = rows + (size_t)(slot * 3 + c) * rw;
-          for (int x = 0; x < rw; x++)
-            dst[x] = pre_color(branch, cs * col[base + x], alb[base + x], eps);
+          if (branch == KPCN_BRANCH_DIFFUSE) /* two loops: each vectorizes */
+            for (int x = 0; x < rw; x++)
+              dst[x] = pre_color(KPCN_BRANCH_DIFFUSE, cs * col[base + x], alb[base + x], eps);
+          else
+            for (int x = 0; x < rw; x++)
+              dst[x] = pre_color(KPCN_BRANCH_SPECULAR, cs * col[base + x], alb[base + x], eps);
         }
         held[slot] = r;
       }
@@ -341,7 +382,7 @@ void kpcn_demodulate_diffuse(const float *diffuse, const float *albedo, float ep
 
 void kpcn_log_specular(const float *specular, size_t n, float *out) {
   for (size_t i = 0; i < n; i++)
-    out[i] = log1pf(specular[i] > 0.0f ? specular[i] : 0.0f);
+    out[i] = log1p_nonneg(specular[i] > 0.0f ? specular[i] : 0.0f);
 }
 
 void kpcn_remodulate_diffuse(const float *diffuse_out, const float *albedo, float eps, size_t n,
