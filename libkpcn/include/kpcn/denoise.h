@@ -195,8 +195,9 @@ typedef struct kpcn_denoiser_options {
   const char *model_path; /* safetensors model (method KPCN); copied at create */
   int bf16;               /* 1: bf16 inference (convolutions) */
   int tile;               /* KPCN tile size (output pixels per side); 0 = automatic: the
-                             grid with the least overlap whose padded tile needs <= 1 GiB
-                             (a 1 Mpx frame with the cpu preset: one or two tiles). A tile
+                             grid with the least overlap whose padded tile's buffers fit
+                             an eighth of the machine's memory, kept within 1..3 GiB (a
+                             1 Mpx frame: one tile on a 24 GB machine). A tile
                              >= the image size denoises in one piece. Tiles overlap by
                              kpcn_denoise_tile_overlap(arch) pixels; the result does not
                              depend on the tile size. */
