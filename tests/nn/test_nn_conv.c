@@ -49,15 +49,12 @@ static void fill(float *p, size_t n, unsigned *rs, float scale) {
     p[i] = scale * (2.f * kt_randf(rs) - 1.f);
 }
 
-/* max |got - ref| <= rtol * max |ref| (normwise relative error) */
 /* Element i of logits in the layout's element type. */
 static float logit_value(const void *L, const kpcn_logits_layout *l, size_t i) {
-  if (!l->bf16) return ((const float *)L)[i];
-  const uint32_t u = (uint32_t)((const uint16_t *)L)[i] << 16;
-  float f;
-  memcpy(&f, &u, 4);
-  return f;
+  return l->bf16 ? kpcn_bf16_to_float(((const uint16_t *)L)[i]) : ((const float *)L)[i];
 }
+
+/* max |got - ref| <= rtol * max |ref| (normwise relative error) */
 
 static double rel_err(const float *got, const double *ref, size_t n) {
   double mx = 0, e = 0;

@@ -95,8 +95,7 @@ static void forward_vs_naive(int K, int n, int nc, int h, int w, float scale) {
   float *lgr = malloc(nl * 4), *outr = malloc(nn * 4), *wtr = malloc(nl * 4);
   for (size_t i = 0; i < nl; i++) {
     lg16[i] = kt_bf16_round(lg[i]);
-    const uint32_t u = (uint32_t)lg16[i] << 16;
-    memcpy(&lgr[i], &u, 4);
+    lgr[i] = kpcn_bf16_to_float(lg16[i]);
   }
   CHECK(kpcn_kpa_forward(K, n, nc, h, w, lgr, nz, outr, wtr, 1) == KPCN_OK);
   const int blocks[6] = {K2, 16, 8, K2, 16, 1},
