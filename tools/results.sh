@@ -138,6 +138,8 @@ for l in open(sys.argv[2]):
     print('| %s | %.3e | %.3e | %.3e | %.3e | %.3e | %.3e | %.3e | %.0f %% | %s |' % (
         scene, d['noisy'], d['noisy'] / 20, d['irradiance_oracle'], d['diffuse_exact'], d['kpcn'],
         d['kpcn_diffuse'], d['kpcn_specular'], 100 * d['kpcn_top1pct'], '%.3e' % kx[0] if kx else '-'))
+print('\nHow far the `cpu` preset can go on these two scenes, measured by fine-tuning it on the scenes')
+print('themselves (a bound, never a shipped model): docs/training.md, "Session 22".')
 PY
 if [ -s "$work/rows2.tsv" ]; then
   targets "$work/rows2.tsv" ", against ${REF2_SPP}-spp references" >> "$md"
