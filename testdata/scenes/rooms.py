@@ -16,7 +16,6 @@ writes DIR/<prefix>-<seed>-<i>/scene.json (i = 0..N-1)
 """
 import argparse
 import json
-import math
 import os
 import random
 import sys
@@ -64,8 +63,8 @@ def room(seed, index, resolution):
     walls = ["floor", "ceil", "back", "left", "right"]
     bs = [{"name": n, "type": "lambert", "albedo": colour(r, saturated=0.4 if n in ("left", "right", "back") else 0.1)}
           for n in walls]
-    if r.random() < 0.3:  # a textured floor now and then
-        bs[0] = material(r, "floor") if r.random() < 0.5 else bs[0]
+    if r.random() < 0.3 and r.random() < 0.5:  # 15 %: a floor from the objects' materials (textures, gloss)
+        bs[0] = material(r, "floor")
     closed = r.random() < 0.5
     if closed:
         bs.append({"name": "front", "type": "lambert", "albedo": colour(r)})
