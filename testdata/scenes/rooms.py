@@ -8,14 +8,20 @@ lights, most of their light indirect), none of them a held-out scene: random siz
 colours, one to three area lights of random size, power and place (ceiling or wall), one to
 six objects (boxes, spheres, blocks) with diffuse, plastic, conductor or textured materials
 from train-textures/ (never the held-out scenes' textures/), and a camera inside the room.
+With --outside P a room is, with probability P, open at the front and seen from outside
+through the opening (the classic Cornell-box view: the walls frame the picture, the
+room's light reaches the camera only off its surfaces). P = 0 (the default) writes exactly
+the rooms of earlier sessions: the choice and its camera draw from a generator of their own.
 Every room is a pure function of (seed, index): two seeds give disjoint sets, so one seed
 can make training scenes and another distinct validation scenes.
 
 usage: python3 rooms.py --count N --seed S -o DIR [--resolution 160x160] [--prefix room]
+                        [--outside P]
 writes DIR/<prefix>-<seed>-<i>/scene.json (i = 0..N-1)
 """
 import argparse
 import json
+import math
 import os
 import random
 import sys
@@ -57,15 +63,18 @@ def material(r, name):
                        "off_color": colour(r, hi=0.3, saturated=0.2), "res_u": res, "res_v": res}}
 
 
-def room(seed, index, resolution):
+def room(seed, index, resolution, outside=0.0):
     r = random.Random(seed * 1000003 + index)
+    # Own stream, so that outside = 0 leaves every draw of r (and so every older room) as it was.
+    ro = random.Random((seed * 1000003 + index) * 7919 + 17)
+    view_outside = ro.random() < outside
     w, h, d = r.uniform(2, 5), r.uniform(2, 3), r.uniform(2, 5)
     walls = ["floor", "ceil", "back", "left", "right"]
     bs = [{"name": n, "type": "lambert", "albedo": colour(r, saturated=0.4 if n in ("left", "right", "back") else 0.1)}
           for n in walls]
     if r.random() < 0.3 and r.random() < 0.5:  # 15 %: a floor from the objects' materials (textures, gloss)
         bs[0] = material(r, "floor")
-    closed = r.random() < 0.5
+    closed = r.random() < 0.5 and not view_outside
     if closed:
         bs.append({"name": "front", "type": "lambert", "albedo": colour(r)})
     bs.append({"name": "light", "type": "null"})
@@ -103,6 +112,14 @@ def room(seed, index, resolution):
     pos = [r.uniform(-0.25, 0.25) * w, r.uniform(0.4, 0.8) * h, d / 2 - r.uniform(0.01, 0.05) * d]
     look = [r.uniform(-0.15, 0.15) * w, r.uniform(0.1, 0.35) * h, -d / 4]
     camera = cam(pos, look, r.uniform(50, 75), resolution)
+    if view_outside:
+        # In front of the opening, far enough for the opening to about fill the frame.
+        fov = ro.uniform(30, 50)
+        half = 0.5 * max(w, h) * ro.uniform(0.8, 1.1)
+        dist = half / math.tan(math.radians(fov / 2))
+        pos = [ro.uniform(-0.1, 0.1) * w, ro.uniform(0.4, 0.6) * h, d / 2 + dist]
+        look = [ro.uniform(-0.05, 0.05) * w, ro.uniform(0.4, 0.55) * h, 0]
+        camera = cam(pos, look, fov, resolution)
     return {"media": [], "bsdfs": bs, "primitives": ps, "camera": camera,
             "integrator": {"type": "path_tracer", "min_bounces": 0, "max_bounces": 16,
                            "enable_light_sampling": True},
@@ -116,7 +133,11 @@ def main():
     ap.add_argument("-o", dest="out", required=True)
     ap.add_argument("--resolution", default="160x160")
     ap.add_argument("--prefix", default="room")
+    ap.add_argument("--outside", type=float, default=0.0,
+                    help="probability that a room is open at the front and seen from outside")
     a = ap.parse_args()
+    if not 0.0 <= a.outside <= 1.0:
+        sys.exit("rooms.py: --outside must be a probability in [0, 1] (got %g)" % a.outside)
     try:
         res = [int(v) for v in a.resolution.lower().split("x")]
         if len(res) != 2 or min(res) < 1:
@@ -129,7 +150,7 @@ def main():
         d = os.path.join(a.out, "%s-%d-%d" % (a.prefix, a.seed, i))
         os.makedirs(d, exist_ok=True)
         with open(os.path.join(d, "scene.json"), "w") as f:
-            json.dump(room(a.seed, i, res), f, indent=1)
+            json.dump(room(a.seed, i, res, a.outside), f, indent=1)
     print("wrote %d rooms to %s" % (a.count, a.out))
 
 
