@@ -9,9 +9,9 @@ colours, one to three area lights of random size, power and place (ceiling or wa
 six objects (boxes, spheres, blocks) with diffuse, plastic, conductor or textured materials
 from train-textures/ (never the held-out scenes' textures/), and a camera inside the room.
 With --outside P a room is, with probability P, open at the front and seen from outside
-through the opening (the classic Cornell-box view: the walls frame the picture, the
-room's light reaches the camera only off its surfaces). P = 0 (the default) writes exactly
-the rooms of earlier sessions: the choice and its camera draw from a generator of their own.
+through the opening (the classic Cornell-box view, the walls framing the picture). P = 0
+(the default) writes exactly the rooms of earlier sessions: the choice and its camera draw
+from a generator of their own.
 Every room is a pure function of (seed, index): two seeds give disjoint sets, so one seed
 can make training scenes and another distinct validation scenes.
 
