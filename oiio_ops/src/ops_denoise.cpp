@@ -19,6 +19,7 @@ kpcn_denoiser_options DenoiseOptions::c_options() const {
   o.tile = tile;
   o.ensemble = ensemble;
   o.exposure = exposure;
+  o.firefly = firefly;
   return o;
 }
 

@@ -57,6 +57,19 @@ for bad in -1 0 nan inf abc 2,1 1e40; do
   grep -q exposure "$D/err" || fail "error does not name exposure: $(cat "$D/err")"
   [ ! -e "$D/bad.exr" ] || fail "partial output written (exposure=$bad)"
 done
+# firefly: the default is ratio 4 (explicit 4 == default bit for bit), off is accepted, bad
+# ratios are named with no output file
+"$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":firefly=4 -o "$D/out_f4.exr" || fail "firefly=4"
+"$T" "$D/out_f4.exr" "$D/out.exr" --l1 --json >"$D/f4.json" || fail "compare firefly=4"
+grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/f4.json" || fail "firefly=4 differs from the default: $(cat "$D/f4.json")"
+"$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":firefly=off -o "$D/out_foff.exr" || fail "firefly=off"
+for bad in 0.5 -1 0 nan abc; do
+  if "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":firefly=$bad -o "$D/bad.exr" 2>"$D/err"; then
+    fail "firefly=$bad accepted"
+  fi
+  grep -q firefly "$D/err" || fail "error does not name firefly: $(cat "$D/err")"
+  [ ! -e "$D/bad.exr" ] || fail "partial output written (firefly=$bad)"
+done
 if "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":ensemble=3 -o "$D/bad.exr" 2>"$D/err"; then
   fail "ensemble=3 accepted"
 fi

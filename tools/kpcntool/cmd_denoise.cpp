@@ -1,5 +1,6 @@
 // kpcntool --denoise: pops an AOV image, pushes the denoised RGB image.
 //   --denoise:model=m.safetensors[:bf16=1][:tile=N][:ensemble=N][:exposure=auto|off|E]
+//            [:firefly=R|off]
 //   --denoise:method=bilateral|nlmeans
 #include "kpcn/oiio_convert.h"
 #include "kpcn/ops_denoise.h"
@@ -22,6 +23,23 @@ bool parse_exposure(const std::string &v, kpcn::ops::DenoiseOptions &opt, std::s
     return false;
   }
   opt.exposure = (float)e;
+  return true;
+}
+
+// firefly=off or a ratio >= 1 (default: kpcn_denoiser_options' own).
+bool parse_firefly(const std::string &v, kpcn::ops::DenoiseOptions &opt, std::string &err) {
+  if (v.empty()) return true;
+  if (v == "off") {
+    opt.firefly = 0.0f;
+    return true;
+  }
+  char *end = nullptr;
+  const double r = std::strtod(v.c_str(), &end);
+  if (*end != '\0' || !(r >= 1.0 && r < 1e30)) {
+    err = "firefly must be off or a ratio >= 1 (got '" + v + "')";
+    return false;
+  }
+  opt.firefly = (float)r;
   return true;
 }
 
@@ -52,6 +70,7 @@ bool run_denoise(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
   }
   opt.ensemble = (int)ensemble;
   if (!parse_exposure(m.str("exposure", "auto"), opt, err)) return false;
+  if (!parse_firefly(m.str("firefly", ""), opt, err)) return false;
   OIIO::ImageBuf src = ctx.pop();
   OIIO::ImageBuf dst;
   if (!kpcn::ops::denoise(dst, src, opt, {}, ctx.nthreads)) {
@@ -89,10 +108,11 @@ bool reg_exposure = kpcntool::register_command(
 bool reg = kpcntool::register_command(
     {"denoise",
      0,
-     {"model", "method", "bf16", "tile", "ensemble", "exposure"},
+     {"model", "method", "bf16", "tile", "ensemble", "exposure", "firefly"},
      "denoise the top AOV image (model=m.safetensors | method=bilateral|nlmeans, bf16=1, tile=N, "
      "ensemble=2|4|8: average over mirrored/rotated copies, exposure=auto|off|E: the exposure "
-     "the network is shown every input at, default the model's)",
+     "the network is shown every input at, default the model's; firefly=R|off: bound isolated "
+     "diffuse fireflies to R x their brightest neighbour first, default 4)",
      run_denoise});
 
 } // namespace

@@ -163,6 +163,19 @@ void kpcn_recombine(const float *diffuse_out, const float *spec_out, const float
 void kpcn_recombine_backward(const float *grad_out, const float *spec_out, const float *albedo,
                              float eps, size_t n, float *grad_diffuse, float *grad_spec);
 
+/* Bounds isolated diffuse fireflies in place (the KPCN's input conditioning; the denoiser
+ * runs it on a copy of its input when kpcn_denoiser_options.firefly > 0). With
+ * E = mean_c diffuse_c / (albedo_c + eps) (the diffuse branch's irradiance), a pixel whose E
+ * exceeds bound = ratio * (the largest E of its 8 neighbours) + 0.01 * exposure
+ * (kpcn_aov_exposure) and whose diffuse relative variance diffuse.var / mean_c(diffuse_c)^2
+ * exceeds 0.25 (its value rests on a few samples) has its diffuse scaled by bound / E, its
+ * diffuse.var by the square, and color (if present) lowered by what diffuse lost. Decisions
+ * read the E of the input, so the result does not depend on the order pixels are visited.
+ * Why: at a partly covered pixel the small albedo turns one bright sample into a large
+ * irradiance that neighbours' kernels spread (docs/denoiser.md). ratio >= 1. Needs diffuse
+ * with its variance, albedo and specular. *count (may be NULL): pixels bounded. */
+kpcn_status kpcn_aov_bound_fireflies(kpcn_aov_set *aov, float ratio, float eps, int *count);
+
 /* ======================================================================================
  * Denoiser (oidn.h style). Lifecycle:
  *   kpcn_denoiser_options o; kpcn_denoiser_options_defaults(&o); o.model_path = "m.safetensors";
@@ -216,9 +229,16 @@ typedef struct kpcn_denoiser_options {
    * exposure of its training images (as rendered for a model that records none); > 0: that
    * exposure; KPCN_EXPOSURE_AS_RENDERED: the input as rendered. */
   float exposure;
+  /* KPCN only: bound isolated diffuse fireflies before the network (kpcn_aov_bound_fireflies
+   * with this ratio, the model's eps); 0 = off. kpcn_denoiser_options_defaults sets
+   * KPCN_DENOISE_DEFAULT_FIREFLY. */
+  float firefly;
   kpcn_baseline_params bilateral;
   kpcn_baseline_params nlmeans;
 } kpcn_denoiser_options;
+
+/* kpcn_denoiser_options.firefly's default (chosen on the validation pairs, docs/denoiser.md). */
+#define KPCN_DENOISE_DEFAULT_FIREFLY 4.0f
 
 /* kpcn_denoiser_options.exposure: show the network the input as rendered. */
 #define KPCN_EXPOSURE_AS_RENDERED (-1.0f)
@@ -277,6 +297,7 @@ typedef struct kpcn_denoise_stats {
   int nets_created;      /* oneDNN networks built (0 on a warm execute of an unchanged size) */
   double exposure;       /* the input's kpcn_aov_exposure (0 when not measured) */
   double exposure_scale; /* the colour scale the network saw the input at (1 = as rendered) */
+  int fireflies; /* pixels kpcn_aov_bound_fireflies bounded (kpcn_denoiser_options.firefly) */
 } kpcn_denoise_stats;
 void kpcn_denoiser_get_stats(const kpcn_denoiser *d, kpcn_denoise_stats *s);
 

@@ -42,6 +42,7 @@ void kpcn_denoiser_options_defaults(kpcn_denoiser_options *o) {
   o->nlmeans.sigma_albedo = 0.05f;
   o->nlmeans.sigma_depth = 0.02f;
   o->nlmeans.patch_radius = 3;
+  o->firefly = KPCN_DENOISE_DEFAULT_FIREFLY;
 }
 
 static double now_s(void) {
@@ -59,6 +60,10 @@ static kpcn_status check_options(const kpcn_denoiser_options *o) {
                      "denoiser_create: exposure %g must be > 0, 0 (the model's) or "
                      "KPCN_EXPOSURE_AS_RENDERED",
                      (double)o->exposure);
+  if (!(o->firefly == 0.0f || o->firefly >= 1.0f) || !isfinite(o->firefly))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "denoiser_create: firefly %g must be 0 (off) or a ratio >= 1",
+                     (double)o->firefly);
   if (o->ensemble < 0 || o->ensemble > KPCN_DENOISE_MAX_ENSEMBLE ||
       (o->ensemble > 1 && (o->ensemble & (o->ensemble - 1)) != 0))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
@@ -305,13 +310,10 @@ static kpcn_status exposure_scale(kpcn_denoiser *d, const kpcn_aov_set *aov, flo
 }
 
 /* run_method on each transform of the ensemble, mapped back and averaged into out. The
- * members are summed in a fixed order, so the result does not depend on threads. The
- * exposure is measured once, on the input as given, so every member sees the same scale. */
-static kpcn_status run_ensemble(kpcn_denoiser *d, const kpcn_aov_set *aov, float *out) {
+ * members are summed in a fixed order, so the result does not depend on threads. Every
+ * member sees the same colour scale `sc` (run_denoise measures it once). */
+static kpcn_status run_ensemble(kpcn_denoiser *d, const kpcn_aov_set *aov, float sc, float *out) {
   const int n = d->opt.ensemble > 1 ? d->opt.ensemble : 1;
-  float sc;
-  KPCN_TRY(exposure_scale(d, aov, &sc));
-  d->stats.exposure_scale = sc;
   if (n == 1) return run_method(d, aov, sc, out);
   const int W = aov->width, H = aov->height, nt = d->opt.nthreads;
   const size_t N = 3 * kpcn_aov_plane_size(aov);
@@ -356,6 +358,45 @@ static kpcn_status run_ensemble(kpcn_denoiser *d, const kpcn_aov_set *aov, float
   return s;
 }
 
+/* A malloc'd copy of n floats (NULL for a NULL src, or on failure with *s set). */
+static float *dup_floats(const float *src, size_t n, kpcn_status *s) {
+  if (!src || *s != KPCN_OK) return NULL;
+  float *p = kpcn_alloc(sizeof(float) * n, "firefly-bounded input plane");
+  if (!p) {
+    *s = KPCN_ERR_OUT_OF_MEMORY;
+    return NULL;
+  }
+  memcpy(p, src, sizeof(float) * n);
+  return p;
+}
+
+/* The exposure scale (measured on the input as given), the KPCN's firefly bound, then
+ * run_ensemble. The bound runs once, before the ensemble's mirrors and rotations (it commutes
+ * with them), on a shallow copy of the input whose only own planes are the three it changes:
+ * diffuse, its variance and colour (the other buffers stay the caller's, read only). */
+static kpcn_status run_denoise(kpcn_denoiser *d, const kpcn_aov_set *aov, float *out) {
+  float sc;
+  KPCN_TRY(exposure_scale(d, aov, &sc));
+  d->stats.exposure_scale = sc;
+  if (d->opt.method != KPCN_DENOISE_KPCN || d->opt.firefly == 0.0f)
+    return run_ensemble(d, aov, sc, out);
+  KPCN_TRY(kpcn_pipeline_require(aov)); /* the pipeline's errors, not the bound's */
+  const size_t P = kpcn_aov_plane_size(aov);
+  kpcn_status s = KPCN_OK;
+  kpcn_aov_set b = *aov;
+  b.buf[KPCN_BUF_DIFFUSE] = dup_floats(aov->buf[KPCN_BUF_DIFFUSE], 3 * P, &s);
+  b.var[KPCN_BUF_DIFFUSE] = dup_floats(aov->var[KPCN_BUF_DIFFUSE], P, &s);
+  b.buf[KPCN_BUF_COLOR] = dup_floats(aov->buf[KPCN_BUF_COLOR], 3 * P, &s);
+  if (s == KPCN_OK)
+    s = kpcn_aov_bound_fireflies(&b, d->opt.firefly, kpcn_model_arch(d->model)->eps,
+                                 &d->stats.fireflies);
+  if (s == KPCN_OK) s = run_ensemble(d, &b, sc, out);
+  free(b.buf[KPCN_BUF_DIFFUSE]);
+  free(b.var[KPCN_BUF_DIFFUSE]);
+  free(b.buf[KPCN_BUF_COLOR]);
+  return s;
+}
+
 kpcn_status kpcn_denoiser_execute(kpcn_denoiser *d, float *out, int width, int height,
                                   size_t pixel_stride, size_t row_stride) {
   if (!d || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_execute: NULL argument");
@@ -369,7 +410,7 @@ kpcn_status kpcn_denoiser_execute(kpcn_denoiser *d, float *out, int width, int h
   kpcn_status s = assemble(d, width, height, &aov);
   if (s == KPCN_OK) {
     rgb = kpcn_aligned_alloc(sizeof(float) * 3 * kpcn_aov_plane_size(aov), "denoiser output");
-    s = rgb ? run_ensemble(d, aov, rgb) : KPCN_ERR_OUT_OF_MEMORY;
+    s = rgb ? run_denoise(d, aov, rgb) : KPCN_ERR_OUT_OF_MEMORY;
   }
   if (s == KPCN_OK) {
     const size_t P = kpcn_aov_plane_size(aov);
@@ -394,7 +435,7 @@ kpcn_status kpcn_denoiser_execute_aov(kpcn_denoiser *d, const kpcn_aov_set *aov,
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_execute_aov: NULL argument");
   double t0 = now_s();
   memset(&d->stats, 0, sizeof d->stats);
-  kpcn_status s = run_ensemble(d, aov, out_planar);
+  kpcn_status s = run_denoise(d, aov, out_planar);
   d->stats.total_s = now_s() - t0;
   return s;
 }

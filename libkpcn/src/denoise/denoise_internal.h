@@ -52,6 +52,9 @@ typedef struct kpcn_pipeline_cache {
 /* Frees what the cache holds and zeroes it (safe on a zeroed cache). */
 void kpcn_pipeline_cache_release(kpcn_pipeline_cache *c);
 
+/* Fails naming the first buffer or variance the KPCN needs that `aov` lacks. */
+kpcn_status kpcn_pipeline_require(const kpcn_aov_set *aov);
+
 /* Runs the two-branch KPCN on `aov` into out (planar RGB [3][H][W]) with o's tile, bf16,
  * nthreads and direct_conv; the network sees the colour buffers times color_scale (> 0,
  * kpcn_features_norm) and the result is divided by it. Accumulates timings into *st.

@@ -127,7 +127,7 @@ static void tile_grid(const kpcn_arch *a, int bf16, int W, int H, int pad, int t
   }
 }
 
-static kpcn_status require_all(const kpcn_aov_set *aov) {
+kpcn_status kpcn_pipeline_require(const kpcn_aov_set *aov) {
   const kpcn_buffer need[] = {KPCN_BUF_DIFFUSE, KPCN_BUF_SPECULAR, KPCN_BUF_ALBEDO,
                               KPCN_BUF_NORMAL,  KPCN_BUF_DEPTH,    KPCN_BUF_VISIBILITY};
   for (size_t i = 0; i < sizeof need / sizeof need[0]; i++)
@@ -218,7 +218,7 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
   const int tile = o->tile, nthreads = o->nthreads;
   const kpcn_arch *arch = kpcn_model_arch(model);
   KPCN_TRY(kpcn_features_check_arch(arch));
-  KPCN_TRY(require_all(aov));
+  KPCN_TRY(kpcn_pipeline_require(aov));
   const int W = aov->width, H = aov->height, K = arch->kernel_size;
   const int passes = kpcn_arch_kpa_passes(arch);
   const int pad = tile_pad(arch);

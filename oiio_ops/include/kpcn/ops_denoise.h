@@ -22,6 +22,8 @@ struct DenoiseOptions {
   // the exposure the network is shown every input at (kpcn_denoiser_options.exposure):
   // 0 = the model's, > 0 = that one, KPCN_EXPOSURE_AS_RENDERED = as rendered
   float exposure = 0.0f;
+  // bound isolated diffuse fireflies first (kpcn_denoiser_options.firefly): the ratio, 0 = off
+  float firefly = KPCN_DENOISE_DEFAULT_FIREFLY;
   // Baseline parameters; defaults of kpcn_denoiser_options_defaults when left alone.
   kpcn_denoiser_options c_options() const;
 };
