@@ -52,7 +52,7 @@ kpcn_status kpcn_aov_bound_fireflies(kpcn_aov_set *aov, float ratio, float eps, 
       e += dif[c * P + i] / (alb[c * P + i] + eps);
     irr[i] = e * (1.0f / 3.0f);
   }
-  const float floor = (float)(FIREFLY_FLOOR * exposure);
+  const float bound_floor = (float)(FIREFLY_FLOOR * exposure);
   int n = 0;
   for (int y = 0; y < H; y++)
     for (int x = 0; x < W; x++) {
@@ -66,7 +66,7 @@ kpcn_status kpcn_aov_bound_fireflies(kpcn_aov_set *aov, float ratio, float eps, 
             if (v > nb) nb = v;
           }
         }
-      const float bound = ratio * nb + floor;
+      const float bound = ratio * nb + bound_floor;
       if (!(irr[i] > bound)) continue;
       const float m = (dif[i] + dif[P + i] + dif[2 * P + i]) * (1.0f / 3.0f);
       if (!(var[i] > FIREFLY_MIN_RELVAR * m * m)) continue;
