@@ -70,20 +70,20 @@ static void test_untouched(void) {
   kpcn_aov_set *a = wall(1), *ref = NULL;
   CHECK(a && kpcn_aov_clone(&ref, a) == KPCN_OK);
   int n = -1;
-  CHECK(kpcn_aov_bound_fireflies(a, 4.0f, EPS, &n) == KPCN_OK && n == 0);
+  CHECK(kpcn_aov_bound_fireflies(a, 4.0f, EPS, 0.0, &n) == KPCN_OK && n == 0);
   CHECK(same_planes(a, ref));
   /* a bright pixel that many samples agree on (an emitter's edge seen in diffuse, a sharp
    * caustic at high spp): relative variance 0.01, left alone however bright */
   put(a, 7, 9, 5.0f, 0.8f, 0.01f);
   put(ref, 7, 9, 5.0f, 0.8f, 0.01f);
-  CHECK(kpcn_aov_bound_fireflies(a, 4.0f, EPS, &n) == KPCN_OK && n == 0);
+  CHECK(kpcn_aov_bound_fireflies(a, 4.0f, EPS, 0.0, &n) == KPCN_OK && n == 0);
   CHECK(same_planes(a, ref));
   /* a bright noisy 2x2 cluster: each pixel has bright neighbours, so none is isolated */
   for (int k = 0; k < 4; k++) {
     put(a, 12 + (k & 1), 12 + (k >> 1), 1.0f, 0.8f, 1.0f);
     put(ref, 12 + (k & 1), 12 + (k >> 1), 1.0f, 0.8f, 1.0f);
   }
-  CHECK(kpcn_aov_bound_fireflies(a, 4.0f, EPS, &n) == KPCN_OK && n == 0);
+  CHECK(kpcn_aov_bound_fireflies(a, 4.0f, EPS, 0.0, &n) == KPCN_OK && n == 0);
   CHECK(same_planes(a, ref));
   kpcn_aov_destroy(a);
   kpcn_aov_destroy(ref);
@@ -106,7 +106,7 @@ static void test_partial_coverage(void) {
   const double bound = 4.0 * nb + 0.01 * exposure, e0 = irradiance(in, i);
   CHECK(e0 > 100.0 * nb);
   int n = -1;
-  CHECK(kpcn_aov_bound_fireflies(a, 4.0f, EPS, &n) == KPCN_OK && n == 1);
+  CHECK(kpcn_aov_bound_fireflies(a, 4.0f, EPS, 0.0, &n) == KPCN_OK && n == 1);
   CHECK_CLOSE(irradiance(a, i), bound, 1e-5, 0.0);
   const double s = bound / e0;
   for (int c = 0; c < 3; c++) {
@@ -120,7 +120,7 @@ static void test_partial_coverage(void) {
   put(a, 10, 6, 1.93f, 0.19f, 1.0f);
   CHECK(same_planes(a, in));
   /* a ratio above the firefly's own leaves it */
-  CHECK(kpcn_aov_bound_fireflies(a, (float)(1.01 * e0 / nb), EPS, &n) == KPCN_OK && n == 0);
+  CHECK(kpcn_aov_bound_fireflies(a, (float)(1.01 * e0 / nb), EPS, 0.0, &n) == KPCN_OK && n == 0);
   kpcn_aov_destroy(a);
   kpcn_aov_destroy(in);
 }
@@ -136,14 +136,14 @@ static void test_equivariance(void) {
   kpcn_aov_set *b = NULL;
   CHECK(kpcn_aov_clone(&b, a) == KPCN_OK);
   int n = 0;
-  CHECK(kpcn_aov_bound_fireflies(b, 4.0f, EPS, &n) == KPCN_OK && n >= 6);
+  CHECK(kpcn_aov_bound_fireflies(b, 4.0f, EPS, 0.0, &n) == KPCN_OK && n >= 6);
   for (int t = 1; t < KPCN_DENOISE_MAX_ENSEMBLE; t++) {
     kpcn_augment_xform x;
     kpcn_denoise_ensemble_xform(t, &x);
     kpcn_aov_set *ta = NULL, *tb = NULL;
     CHECK(kpcn_augment_aov(&ta, a, &x, 1) == KPCN_OK && kpcn_augment_aov(&tb, b, &x, 1) == KPCN_OK);
     int m = -1;
-    CHECK(kpcn_aov_bound_fireflies(ta, 4.0f, EPS, &m) == KPCN_OK && m == n);
+    CHECK(kpcn_aov_bound_fireflies(ta, 4.0f, EPS, 0.0, &m) == KPCN_OK && m == n);
     CHECK(same_planes(ta, tb));
     kpcn_aov_destroy(ta);
     kpcn_aov_destroy(tb);
@@ -160,7 +160,7 @@ static void test_equivariance(void) {
       s->var[lit[k]][i] *= 16.0f;
   }
   int m = -1;
-  CHECK(kpcn_aov_bound_fireflies(s, 4.0f, EPS, &m) == KPCN_OK && m == n);
+  CHECK(kpcn_aov_bound_fireflies(s, 4.0f, EPS, 0.0, &m) == KPCN_OK && m == n);
   int exact = 1;
   for (size_t i = 0; i < 3 * P; i++)
     exact &= s->buf[KPCN_BUF_DIFFUSE][i] == 4.0f * b->buf[KPCN_BUF_DIFFUSE][i];
@@ -198,7 +198,7 @@ static void test_denoiser(void) {
   put(a, 3, 17, 0.9f, 0.05f, 0.8f);
   CHECK(kpcn_aov_clone(&in, a) == KPCN_OK && kpcn_aov_clone(&pre, a) == KPCN_OK);
   int n = 0, nd = -1;
-  CHECK(kpcn_aov_bound_fireflies(pre, KPCN_DENOISE_DEFAULT_FIREFLY, arch.eps, &n) == KPCN_OK);
+  CHECK(kpcn_aov_bound_fireflies(pre, KPCN_DENOISE_DEFAULT_FIREFLY, arch.eps, 0.0, &n) == KPCN_OK);
   CHECK(n == 2);
   const size_t N = 3 * kpcn_aov_plane_size(a);
   float *x = malloc(sizeof(float) * N), *y = malloc(sizeof(float) * N),
@@ -231,12 +231,12 @@ static void test_denoiser(void) {
 static void test_errors(void) {
   kpcn_aov_set *a = wall(6);
   int n = 7;
-  CHECK(kpcn_aov_bound_fireflies(a, 0.9f, EPS, &n) == KPCN_ERR_INVALID_ARGUMENT && n == 0);
-  CHECK(kpcn_aov_bound_fireflies(a, 4.0f, 0.0f, NULL) == KPCN_ERR_INVALID_ARGUMENT);
-  CHECK(kpcn_aov_bound_fireflies(NULL, 4.0f, EPS, NULL) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_aov_bound_fireflies(a, 0.9f, EPS, 0.0, &n) == KPCN_ERR_INVALID_ARGUMENT && n == 0);
+  CHECK(kpcn_aov_bound_fireflies(a, 4.0f, 0.0f, 0.0, NULL) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_aov_bound_fireflies(NULL, 4.0f, EPS, 0.0, NULL) == KPCN_ERR_INVALID_ARGUMENT);
   free(a->var[KPCN_BUF_DIFFUSE]);
   a->var[KPCN_BUF_DIFFUSE] = NULL;
-  CHECK(kpcn_aov_bound_fireflies(a, 4.0f, EPS, NULL) == KPCN_ERR_MISSING_CHANNEL);
+  CHECK(kpcn_aov_bound_fireflies(a, 4.0f, EPS, 0.0, NULL) == KPCN_ERR_MISSING_CHANNEL);
   CHECK(strstr(kpcn_last_error(), "diffuse.var") != NULL);
   kpcn_aov_destroy(a);
 }

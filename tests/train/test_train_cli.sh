@@ -1,6 +1,6 @@
 #!/bin/sh
 # kpcn-train --record-exposure: a copy of a model recording the median exposure of a patch
-# store's training images; same weights; bad inputs named, no output file.
+# store's training images; same weights; bad inputs named, no output file. --firefly: bad ratios named.
 # usage: test_train_cli.sh KPCN_TRAIN KPCNTOOL TESTDATA
 set -u
 K=$1; T=$2; TD=$3
@@ -30,4 +30,12 @@ for args in "$M $D/nope.kps" "$M $N" "$N $D/p.kps"; do
 done
 "$K" --record-exposure "$D/bad.safetensors" "$M" 2>"$D/err" && fail "accepted without a store"
 grep -q 'expected' "$D/err" || fail "usage error unclear: $(cat "$D/err")"
+# --firefly: a ratio below 1 or no number is refused naming the option, nothing is written
+for bad in 0.5 abc; do
+  if "$K" --store "$D/p.kps" -o "$D/f.safetensors" --iters 1 --firefly $bad 2>"$D/err"; then
+    fail "--firefly $bad accepted"
+  fi
+  grep -q firefly "$D/err" || fail "--firefly error unclear: $(cat "$D/err")"
+  [ ! -e "$D/f.safetensors" ] || fail "output written for --firefly $bad"
+done
 echo "test_train_cli: ok"

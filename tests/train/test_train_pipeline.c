@@ -815,6 +815,58 @@ static void test_batch_exposure(void) {
   kpcn_trainer_destroy(b);
 }
 
+/* firefly: the bound lowers only the diffuse branch's noisy colour, at the pixels it bounds
+ * (never raises one), and leaves the specular branch, the albedo and every target alone; the
+ * checkpoint records the ratio, so resuming with another (or without) is refused. */
+static void test_batch_firefly(void) {
+  kpcn_train_settings s;
+  settings(&s, tf_tmp("f0.safetensors"));
+  kpcn_trainer *a = NULL, *b = NULL;
+  CHECK(kpcn_trainer_create(&a, &s) == KPCN_OK);
+  s.out_path = tf_tmp("f1.safetensors");
+  s.firefly = 1.0; /* the tightest ratio: the store's +-30 % noise (relative variance 0.44)
+                      has local maxima */
+  CHECK(kpcn_trainer_create(&b, &s) == KPCN_OK);
+  if (!a || !b) return;
+  CHECK(kt_batch_assemble(a) == KPCN_OK && kt_batch_assemble(b) == KPCN_OK);
+  const size_t n = (size_t)a->N * 3 * a->P * a->P;
+  size_t lowered = 0;
+  int raised = 0, other = 0;
+  for (size_t i = 0; i < n; i++) {
+    lowered += b->noisy[0][i] < a->noisy[0][i];
+    raised |= b->noisy[0][i] > a->noisy[0][i];
+    other |= b->noisy[1][i] != a->noisy[1][i] || b->target[0][i] != a->target[0][i] ||
+             b->target[1][i] != a->target[1][i] || b->albedo[i] != a->albedo[i] ||
+             b->refc[i] != a->refc[i];
+  }
+  printf("firefly ratio 1: %zu of %zu diffuse colour values lowered\n", lowered, n);
+  CHECK(lowered > 0 && lowered < n / 4 && !raised && !other);
+  kpcn_trainer_destroy(a);
+  kpcn_trainer_destroy(b);
+  s.firefly = 0.5;
+  CHECK(kpcn_trainer_create(&b, &s) == KPCN_ERR_INVALID_ARGUMENT && !b);
+  CHECK(strstr(kpcn_last_error(), "firefly") != NULL);
+  s.firefly = 4.0;
+  s.out_path = tf_tmp("f2.safetensors");
+  stop_at = 2;
+  s.progress = stop_cb;
+  int stopped = 0;
+  CHECK(kpcn_trainer_create(&b, &s) == KPCN_OK);
+  CHECK(b && kpcn_trainer_run(b, &stopped) == KPCN_OK && stopped == 1);
+  kpcn_trainer_destroy(b);
+  s.progress = NULL;
+  s.resume = 1;
+  const double other_ratio[2] = {0.0, 3.0};
+  for (int k = 0; k < 2; k++) {
+    s.firefly = other_ratio[k];
+    CHECK(kpcn_trainer_create(&b, &s) == KPCN_ERR_FORMAT);
+    CHECK(strstr(kpcn_last_error(), "firefly") != NULL);
+  }
+  s.firefly = 4.0;
+  CHECK(kpcn_trainer_create(&b, &s) == KPCN_OK && kpcn_trainer_iteration(b) == 2);
+  kpcn_trainer_destroy(b);
+}
+
 int main(void) {
   static char store[512]; /* out of tf_tmp's pool, which wraps after 64 names */
   snprintf(store, sizeof store, "%s", tf_tmp("train.kps"));
@@ -825,6 +877,7 @@ int main(void) {
   }
   test_batch_wiring();
   test_batch_exposure();
+  test_batch_firefly();
   test_determinism_and_resume();
   g_passes = 2;
   test_determinism_and_resume();

@@ -54,6 +54,8 @@ static void usage(FILE *f) {
         "  --no-colorswap --no-mirror --no-rotate --no-shift   disable augmentations\n"
         "  --normalize-exposure      show every patch at the model's exposure (the median of\n"
         "                            the store's; as the denoiser shows every input)\n"
+        "  --firefly R               bound each patch's isolated diffuse fireflies (ratio R >= 1)\n"
+        "                            before its features, as the denoiser does by default (4)\n"
         "  --quiet                   no log lines\n"
         "\n"
         "usage: kpcn-train --compare OUT.png [--x iter|elapsed_s] [--y COLUMN] [--title T]\n"
@@ -340,6 +342,7 @@ int main(int argc, char **argv) {
     INT("--log-every", 1, (long long)1e12, s.log_every)
     INT("--decay-every", 0, (long long)1e12, s.adam.decay_every)
     DBL("--source-lr-scale", 1e-3, 1e4, s.source_lr_scale)
+    DBL("--firefly", 1, 1e30, s.firefly)
     DBL("--lr", 1e-12, 10, s.adam.lr)
     DBL("--lr2", 1e-12, 1, s.stage2_lr)
     DBL("--lr-decay", 1e-6, 1, s.adam.lr_decay)

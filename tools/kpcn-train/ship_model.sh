@@ -78,6 +78,7 @@ case $BEST_BY in mean) vcol=7 ;; geomean) vcol=10 ;; *) echo "ship_model.sh: BES
 [ -n "${KPA_PASSES:-}" ] && args+=(--kpa-passes "$KPA_PASSES")
 [ "${SOURCE_WEIGHT:-0}" = 1 ] && args+=(--source-weight)
 [ -n "${SOURCE_LR_SCALE:-}" ] && args+=(--source-lr-scale "$SOURCE_LR_SCALE")
+[ -n "${FIREFLY:-}" ] && args+=(--firefly "$FIREFLY")
 [ -n "${TIME_LIMIT:-}" ] && args+=(--time-limit "$TIME_LIMIT")
 snapdir=${SNAPSHOT_DIR:-$work/snapshots}
 [ -n "${SWA_FROM:-}" ] && [ -z "${SNAPSHOT_DIR:-}" ] && args+=(--snapshots "$snapdir")

@@ -164,17 +164,19 @@ void kpcn_recombine_backward(const float *grad_out, const float *spec_out, const
                              float eps, size_t n, float *grad_diffuse, float *grad_spec);
 
 /* Bounds isolated diffuse fireflies in place (the KPCN's input conditioning; the denoiser
- * runs it on a copy of its input when kpcn_denoiser_options.firefly > 0). With
- * E = mean_c diffuse_c / (albedo_c + eps) (the diffuse branch's irradiance), a pixel whose E
- * exceeds bound = ratio * (the largest E of its 8 neighbours) + 0.01 * exposure
- * (kpcn_aov_exposure) and whose diffuse relative variance diffuse.var / mean_c(diffuse_c)^2
- * exceeds 0.25 (its value rests on a few samples) has its diffuse scaled by bound / E, its
- * diffuse.var by the square, and color (if present) lowered by what diffuse lost. Decisions
- * read the E of the input, so the result does not depend on the order pixels are visited.
+ * runs it on a copy of its input when kpcn_denoiser_options.firefly > 0, the trainer on each
+ * patch when kpcn_train_settings.firefly > 0). With E = mean_c diffuse_c / (albedo_c + eps)
+ * (the diffuse branch's irradiance), a pixel whose E exceeds bound = ratio * (the largest E
+ * of its 8 neighbours) + 0.01 * exposure (`exposure` if > 0, else kpcn_aov_exposure of `aov`:
+ * a training patch passes its whole image's) and whose diffuse relative variance diffuse.var /
+ * mean_c(diffuse_c)^2 exceeds 0.25 (its value rests on a few samples) has its diffuse scaled by
+ * bound / E, its diffuse.var by the square, and color (if present) lowered by what diffuse lost.
+ * Decisions read the E of the input, so the result does not depend on the order pixels are visited.
  * Why: at a partly covered pixel the small albedo turns one bright sample into a large
  * irradiance that neighbours' kernels spread (docs/denoiser.md). ratio >= 1. Needs diffuse
  * with its variance, albedo and specular. *count (may be NULL): pixels bounded. */
-kpcn_status kpcn_aov_bound_fireflies(kpcn_aov_set *aov, float ratio, float eps, int *count);
+kpcn_status kpcn_aov_bound_fireflies(kpcn_aov_set *aov, float ratio, float eps, double exposure,
+                                     int *count);
 
 /* ======================================================================================
  * Denoiser (oidn.h style). Lifecycle:

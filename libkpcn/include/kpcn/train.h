@@ -248,6 +248,10 @@ typedef struct kpcn_train_settings {
                                the store: needs a store whose sources record theirs), as the
                                denoiser shows every input: noisy colour and references scaled by
                                arch.exposure / the source image's exposure. 0: as rendered */
+  double firefly;           /* >= 1: bound each patch's isolated diffuse fireflies with this ratio
+                               before its features, as the denoiser bounds its input
+                               (kpcn_aov_bound_fireflies, the floor from the source image's
+                               exposure); 0 = patches as rendered */
   int batch;                /* 16 */
   int patch;                /* P, 64 (<= store patch size) */
   int64_t iters;            /* total iterations, 1000 */

@@ -26,7 +26,8 @@
  * neighbours is bounded to this, not to zero, and the rule is exposure-invariant. */
 #define FIREFLY_FLOOR 0.01
 
-kpcn_status kpcn_aov_bound_fireflies(kpcn_aov_set *aov, float ratio, float eps, int *count) {
+kpcn_status kpcn_aov_bound_fireflies(kpcn_aov_set *aov, float ratio, float eps, double exposure,
+                                     int *count) {
   if (count) *count = 0;
   if (!aov) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "bound_fireflies: aov is NULL");
   if (!(ratio >= 1.0f) || !isfinite(ratio))
@@ -37,8 +38,7 @@ kpcn_status kpcn_aov_bound_fireflies(kpcn_aov_set *aov, float ratio, float eps, 
   KPCN_TRY(kpcn_aov_require(aov, KPCN_BUF_DIFFUSE, 1, "bound_fireflies"));
   KPCN_TRY(kpcn_aov_require(aov, KPCN_BUF_ALBEDO, 0, "bound_fireflies"));
   KPCN_TRY(kpcn_aov_require(aov, KPCN_BUF_SPECULAR, 0, "bound_fireflies"));
-  double exposure;
-  KPCN_TRY(kpcn_aov_exposure(aov, &exposure));
+  if (!(exposure > 0.0)) KPCN_TRY(kpcn_aov_exposure(aov, &exposure));
   const int W = aov->width, H = aov->height;
   const size_t P = kpcn_aov_plane_size(aov);
   float *irr = kpcn_aligned_alloc(sizeof(float) * P, "firefly irradiance");

@@ -153,6 +153,9 @@ static kpcn_status one_sample(kpcn_trainer *t, int b, float *scr) {
           aug[(size_t)ch[k] * pp + i] *= norm.color_scale;
     }
   float eps = t->arch.eps;
+  if (t->s.firefly > 0.0) /* the denoiser's input conditioning, on the (augmented) patch */
+    KPCN_TRY(
+        kpcn_aov_bound_fireflies(&aov, (float)t->s.firefly, eps, src ? src->exposure : 0.0, NULL));
   size_t f3 = 3 * pp;
   for (int br = 0; br < KT_NB; br++)
     KPCN_TRY(kpcn_features_build(&aov, br, eps, &norm, t->feat[br] + (size_t)b * t->nfeat * pp,

@@ -82,6 +82,10 @@ kpcn_status kt_checkpoint_save(kpcn_trainer *t, const char *path) {
   meta_i64(meta, "train.stage1_iters", t->s.stage1_iters);
   cJSON_AddStringToObject(meta, "train.precision", t->s.bf16 ? "bf16" : "f32");
   if (t->s.normalize_exposure) cJSON_AddStringToObject(meta, "train.normalize_exposure", "1");
+  if (t->s.firefly > 0.0) {
+    snprintf(buf, sizeof buf, "%.17g", t->s.firefly);
+    cJSON_AddStringToObject(meta, "train.firefly", buf);
+  }
   cJSON_AddStringToObject(meta, "train.loss1", kpcn_loss_name(t->s.loss1));
   cJSON_AddStringToObject(meta, "train.loss2", kpcn_loss_name(t->s.loss2));
   cJSON_AddItemToObject(root, "__metadata__", meta);
@@ -271,6 +275,11 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
   if ((nx && !strcmp(nx, "1")) != (t->s.normalize_exposure != 0))
     BAD("checkpoint '%s' was written %s exposure normalisation, this run %s it", path,
         nx ? "with" : "without", t->s.normalize_exposure ? "uses" : "does not use");
+  /* absent in checkpoints of runs that showed patches without the firefly bound */
+  const char *ff = meta_str(meta, "train.firefly");
+  if ((ff ? strtod(ff, NULL) : 0.0) != t->s.firefly)
+    BAD("checkpoint '%s' was written with firefly %s, this run uses %g (--firefly)", path,
+        ff ? ff : "off", t->s.firefly);
   long long iter = 0, steps[2] = {0, 0};
   if ((st = meta_expect(meta, "train.iteration", 0, path, &iter)) ||
       (st = meta_expect(meta, "train.adam_steps.diffuse", 0, path, &steps[0])) ||

@@ -216,6 +216,9 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch %d out of range 8..1024", s->patch);
   if (s->iters < 0)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "iters %lld < 0", (long long)s->iters);
+  if (!(s->firefly == 0.0 || (s->firefly >= 1.0 && s->firefly <= 1e30)))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "firefly %g must be 0 (off) or a ratio >= 1",
+                     s->firefly);
   if (s->loss_margin < 0 || 2 * s->loss_margin >= s->patch)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "loss margin %d too large for patch %d",
                      s->loss_margin, s->patch);
