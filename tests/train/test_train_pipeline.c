@@ -760,6 +760,21 @@ static void test_batch_wiring(void) {
   kpcn_trainer_destroy(t);
 }
 
+/* Runs s into `out` until stop_cb stops it at iteration 2 (a checkpoint), then leaves s set
+ * to resume it: the tests of settings a checkpoint must record. */
+static void checkpoint_at_two(kpcn_train_settings *s, const char *out) {
+  s->out_path = out;
+  stop_at = 2;
+  s->progress = stop_cb;
+  int stopped = 0;
+  kpcn_trainer *t = NULL;
+  CHECK(kpcn_trainer_create(&t, s) == KPCN_OK);
+  CHECK(t && kpcn_trainer_run(t, &stopped) == KPCN_OK && stopped == 1);
+  kpcn_trainer_destroy(t);
+  s->progress = NULL;
+  s->resume = 1;
+}
+
 /* normalize_exposure: the same batch as without it, its noisy colour and targets at the
  * model's exposure (here set to 4x the source's): linear quantities x4, log-specular
  * expm1(.)/4 the same; recombining the targets still gives the (scaled) reference. */
@@ -798,15 +813,7 @@ static void test_batch_exposure(void) {
   kpcn_trainer_destroy(a);
   kpcn_trainer_destroy(b);
   /* the checkpoint records the setting: resuming it without (or the reverse) is refused */
-  s.out_path = tf_tmp("x2.safetensors");
-  stop_at = 2;
-  s.progress = stop_cb;
-  int stopped = 0;
-  CHECK(kpcn_trainer_create(&b, &s) == KPCN_OK);
-  CHECK(b && kpcn_trainer_run(b, &stopped) == KPCN_OK && stopped == 1);
-  kpcn_trainer_destroy(b);
-  s.progress = NULL;
-  s.resume = 1;
+  checkpoint_at_two(&s, tf_tmp("x2.safetensors"));
   s.normalize_exposure = 0;
   CHECK(kpcn_trainer_create(&b, &s) == KPCN_ERR_FORMAT);
   CHECK(strstr(kpcn_last_error(), "exposure") != NULL);
@@ -847,15 +854,7 @@ static void test_batch_firefly(void) {
   CHECK(kpcn_trainer_create(&b, &s) == KPCN_ERR_INVALID_ARGUMENT && !b);
   CHECK(strstr(kpcn_last_error(), "firefly") != NULL);
   s.firefly = 4.0;
-  s.out_path = tf_tmp("f2.safetensors");
-  stop_at = 2;
-  s.progress = stop_cb;
-  int stopped = 0;
-  CHECK(kpcn_trainer_create(&b, &s) == KPCN_OK);
-  CHECK(b && kpcn_trainer_run(b, &stopped) == KPCN_OK && stopped == 1);
-  kpcn_trainer_destroy(b);
-  s.progress = NULL;
-  s.resume = 1;
+  checkpoint_at_two(&s, tf_tmp("f2.safetensors"));
   const double other_ratio[2] = {0.0, 3.0};
   for (int k = 0; k < 2; k++) {
     s.firefly = other_ratio[k];
