@@ -388,7 +388,9 @@ static kpcn_status run_denoise(kpcn_denoiser *d, const kpcn_aov_set *aov, float 
   b.var[KPCN_BUF_DIFFUSE] = dup_floats(aov->var[KPCN_BUF_DIFFUSE], P, &s);
   b.buf[KPCN_BUF_COLOR] = dup_floats(aov->buf[KPCN_BUF_COLOR], 3 * P, &s);
   if (s == KPCN_OK)
-    s = kpcn_aov_bound_fireflies(&b, d->opt.firefly, kpcn_model_arch(d->model)->eps, 0.0,
+    s = kpcn_aov_bound_fireflies(&b, d->opt.firefly, kpcn_model_arch(d->model)->eps,
+                                 d->stats.exposure, /* measured once by exposure_scale; 0 =
+                                                       not measured there: the bound measures */
                                  &d->stats.fireflies);
   if (s == KPCN_OK) s = run_ensemble(d, &b, sc, out);
   free(b.buf[KPCN_BUF_DIFFUSE]);
