@@ -21,31 +21,8 @@ static const char *g_store;
 static int g_bf16;       /* settings(): mixed-precision training */
 static int g_passes = 1; /* settings(): arch.kpa_passes */
 static int g_sw;         /* settings(): arch.source_weight */
-/* kt_tmpfile rotates 8 static buffers; the tests keep many paths alive */
-/* kt_tmpfile cycles through 8 buffers; this test holds more paths at once, so it copies them
- * into its own pool (static, so nothing is left to free). */
-static const char *tf_tmp(const char *name) {
-  static char pool[64][512];
-  static int next = 0;
-  char *p = pool[next++ % 64];
-  snprintf(p, sizeof pool[0], "%s", kt_tmpfile(name));
-  return p;
-}
-
 static void settings(kpcn_train_settings *s, const char *out) {
-  kpcn_train_settings_defaults(s);
-  kpcn_arch_preset("tiny", &s->arch);
-  s->arch.channels = 16; /* oneDNN 2.6 jit kernels need channel blocks of 16 (8 -> ref:any) */
-  s->store_path = g_store;
-  s->out_path = out;
-  s->batch = 3;
-  s->patch = 16;
-  s->iters = 6;
-  s->stage1_iters = 3;
-  s->nthreads = 2;
-  s->seed = 5;
-  s->adam.lr = 1e-2;
-  s->log_every = 2;
+  tf_settings(s, g_store, out);
   s->bf16 = g_bf16;
   s->arch.kpa_passes = g_passes;
   s->arch.source_weight = g_sw;
@@ -70,12 +47,6 @@ static float *model_weights(kpcn_model *m, size_t *n) {
 
 static float *weights(kpcn_trainer *t, size_t *n) {
   return model_weights(kpcn_trainer_model(t), n);
-}
-
-static int stop_at;
-static int stop_cb(void *u, const kpcn_train_progress *p) {
-  (void)u;
-  return p->iter >= stop_at;
 }
 
 static float *run_full(const char *out, size_t *n) {
@@ -121,8 +92,8 @@ static void test_determinism_and_resume(void) {
     kpcn_patchstore_close(ps);
   }
   /* interrupted at iteration 2 (stage 1), resumed to 6 (through stage 2) */
-  stop_at = 2;
-  s.progress = stop_cb;
+  tf_stop_at = 2;
+  s.progress = tf_stop_cb;
   kpcn_trainer_destroy(t);
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
   int stopped = 0;
@@ -729,154 +700,9 @@ static void test_bad_stores(void) {
   CHECK(strstr(kpcn_last_error(), "nockpt.safetensors.ckpt") != NULL);
 }
 
-/* Batch wiring, checked against the definitions: recombining the stage-1 targets gives the
- * reference colour; the kernel's input is the features' colour; the albedo used for
- * recombination is the features' albedo; augmentation draws differ between samples. */
-static void test_batch_wiring(void) {
-  kpcn_train_settings s;
-  settings(&s, tf_tmp("w.safetensors"));
-  kpcn_trainer *t = NULL;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
-  if (!t) return;
-  CHECK(kt_batch_assemble(t) == KPCN_OK);
-  size_t pp = (size_t)t->P * t->P, n3 = 3 * pp;
-  float *c = malloc((size_t)t->N * n3 * sizeof(float));
-  kpcn_recombine(t->target[0], t->target[1], t->albedo, t->arch.eps, t->N * n3, c);
-  double maxrel = 0;
-  for (size_t i = 0; i < t->N * n3; i++)
-    maxrel = fmax(maxrel, fabs(c[i] - t->refc[i]) / (fabs(t->refc[i]) + 1e-3));
-  CHECK(maxrel < 1e-5);
-  int same_noisy = 1, same_alb = 1, same_rgb = 1;
-  for (int b = 0; b < t->N; b++)
-    for (int br = 0; br < 2; br++) {
-      const float *f = t->feat[br] + (size_t)b * t->nfeat * pp;
-      if (memcmp(f, t->noisy[br] + b * n3, n3 * sizeof(float))) same_noisy = 0;
-      if (memcmp(f + 8 * pp, t->albedo + b * n3, n3 * sizeof(float))) same_alb = 0;
-    }
-  /* the diffuse and specular inputs are different images */
-  if (memcmp(t->noisy[0], t->noisy[1], n3 * sizeof(float))) same_rgb = 0;
-  CHECK(same_noisy && same_alb && !same_rgb);
-  free(c);
-  kpcn_trainer_destroy(t);
-}
-
-/* Runs s into `out` until stop_cb stops it at iteration 2 (a checkpoint), then leaves s set
- * to resume it: the tests of settings a checkpoint must record. */
-static void checkpoint_at_two(kpcn_train_settings *s, const char *out) {
-  s->out_path = out;
-  stop_at = 2;
-  s->progress = stop_cb;
-  int stopped = 0;
-  kpcn_trainer *t = NULL;
-  CHECK(kpcn_trainer_create(&t, s) == KPCN_OK);
-  CHECK(t && kpcn_trainer_run(t, &stopped) == KPCN_OK && stopped == 1);
-  kpcn_trainer_destroy(t);
-  s->progress = NULL;
-  s->resume = 1;
-}
-
-/* normalize_exposure: the same batch as without it, its noisy colour and targets at the
- * model's exposure (here set to 4x the source's): linear quantities x4, log-specular
- * expm1(.)/4 the same; recombining the targets still gives the (scaled) reference. */
-static void test_batch_exposure(void) {
-  kpcn_train_settings s;
-  settings(&s, tf_tmp("x0.safetensors"));
-  kpcn_trainer *a = NULL, *b = NULL;
-  CHECK(kpcn_trainer_create(&a, &s) == KPCN_OK);
-  s.out_path = tf_tmp("x1.safetensors");
-  s.normalize_exposure = 1;
-  CHECK(kpcn_trainer_create(&b, &s) == KPCN_OK);
-  if (!a || !b) return;
-  const double e = kpcn_patchstore_source(b->ps, 0)->exposure;
-  CHECK(e > 0.0 && b->arch.exposure == (float)e);
-  b->arch.exposure = (float)(4.0 * e);
-  CHECK(kt_batch_assemble(a) == KPCN_OK && kt_batch_assemble(b) == KPCN_OK);
-  const size_t n = (size_t)a->N * 3 * a->P * a->P;
-  double lin = 0, spec = 0, comb = 0;
-  float *c = malloc(n * sizeof(float));
-  kpcn_recombine(b->target[0], b->target[1], b->albedo, b->arch.eps, n, c);
-  for (size_t i = 0; i < n; i++) {
-    const double r[4] = {b->noisy[0][i] / (4.0 * a->noisy[0][i]),
-                         b->target[0][i] / (4.0 * a->target[0][i]), b->refc[i] / (4.0 * a->refc[i]),
-                         0};
-    for (int k = 0; k < 3; k++)
-      if (isfinite(r[k]) && fabs(a->refc[i]) > 1e-6) lin = fmax(lin, fabs(r[k] - 1.0));
-    spec = fmax(spec, fabs(expm1(b->noisy[1][i]) / 4.0 - expm1(a->noisy[1][i])) /
-                          (1e-6 + fabs(expm1(a->noisy[1][i]))));
-    spec = fmax(spec, fabs(expm1(b->target[1][i]) / 4.0 - expm1(a->target[1][i])) /
-                          (1e-6 + fabs(expm1(a->target[1][i]))));
-    comb = fmax(comb, fabs(c[i] - b->refc[i]) / (fabs(b->refc[i]) + 1e-3));
-  }
-  printf("normalize_exposure x4: linear %.2g, specular %.2g, recombined %.2g\n", lin, spec, comb);
-  CHECK(lin < 1e-5 && spec < 1e-4 && comb < 1e-5);
-  free(c);
-  kpcn_trainer_destroy(a);
-  kpcn_trainer_destroy(b);
-  /* the checkpoint records the setting: resuming it without (or the reverse) is refused */
-  checkpoint_at_two(&s, tf_tmp("x2.safetensors"));
-  s.normalize_exposure = 0;
-  CHECK(kpcn_trainer_create(&b, &s) == KPCN_ERR_FORMAT);
-  CHECK(strstr(kpcn_last_error(), "exposure") != NULL);
-  s.normalize_exposure = 1;
-  CHECK(kpcn_trainer_create(&b, &s) == KPCN_OK && kpcn_trainer_iteration(b) == 2);
-  kpcn_trainer_destroy(b);
-}
-
-/* firefly: the bound lowers only the diffuse branch's noisy colour, at the pixels it bounds
- * (never raises one), and leaves the specular branch, the albedo and every target alone; the
- * checkpoint records the ratio, so resuming with another (or without) is refused. */
-static void test_batch_firefly(void) {
-  kpcn_train_settings s;
-  settings(&s, tf_tmp("f0.safetensors"));
-  kpcn_trainer *a = NULL, *b = NULL;
-  CHECK(kpcn_trainer_create(&a, &s) == KPCN_OK);
-  s.out_path = tf_tmp("f1.safetensors");
-  s.firefly = 1.0; /* the tightest ratio: the store's +-30 % noise (relative variance 0.44)
-                      has local maxima */
-  CHECK(kpcn_trainer_create(&b, &s) == KPCN_OK);
-  if (!a || !b) return;
-  CHECK(kt_batch_assemble(a) == KPCN_OK && kt_batch_assemble(b) == KPCN_OK);
-  const size_t n = (size_t)a->N * 3 * a->P * a->P;
-  size_t lowered = 0;
-  int raised = 0, other = 0;
-  for (size_t i = 0; i < n; i++) {
-    lowered += b->noisy[0][i] < a->noisy[0][i];
-    raised |= b->noisy[0][i] > a->noisy[0][i];
-    other |= b->noisy[1][i] != a->noisy[1][i] || b->target[0][i] != a->target[0][i] ||
-             b->target[1][i] != a->target[1][i] || b->albedo[i] != a->albedo[i] ||
-             b->refc[i] != a->refc[i];
-  }
-  printf("firefly ratio 1: %zu of %zu diffuse colour values lowered\n", lowered, n);
-  CHECK(lowered > 0 && lowered < n / 4 && !raised && !other);
-  kpcn_trainer_destroy(a);
-  kpcn_trainer_destroy(b);
-  s.firefly = 0.5;
-  CHECK(kpcn_trainer_create(&b, &s) == KPCN_ERR_INVALID_ARGUMENT && !b);
-  CHECK(strstr(kpcn_last_error(), "firefly") != NULL);
-  s.firefly = 4.0;
-  checkpoint_at_two(&s, tf_tmp("f2.safetensors"));
-  const double other_ratio[2] = {0.0, 3.0};
-  for (int k = 0; k < 2; k++) {
-    s.firefly = other_ratio[k];
-    CHECK(kpcn_trainer_create(&b, &s) == KPCN_ERR_FORMAT);
-    CHECK(strstr(kpcn_last_error(), "firefly") != NULL);
-  }
-  s.firefly = 4.0;
-  CHECK(kpcn_trainer_create(&b, &s) == KPCN_OK && kpcn_trainer_iteration(b) == 2);
-  kpcn_trainer_destroy(b);
-}
-
 int main(void) {
-  static char store[512]; /* out of tf_tmp's pool, which wraps after 64 names */
-  snprintf(store, sizeof store, "%s", tf_tmp("train.kps"));
-  g_store = store;
-  if (tf_make_store(g_store, 20, 48, 40, 12, 1, 0, NULL, 0) != 0) {
-    fprintf(stderr, "cannot build the synthetic store: %s\n", kpcn_last_error());
-    return 1;
-  }
-  test_batch_wiring();
-  test_batch_exposure();
-  test_batch_firefly();
+  g_store = tf_make_test_store("train.kps");
+  if (!g_store) return 1;
   test_determinism_and_resume();
   g_passes = 2;
   test_determinism_and_resume();

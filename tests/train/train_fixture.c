@@ -120,3 +120,43 @@ out:
   kpcn_aov_destroy(r);
   return rc;
 }
+
+const char *tf_tmp(const char *name) {
+  static char pool[64][512];
+  static int next = 0;
+  char *p = pool[next++ % 64];
+  snprintf(p, sizeof pool[0], "%s", kt_tmpfile(name));
+  return p;
+}
+
+const char *tf_make_test_store(const char *name) {
+  static char store[512]; /* out of tf_tmp's pool, which wraps after 64 names */
+  snprintf(store, sizeof store, "%s", tf_tmp(name));
+  if (tf_make_store(store, 20, 48, 40, 12, 1, 0, NULL, 0) != 0) {
+    fprintf(stderr, "cannot build the synthetic store: %s\n", kpcn_last_error());
+    return NULL;
+  }
+  return store;
+}
+
+void tf_settings(kpcn_train_settings *s, const char *store, const char *out) {
+  kpcn_train_settings_defaults(s);
+  kpcn_arch_preset("tiny", &s->arch);
+  s->arch.channels = 16;
+  s->store_path = store;
+  s->out_path = out;
+  s->batch = 3;
+  s->patch = 16;
+  s->iters = 6;
+  s->stage1_iters = 3;
+  s->nthreads = 2;
+  s->seed = 5;
+  s->adam.lr = 1e-2;
+  s->log_every = 2;
+}
+
+int tf_stop_at;
+int tf_stop_cb(void *user, const kpcn_train_progress *p) {
+  (void)user;
+  return p->iter >= tf_stop_at;
+}
