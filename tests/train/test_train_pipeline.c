@@ -583,9 +583,24 @@ static void test_average(void) {
   kpcn_model *mo = NULL;
   const char *bad[2] = {in[0], tf_tmp("avg_other.safetensors")};
   CHECK(kpcn_model_create(&other, 1, &mo) == KPCN_OK && kpcn_model_save(mo, bad[1]) == KPCN_OK);
+  kpcn_model_destroy(mo);
+  mo = NULL;
   avg = NULL;
   CHECK(kpcn_model_average(bad, 2, &avg) == KPCN_ERR_FORMAT && avg == NULL);
   CHECK(strstr(kpcn_last_error(), "avg_other") && strstr(kpcn_last_error(), "architecture"));
+  /* the same network with another recorded exposure: named as such, with the way out */
+  CHECK(kpcn_model_create(kpcn_model_arch(m3), 2, &mo) == KPCN_OK);
+  if (mo) {
+    const char *other_exposure[2] = {in[2], tf_tmp("avg_exposure.safetensors")};
+    CHECK(kpcn_model_set_exposure(mo, 2.5f * kpcn_model_arch(m3)->exposure + 0.5f) == KPCN_OK);
+    CHECK(kpcn_model_save(mo, other_exposure[1]) == KPCN_OK);
+    CHECK(kpcn_model_average(other_exposure, 2, &avg) == KPCN_ERR_FORMAT && avg == NULL);
+    CHECK(strstr(kpcn_last_error(), "avg_exposure") && strstr(kpcn_last_error(), "exposure") &&
+          strstr(kpcn_last_error(), "--record-exposure") &&
+          !strstr(kpcn_last_error(), "architecture"));
+    kpcn_model_destroy(mo);
+    mo = NULL;
+  }
   /* a checkpoint with a NaN weight (the first float of the first tensor) */
   {
     FILE *src = fopen(in[0], "rb"), *dst = fopen(tf_tmp("avg_nan.ckpt"), "wb");

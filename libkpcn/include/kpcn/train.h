@@ -333,7 +333,8 @@ kpcn_status kpcn_checkpoint_load_model(const char *path, kpcn_model **out);
 /* Weight averaging (SWA): the element-wise mean (accumulated in double) of the weights of n
  * model files and/or training checkpoints of one architecture — snapshots of one run. The
  * result carries the first file's metadata plus "train.averaged_snapshots" = n. A file of
- * another architecture is an error naming it. */
+ * another architecture is an error naming it; so is one of the same network that records
+ * another exposure (arch.exposure: it expects inputs at another scale), with the fix named. */
 kpcn_status kpcn_model_average(const char *const *paths, int n, kpcn_model **out);
 
 /* Writes the training-curve plot from a CSV written by the trainer (any columns named

@@ -60,10 +60,25 @@ kpcn_status kpcn_model_average(const char *const *paths, int n, kpcn_model **out
   for (int i = 1; i < n && st == KPCN_OK; i++) {
     kpcn_model *m = NULL;
     if ((st = load_any(paths[i], &m)) != KPCN_OK) break;
-    char *ai = kpcn_arch_to_json(kpcn_model_arch(m));
-    if (!ai || strcmp(ai, arch) != 0)
+    /* The recorded exposure is part of the arch record but not of the network's shape: a
+     * mismatch there alone gets its own message, since the fix differs (record one store's
+     * exposure in every input) and "another architecture" would send the user looking at
+     * layer sizes. Models expecting inputs at different scales are still not averaged. */
+    kpcn_arch same_exposure = *kpcn_model_arch(m);
+    same_exposure.exposure = kpcn_model_arch(first)->exposure;
+    char *ai = kpcn_arch_to_json(&same_exposure);
+    if (!ai)
+      st = kpcn_last_status();
+    else if (strcmp(ai, arch) != 0)
       st =
           kpcn_fail(KPCN_ERR_FORMAT, "'%s' has another architecture than '%s'", paths[i], paths[0]);
+    else if (kpcn_model_arch(m)->exposure != kpcn_model_arch(first)->exposure)
+      st = kpcn_fail(KPCN_ERR_FORMAT,
+                     "'%s' records exposure %.9g, '%s' %.9g: the models expect inputs at other "
+                     "scales; record one store's exposure in each first (kpcn-train "
+                     "--record-exposure)",
+                     paths[i], kpcn_model_arch(m)->exposure, paths[0],
+                     kpcn_model_arch(first)->exposure);
     else
       st = walk(m, sum, NULL, 0);
     free(ai);
