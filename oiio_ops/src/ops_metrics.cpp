@@ -62,7 +62,7 @@ static MetricResult run(const ImageBuf &x, const ImageBuf &ref, Metric m, const 
   o.data_range = opt.data_range;
   o.eps = opt.eps;
   o.nthreads = nthreads;
-  kpcn_metric_result res;
+  kpcn_metric_result res{};
   kpcn_image *em = nullptr;
   kpcn_status s = kpcn_metric_image((kpcn_metric)m, ix.get(), iy.get(), nullptr, 0, &o, &res,
                                     map ? &em : nullptr);

@@ -349,6 +349,7 @@ static void test_image_form_and_errors(void) {
   CHECK(kpcn_metric_image(KPCN_METRIC_L1, a, small, NULL, 0, &o, &r, NULL) ==
         KPCN_ERR_SIZE_MISMATCH);
   CHECK(strstr(kpcn_last_error(), "16x12") && strstr(kpcn_last_error(), "15x12"));
+  CHECK(isnan(r.value) && r.npixels == 0 && r.nonfinite == 0); /* a failed call's result is empty */
   const char *zz[1] = {"Q"};
   CHECK(kpcn_metric_image(KPCN_METRIC_L1, a, b, zz, 1, &o, &r, NULL) == KPCN_ERR_MISSING_CHANNEL);
   CHECK(strstr(kpcn_last_error(), "'Q'") != NULL);
@@ -364,6 +365,11 @@ static void test_image_form_and_errors(void) {
   CHECK(kpcn_metric_planar(KPCN_METRIC_L1, a->data, a->data, 0, 12, 1, &o, &r, NULL) != KPCN_OK);
   CHECK(kpcn_metric_planar(KPCN_METRIC_L1, a->data, a->data, 100000, 100000, 1, &o, &r, NULL) !=
         KPCN_OK);
+  o.eps = 0; /* would divide by zero at a black reference pixel */
+  CHECK(kpcn_metric_planar(KPCN_METRIC_RELMSE, a->data, a->data, 16, 12, 1, &o, &r, NULL) ==
+        KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "eps must be > 0") != NULL);
+  o.eps = 0.01;
   o.data_range = 0;
   CHECK(kpcn_metric_planar(KPCN_METRIC_PSNR, a->data, a->data, 16, 12, 1, &o, &r, NULL) ==
         KPCN_ERR_INVALID_ARGUMENT);

@@ -26,8 +26,8 @@ bool options(const kpcntool::Modifiers &m, kpcn::ops::CompareOptions &o, std::st
     err = "modifier 'range' must be positive (got '" + m.str("range") + "')";
     return false;
   }
-  if (!(o.eps >= 0)) {
-    err = "modifier 'eps' must be >= 0 (got '" + m.str("eps") + "')";
+  if (!(o.eps > 0)) {
+    err = "modifier 'eps' must be > 0 (got '" + m.str("eps") + "')";
     return false;
   }
   return true;

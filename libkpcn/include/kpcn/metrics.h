@@ -21,8 +21,8 @@
  *
  * Non-finite policy: a pixel where ANY compared channel of x or y is NaN or +-Inf is
  * excluded from the mean and counted in kpcn_metric_result.nonfinite. The library never
- * fails because of them (callers decide; kpcntool fails unless told otherwise). For SSIM the
- * non-finite values are replaced by 0 in both images before filtering (windows around them
+ * fails because of them (callers decide; kpcntool fails unless told otherwise). For SSIM every
+ * compared channel of an excluded pixel is replaced by 0 in both images before filtering (windows around them
  * then see equal values there) and the pixels themselves are excluded from the mean. In
  * error maps, excluded pixels hold NaN. If no pixel is left, the call fails with
  * KPCN_ERR_NONFINITE.
@@ -64,7 +64,7 @@ typedef enum kpcn_display { KPCN_DISPLAY_LINEAR = 0, KPCN_DISPLAY_SRGB = 1 } kpc
 typedef struct kpcn_metric_options {
   kpcn_display display; /* encode both images before comparing (default linear) */
   double data_range;    /* SSIM data range R and PSNR peak (default 1.0) */
-  double eps;           /* relMSE / relL1 epsilon (default 0.01) */
+  double eps;           /* relMSE / relL1 epsilon (default 0.01; must be > 0) */
   int nthreads;         /* 0 = all cores */
 } kpcn_metric_options;
 

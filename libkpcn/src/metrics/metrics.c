@@ -159,8 +159,9 @@ kpcn_status kpcn_metric_planar(kpcn_metric m, const float *x, const float *y, in
   if (!(opt.data_range > 0.0) || !isfinite(opt.data_range))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: data range must be positive (got %g)",
                      kpcn_metric_name(m), opt.data_range);
-  if (!(opt.eps >= 0.0) || !isfinite(opt.eps))
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: eps must be >= 0 (got %g)",
+  /* eps = 0 would divide by zero at every black reference pixel (relMSE, relL1). */
+  if (!(opt.eps > 0.0) || !isfinite(opt.eps))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: eps must be > 0 (got %g)",
                      kpcn_metric_name(m), opt.eps);
   if (m == KPCN_METRIC_SSIM) return kpcn_ssim_planar(x, y, w, h, nch, &opt, res, errormap);
   return pointwise(m, x, y, w, h, nch, &opt, res, errormap);
@@ -208,6 +209,9 @@ kpcn_status kpcn_metric_image(kpcn_metric m, const kpcn_image *x, const kpcn_ima
   const char *what = kpcn_metric_name(m);
   if (errormap) *errormap = NULL;
   if (!x || !y || !res) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: NULL argument", what);
+  /* As kpcn_metric_planar: a failed call leaves a defined, empty result. */
+  memset(res, 0, sizeof *res);
+  res->value = NAN;
   if (x->width != y->width || x->height != y->height)
     return kpcn_fail(KPCN_ERR_SIZE_MISMATCH, "%s: image sizes differ (%dx%d vs %dx%d)", what,
                      x->width, x->height, y->width, y->height);
