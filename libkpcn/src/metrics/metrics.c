@@ -161,8 +161,8 @@ kpcn_status kpcn_metric_planar(kpcn_metric m, const float *x, const float *y, in
                      kpcn_metric_name(m), opt.data_range);
   /* eps = 0 would divide by zero at every black reference pixel (relMSE, relL1). */
   if (!(opt.eps > 0.0) || !isfinite(opt.eps))
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: eps must be > 0 (got %g)",
-                     kpcn_metric_name(m), opt.eps);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: eps must be > 0 (got %g)", kpcn_metric_name(m),
+                     opt.eps);
   if (m == KPCN_METRIC_SSIM) return kpcn_ssim_planar(x, y, w, h, nch, &opt, res, errormap);
   return pointwise(m, x, y, w, h, nch, &opt, res, errormap);
 }
