@@ -25,7 +25,21 @@ expect_fail "32 pixel(s) hold NaN/Inf in 'inf.exr' or 'grey.exr'" map.exr inf.ex
   --errormap:metric=l1 -o map.exr
 expect_fail "every one of the 256 pixels is non-finite" "" nan.exr grey.exr --l1:allow_nonfinite=1
 # Modifier values.
-expect_fail "modifier 'range' needs a number (got 'abc')" "" "$REF" "$REF" --psnr:range=abc
+expect_fail "modifier 'range' needs a finite number (got 'abc')" "" "$REF" "$REF" --psnr:range=abc
+expect_fail "modifier 'tol' needs a finite number (got 'inf')" "" "$NOISY" "$REF" --patches:tol=inf
+expect_fail "modifier 'eps' must be > 0 (got '0')" "" "$REF" "$REF" --relmse:eps=0
+expect_fail "modifier 'dx' needs an integer in [-2147483648, 2147483647] (got '4294967297')" "" \
+  "$REF" --shift:dx=4294967297
+expect_fail "modifier 'seed' needs an integer in [0, 2^64) (got '-1')" "" "$NOISY" --augment:seed=-1
+expect_fail "modifier 'allow_nonfinite' must be 0 or 1 (got 'maybe')" "" "$REF" "$REF" \
+  --l1:allow_nonfinite=maybe
+expect_fail "modifier 'bf16' must be 0 or 1 (got '5')" "" "$NOISY" --denoise:model=m.safetensors:bf16=5
+expect_fail "modifier 'ensemble' applies only to the KPCN, not method=bilateral" "" "$NOISY" \
+  --denoise:method=bilateral:ensemble=8
+expect_fail "exposure must be auto, off or a number > 0 (got '1e-50')" "" "$NOISY" \
+  --denoise:model=m.safetensors:exposure=1e-50
+expect_fail "channel 'A': the constant 'nan' is not a finite float" "" "$REF" --ch R,G,B,A=nan
+expect_fail "channel name 'X' appears twice" "" "$REF" --ch X=R,X=G
 expect_fail "modifier 'range' must be positive" "" "$REF" "$REF" --psnr:range=-1
 expect_fail "modifier 'display' must be srgb or linear (got 'rec2020')" "" "$REF" "$REF" --ssim:display=rec2020
 expect_fail "unknown metric 'foo'" "" "$REF" "$REF" --errormap:metric=foo
@@ -37,6 +51,15 @@ expect_fail "view 'Nope' of display 'sRGB' is not in OCIO config" out.png "$REF"
 expect_fail "display 'P3' is not in OCIO config" "" "$REF" --ociodisplay:display=P3
 OCIO=$PWD/none.ocio expect_fail "OCIO config '$PWD/none.ocio' not found" "" "$REF" --ociodisplay
 expect_fail "no R,G,B to display" "" "$NOISY" --ch N.X,N.Y,N.Z,Z,visibility.V --ociodisplay
+expect_fail "look 'bogus' is not in OCIO config" out.png "$REF" --ociodisplay:looks=bogus -o out.png
+# --info --json stays JSON for numeric attributes of any shape (NaN -> null, vectors -> arrays).
+oiiotool "$REF" --attrib:type=float kpcn:spp nan --attrib:type=int[3] kpcn:seed "1,2,3" -o attr.exr
+"$KT" attr.exr --info --json >attr.json 2>&1
+if $PY -c 'import json,sys; d=json.load(open(sys.argv[1]))["info"]; sys.exit(0 if d["kpcn:spp"] is None and d["kpcn:seed"]==[1,2,3] else 1)' attr.json; then
+  pass "--info --json: numeric attributes as JSON"
+else
+  fail "--info --json: $(cat attr.json)"
+fi
 # A channel name with an escape sequence and a byte that is not UTF-8: printed escaped, never
 # raw (a damaged file must not drive the terminal or break the JSON's UTF-8).
 oiiotool --pattern constant:color=1 4x4 1 --chnames "$(printf '\033[31mR\377')" -o esc.exr

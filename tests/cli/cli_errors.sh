@@ -11,6 +11,8 @@ expect_fail "unknown modifier 'x' for --info (it takes none)" "" "$NOISY" --info
 expect_fail "modifier 'display' of --l1 needs a value" "" "$NOISY" "$REF" --l1:display
 expect_fail "command '-o' needs 1 argument" "" "$NOISY" -o
 expect_fail "nothing to do" "" 
+expect_fail "nothing to do" "" --json --threads 1
+expect_fail "modifier 'range' of --l1 is given twice" "" "$NOISY" "$REF" --l1:range=2:range=1
 [ "$("$KT" --bogus 2>/dev/null; echo $?)" = 2 ] && pass "usage error exits 2" || fail "usage exit code"
 # Files.
 expect_fail "'missing.exr': no such file" out.exr missing.exr -o out.exr
@@ -20,5 +22,14 @@ expect_fail "'wide.exr' has an unsupported or absurd size 70000x1" out.exr wide.
 expect_fail "cannot write 'nodir/out.exr'" "" "$REF" -o nodir/out.exr
 expect_fail "PNG only supports 1-4 channels" out.png "$NOISY" -o out.png
 expect_fail "has no file extension" outfile "$REF" -o outfile
+expect_fail "no image format writes '.xyz' files" out.exr "$REF" -o out.exr -o out.xyz
+# All or nothing: a later output or command that fails leaves none of the earlier ones.
+expect_fail "PNG only supports 1-4 channels" out.exr "$NOISY" -o out.exr -o out.png
+expect_fail "has no channel 'Q'" p.kps "$NOISY" "$REF" --patches:size=16:count=4:out=p.kps --ch Q
+expect_fail "has no channel 'Q'" pdir "$NOISY" "$REF" --patches:size=16:count=4:out=pdir --ch Q
+run_ok "$REF" -o twice.exr --ch R,G,B,A=1 -o twice.exr
+[ "$(oiiotool --info twice.exr | grep -c '4 channel')" = 1 ] && pass "the later of two -o to one file wins" ||
+  fail "two -o to one file: $(oiiotool --info twice.exr)"
+rm -f twice.exr
 [ -z "$(ls -a | grep -E '\.tmp|^out\.(exr|png)$|^map\.exr$')" ] && pass "no stray outputs" || fail "stray: $(ls -a)"
 finish

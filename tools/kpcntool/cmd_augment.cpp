@@ -8,6 +8,7 @@
 #include "kpcntool.h"
 
 #include <cmath>
+#include <memory>
 
 namespace {
 
@@ -20,7 +21,7 @@ template <class F> bool each(Context &ctx, const Modifiers &m, std::string &err,
     err = "needs an image on the stack";
     return false;
   }
-  size_t first = m.integer("all", 0) ? 0 : ctx.stack.size() - 1;
+  size_t first = m.flag("all", false) ? 0 : ctx.stack.size() - 1;
   for (size_t i = first; i < ctx.stack.size(); i++) {
     OIIO::ImageBuf dst;
     if (!op(dst, ctx.stack[i])) {
@@ -77,15 +78,15 @@ bool cmd_augment(Context &ctx, const Modifiers &m, const std::vector<std::string
                  std::string &err) {
   kpcn_augment_draw_settings ds;
   kpcn_augment_draw_defaults(&ds);
-  ds.mirror_v = (int)m.integer("mirror_v", 0);
+  ds.mirror_v = m.flag("mirror_v", false);
   ds.max_shift = (int)m.integer("shift", 0);
-  ds.mode = m.integer("oneof", 0) ? KPCN_AUGMENT_ONE_OF : KPCN_AUGMENT_ALL;
+  ds.mode = m.flag("oneof", false) ? KPCN_AUGMENT_ONE_OF : KPCN_AUGMENT_ALL;
   if (ds.max_shift < 0) {
     err = "modifier 'shift' must be >= 0";
     return false;
   }
   kpcn_augment_xform x;
-  kpcn_augment_draw(&x, &ds, (uint64_t)m.integer("seed", 1), (uint64_t)m.integer("index", 0));
+  kpcn_augment_draw(&x, &ds, m.u64("seed", 1), m.u64("index", 0));
   Modifiers all = m;
   all.kv["all"] = "1"; // one draw for the whole stack keeps pairs aligned
   return each(ctx, all, err, [&](OIIO::ImageBuf &dst, const OIIO::ImageBuf &src) {
@@ -105,11 +106,11 @@ bool cmd_patches(Context &ctx, const Modifiers &m, const std::vector<std::string
   s.count = (int)m.integer("count", 400);
   s.stride = (int)m.integer("stride", 0);
   if (m.has("stride") && !m.has("count")) s.count = 0;
-  s.seed = (uint64_t)m.integer("seed", 1);
+  s.seed = m.u64("seed", 1);
   s.cull = m.num("cull", 0.9);
   s.cull_tol = m.num("tol", 0.05);
   s.cull_abs = m.num("abs", 0.01);
-  s.importance = (int)m.integer("importance", 0);
+  s.importance = m.flag("importance", false);
   s.nthreads = ctx.nthreads;
   bool pair = ctx.stack.size() >= 2;
   const OIIO::ImageBuf &noisy = pair ? ctx.stack[ctx.stack.size() - 2] : ctx.stack.back();
@@ -121,8 +122,21 @@ bool cmd_patches(Context &ctx, const Modifiers &m, const std::vector<std::string
   ctx.add_result("patches_candidates", (double)st.candidates);
   ctx.add_result("patches_kept", (double)st.kept);
   ctx.add_result("patches_culled", (double)st.culled);
-  if (m.has("out") && !kpcn::ops::write_patches(m.str("out"), noisy, ref, o, s.size, err))
+  if (!m.has("out")) return true;
+  // Written with the -o files, after every command succeeded (no partial output).
+  const std::string out = m.str("out");
+  if (out.empty()) {
+    err = "modifier 'out' needs a directory or a .kps file";
     return false;
+  }
+  auto imgs = std::make_shared<const std::pair<OIIO::ImageBuf, OIIO::ImageBuf>>(noisy, ref);
+  const int size = s.size;
+  const bool kps =
+      out.size() > 4 && out.compare(out.size() - 4, 4, ".kps") == 0; // as write_patches
+  ctx.outputs.push_back(
+      {"--patches:out=" + out, out, !kps, [imgs, o, size](const std::string &tmp, std::string &e) {
+         return kpcn::ops::write_patches(tmp, imgs->first, imgs->second, o, size, e);
+       }});
   return true;
 }
 

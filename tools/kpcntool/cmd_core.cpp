@@ -6,7 +6,9 @@
 #include "kpcn/oiio_convert.h"
 
 #include <OpenImageIO/color.h>
+#include <OpenImageIO/half.h>
 #include <OpenImageIO/imagebufalgo.h>
+#include <OpenImageIO/imageio.h>
 
 #include <algorithm>
 #include <cmath>
@@ -23,16 +25,6 @@ using OIIO::TypeDesc;
 namespace IBA = OIIO::ImageBufAlgo;
 
 namespace kpcntool {
-
-static std::string lower_ext(const std::string &path) {
-  size_t dot = path.find_last_of('.');
-  size_t slash = path.find_last_of('/');
-  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
-  std::string e = path.substr(dot + 1);
-  for (char &c : e)
-    c = (char)std::tolower((unsigned char)c);
-  return e;
-}
 
 bool read_image(ImageBuf &dst, const std::string &path, std::string &err) {
   struct stat st;
@@ -62,31 +54,6 @@ bool read_image(ImageBuf &dst, const std::string &path, std::string &err) {
   return true;
 }
 
-bool write_image(const ImageBuf &img, const std::string &path, std::string &err) {
-  std::string ext = lower_ext(path);
-  if (ext.empty()) {
-    err = "'" + path + "' has no file extension to choose the format from";
-    return false;
-  }
-  static const char *eight_bit[] = {"png", "jpg", "jpeg", "bmp", "tga", "ppm", "pgm", "gif"};
-  TypeDesc fmt = TypeDesc::FLOAT;
-  for (const char *e : eight_bit)
-    if (ext == e) fmt = TypeDesc::UINT8;
-  // The temp name keeps the extension so OIIO picks the same writer.
-  std::string tmp = path + ".tmp" + std::to_string((long)getpid()) + "." + ext;
-  if (!img.write(tmp, fmt)) {
-    err = "cannot write '" + path + "': " + img.geterror();
-    std::remove(tmp.c_str());
-    return false;
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    err = "cannot rename '" + tmp + "' to '" + path + "'";
-    std::remove(tmp.c_str());
-    return false;
-  }
-  return true;
-}
-
 namespace {
 
 // "image 'file.exr'", or "the top image" for images computed in this run (they have no name).
@@ -95,8 +62,25 @@ std::string img_desc(const ImageBuf &b, const char *role = "the top image") {
   return n.empty() ? std::string(role) : "image '" + n + "'";
 }
 
-bool cmd_output(Context &ctx, const Modifiers &, const std::vector<std::string> &a, std::string &) {
-  ctx.outputs.emplace_back(a[0], ctx.top()); // a deep copy: later commands may change the top
+bool cmd_output(Context &ctx, const Modifiers &, const std::vector<std::string> &a,
+                std::string &err) {
+  const std::string &path = a[0];
+  const std::string ext = lower_ext(path);
+  if (ext.empty()) {
+    err = "'" + path + "' has no file extension to choose the format from";
+    return false;
+  }
+  if (!OIIO::ImageOutput::create(path)) {
+    OIIO::geterror(); // consumed: the message below says it
+    err = "no image format writes '." + ext + "' files ('" + path + "')";
+    return false;
+  }
+  // A deep copy: later commands may change the top.
+  auto img = std::make_shared<const ImageBuf>(ctx.top());
+  ctx.outputs.push_back(
+      {"-o " + path, path, false, [img, ext](const std::string &tmp, std::string &e) {
+         return write_image(*img, tmp, ext, e);
+       }});
   return true;
 }
 
@@ -125,6 +109,44 @@ std::string quote(const std::string &s) {
     o += c;
   }
   return o + "\"";
+}
+
+// Element i of a numeric attribute (ParamValue's get_*_indexed do not read vector aggregates).
+double attr_element(const OIIO::ParamValue &p, int i) {
+  const void *d = p.data();
+  switch (p.type().basetype) {
+  case TypeDesc::UINT8: return ((const uint8_t *)d)[i];
+  case TypeDesc::INT8: return ((const int8_t *)d)[i];
+  case TypeDesc::UINT16: return ((const uint16_t *)d)[i];
+  case TypeDesc::INT16: return ((const int16_t *)d)[i];
+  case TypeDesc::UINT32: return ((const uint32_t *)d)[i];
+  case TypeDesc::INT32: return ((const int32_t *)d)[i];
+  case TypeDesc::UINT64: return (double)((const uint64_t *)d)[i];
+  case TypeDesc::INT64: return (double)((const int64_t *)d)[i];
+  case TypeDesc::HALF: return ((const half *)d)[i];
+  case TypeDesc::FLOAT: return ((const float *)d)[i];
+  case TypeDesc::DOUBLE: return ((const double *)d)[i];
+  default: return NAN;
+  }
+}
+
+// An attribute as JSON: a number, an array of numbers (non-finite ones null), else a string.
+std::string json_value(const OIIO::ParamValue &p) {
+  const TypeDesc t = p.type();
+  const bool numeric = t.basetype >= TypeDesc::UINT8 && t.basetype <= TypeDesc::DOUBLE;
+  if (!numeric) return quote(p.get_string());
+  const int n = p.nvalues() * (int)t.numelements() * (int)t.aggregate;
+  std::ostringstream o;
+  o.precision(17);
+  for (int i = 0; i < n; ++i) {
+    const double v = attr_element(p, i);
+    o << (i ? ", " : "");
+    if (std::isfinite(v))
+      o << v;
+    else
+      o << "null";
+  }
+  return n == 1 ? o.str() : "[" + o.str() + "]";
 }
 
 bool cmd_info(Context &ctx, const Modifiers &, const std::vector<std::string> &, std::string &) {
@@ -175,10 +197,8 @@ bool cmd_info(Context &ctx, const Modifiers &, const std::vector<std::string> &,
   for (const char *attr : {"kpcn:spp", "kpcn:seed", "kpcn:scene", "kpcn:version"}) {
     const OIIO::ParamValue *p = sp.find_attribute(attr);
     if (!p) continue;
-    std::string v = p->get_string();
-    bool is_str = p->type() == TypeDesc::STRING;
-    txt << "  " << attr << ": " << v << "\n";
-    js << ", " << quote(attr) << ": " << (is_str ? quote(v) : v);
+    txt << "  " << attr << ": " << p->get_string() << "\n";
+    js << ", " << quote(attr) << ": " << json_value(*p);
   }
   js << "}";
   if (ctx.json)
@@ -211,6 +231,15 @@ bool cmd_ch(Context &ctx, const Modifiers &, const std::vector<std::string> &a, 
         err = img_desc(src) + " has no channel '" + from + "'";
         return false;
       }
+      if (!std::isfinite(v)) {
+        err = "channel '" + newname + "': the constant '" + from + "' is not a finite float";
+        return false;
+      }
+    }
+    if (newname.empty() || std::find(names.begin(), names.end(), newname) != names.end()) {
+      err = newname.empty() ? "an empty channel name in '" + a[0] + "'"
+                            : "channel name '" + newname + "' appears twice";
+      return false;
     }
     order.push_back(idx);
     values.push_back(v);
@@ -279,6 +308,18 @@ bool cmd_ociodisplay(Context &ctx, const Modifiers &m, const std::vector<std::st
     err = "view '" + view + "' of display '" + display + "' is not in OCIO config '" + path + "'";
     return false;
   }
+  // OIIO 2.4 ignores a look the config does not define; name it instead.
+  for (std::string look : kpcn::ops::split_names(m.str("looks"))) {
+    if (!look.empty() && (look[0] == '+' || look[0] == '-')) look.erase(0, 1);
+    found = false;
+    for (int i = 0; i < cc->getNumLooks(); ++i)
+      found = found || look == cc->getLookNameByIndex(i);
+    if (!found) {
+      err = "look '" + look + "' is not in OCIO config '" + path + "'" +
+            (cc->getNumLooks() ? "" : " (it defines no looks)");
+      return false;
+    }
+  }
   ImageBuf src = ctx.top();
   // AOV images: transform the colour only (R,G,B and A when present).
   if (src.nchannels() > 4 || src.spec().channelindex("R") > 0) {
@@ -334,7 +375,7 @@ bool cmd_colormap(Context &ctx, const Modifiers &m, const std::vector<std::strin
       std::remove_if(finite.begin(), finite.end(), [](float v) { return !std::isfinite(v); }),
       finite.end());
   IBA::fixNonFinite(mean, mean, IBA::NONFINITE_BLACK, nullptr, {}, ctx.nthreads);
-  double mx = m.num("max", 0.0);
+  double mx = m.str("max").empty() ? 0.0 : m.num("max", 0.0); // empty: the 99th percentile
   if (m.str("max").empty() && !finite.empty()) {
     size_t k = (size_t)std::floor(0.99 * (double)(finite.size() - 1));
     std::nth_element(finite.begin(), finite.begin() + (long)k, finite.end());

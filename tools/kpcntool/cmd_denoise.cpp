@@ -18,7 +18,8 @@ bool parse_exposure(const std::string &v, kpcn::ops::DenoiseOptions &opt, std::s
   }
   char *end = nullptr;
   const double e = std::strtod(v.c_str(), &end);
-  if (v.empty() || *end != '\0' || !(e > 0.0 && e < 1e30)) {
+  // (float)e must stay > 0: 0 is the library's "auto"
+  if (v.empty() || *end != '\0' || !(e > 0.0 && e < 1e30) || !((float)e > 0.0f)) {
     err = "exposure must be auto, off or a number > 0 (got '" + v + "')";
     return false;
   }
@@ -56,7 +57,14 @@ bool run_denoise(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
     err = "unknown method '" + opt.method + "' (kpcn, bilateral, nlmeans)";
     return false;
   }
-  opt.bf16 = m.integer("bf16", 0) != 0;
+  if (opt.method != "kpcn")
+    for (const char *k : {"model", "bf16", "tile", "ensemble", "exposure", "firefly"})
+      if (m.has(k)) {
+        err =
+            "modifier '" + std::string(k) + "' applies only to the KPCN, not method=" + opt.method;
+        return false;
+      }
+  opt.bf16 = m.flag("bf16", false);
   long tile = m.integer("tile", 0);
   if (tile < 0 || tile > 65536) {
     err = "tile must be in [0, 65536] (got " + std::to_string(tile) + ")";

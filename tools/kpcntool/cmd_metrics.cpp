@@ -20,6 +20,7 @@ bool options(const kpcntool::Modifiers &m, kpcn::ops::CompareOptions &o, std::st
     return false;
   }
   o.display_srgb = d != "linear";
+  (void)m.flag("allow_nonfinite", false); // checked here, used only when NaN/Inf appear
   o.data_range = m.num("range", 1.0);
   o.eps = m.num("eps", 0.01);
   if (!(o.data_range > 0)) {
@@ -36,7 +37,7 @@ bool options(const kpcntool::Modifiers &m, kpcn::ops::CompareOptions &o, std::st
 // Non-finite pixels are an error unless allow_nonfinite=1 (they are then excluded).
 bool check_nonfinite(const kpcn::ops::MetricResult &r, const kpcntool::Modifiers &m,
                      const OIIO::ImageBuf &x, const OIIO::ImageBuf &y, std::string &err) {
-  if (r.nonfinite == 0 || m.integer("allow_nonfinite", 0) != 0) return true;
+  if (r.nonfinite == 0 || m.flag("allow_nonfinite", false)) return true;
   auto nm = [](const OIIO::ImageBuf &b, const char *role) {
     return b.name().empty() ? std::string(role) : "'" + std::string(b.name()) + "'";
   };

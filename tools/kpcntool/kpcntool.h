@@ -9,6 +9,7 @@
 #pragma once
 #include <OpenImageIO/imagebuf.h>
 
+#include <cstdint>
 #include <functional>
 #include <map>
 #include <string>
@@ -24,8 +25,10 @@ struct Modifiers {
     return it == kv.end() ? def : it->second;
   }
   // Parse helpers: on a malformed value they throw kpcntool::Error naming the modifier.
-  double num(const std::string &k, double def) const;
-  long integer(const std::string &k, long def) const;
+  double num(const std::string &k, double def) const;     // finite
+  long integer(const std::string &k, long def) const;     // within int's range
+  uint64_t u64(const std::string &k, uint64_t def) const; // seeds, indices: digits only
+  bool flag(const std::string &k, bool def) const;        // exactly 0 or 1
 };
 
 struct Error : std::runtime_error {
@@ -40,8 +43,17 @@ struct Context {
   std::vector<std::pair<std::string, double>> results;
   // Extension (main/cmd_core owner): non-numeric results as raw JSON text, e.g. --info.
   std::vector<std::pair<std::string, std::string>> json_items;
-  // Extension: `-o` files, written only after every command succeeded (no partial output).
-  std::vector<std::pair<std::string, OIIO::ImageBuf>> outputs;
+  // Extension: files written only after every command succeeded (`-o`, `--patches:out=`):
+  // write() makes the output at a temporary path next to `path` (a file, or a directory if
+  // is_dir); commit_outputs renames them all into place once every write succeeded, so a
+  // failing command line leaves none of them.
+  struct Output {
+    std::string what; // the step that queued it, for messages: "-o out.png"
+    std::string path;
+    bool is_dir = false;
+    std::function<bool(const std::string &tmp, std::string &err)> write;
+  };
+  std::vector<Output> outputs;
   // Extension: records a numeric result under a unique key (key, key_2, key_3 ...).
   void add_result(const std::string &key, double value);
   OIIO::ImageBuf pop();  // throws Error on an empty stack
@@ -64,9 +76,17 @@ bool register_command(Command c);
 // Extensions used by main.cpp (implemented in registry.cpp / cmd_core.cpp).
 const Command *find_command(const std::string &name); // nullptr if unknown
 std::vector<const Command *> all_commands();          // sorted by name
-// Writes img to path atomically (temp file + rename); EXR keeps float, PNG/JPEG/TIFF-8
-// formats get 8 bits. Returns false with err naming the file on failure.
-bool write_image(const OIIO::ImageBuf &img, const std::string &path, std::string &err);
+// Writes img to file (the format chosen by ext, lower case: EXR keeps float, PNG/JPEG/... get
+// 8 bits). Returns false with err on failure.
+bool write_image(const OIIO::ImageBuf &img, const std::string &file, const std::string &ext,
+                 std::string &err);
+// "png" for "a/b.PNG", "" when the name has no extension.
+std::string lower_ext(const std::string &path);
+// Writes every pending output (Context::outputs) to its temporary path, then renames them all
+// into place. On failure removes every temporary, sets failed to the output's `what` and err to
+// why, and returns false.
+bool commit_outputs(const std::vector<Context::Output> &outputs, std::string &failed,
+                    std::string &err);
 // Reads an image file fully as float; false with err naming the file on failure.
 bool read_image(OIIO::ImageBuf &dst, const std::string &path, std::string &err);
 // Text that came from a file (channel names, attributes, messages quoting them), made safe to

@@ -10,6 +10,7 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <exception>
@@ -118,6 +119,10 @@ bool parse(int argc, char **argv, std::vector<Step> &steps, std::string &err) {
         err = "modifier '" + key + "' of --" + st.cmd->name + " needs a value (" + key + "=...)";
         return false;
       }
+      if (st.mods.has(key)) {
+        err = "modifier '" + key + "' of --" + st.cmd->name + " is given twice";
+        return false;
+      }
       st.mods.kv[key] = parts[k].substr(eq + 1);
     }
     for (int n = 0; n < st.cmd->nargs; ++n) {
@@ -167,7 +172,10 @@ int main(int argc, char **argv) {
     std::fprintf(stderr, "kpcntool: error: %s\n", kpcntool::printable(err, true).c_str());
     return 2;
   }
-  if (steps.empty()) {
+  // --json and --threads only set how the other steps run.
+  if (std::all_of(steps.begin(), steps.end(), [](const Step &st) {
+        return st.cmd && (st.cmd->name == "json" || st.cmd->name == "threads");
+      })) {
     std::fprintf(stderr, "kpcntool: error: nothing to do (see --help)\n");
     return 2;
   }
@@ -197,12 +205,11 @@ int main(int argc, char **argv) {
       return 1;
     }
   }
-  for (auto &o : ctx.outputs) {
-    if (!kpcntool::write_image(o.second, o.first, err)) {
-      std::fprintf(stderr, "kpcntool: error: -o %s: %s\n", kpcntool::printable(o.first).c_str(),
-                   kpcntool::printable(err, true).c_str());
-      return 1;
-    }
+  std::string failed;
+  if (!kpcntool::commit_outputs(ctx.outputs, failed, err)) {
+    std::fprintf(stderr, "kpcntool: error: %s: %s\n", kpcntool::printable(failed).c_str(),
+                 kpcntool::printable(err, true).c_str());
+    return 1;
   }
   print_results(ctx);
   return 0;

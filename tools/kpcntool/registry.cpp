@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <climits>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 
@@ -40,8 +42,8 @@ double Modifiers::num(const std::string &k, double def) const {
   char *end = nullptr;
   errno = 0;
   double v = std::strtod(s, &end);
-  if (end == s || *end != 0 || errno == ERANGE)
-    throw Error("modifier '" + k + "' needs a number (got '" + it->second + "')");
+  if (end == s || *end != 0 || errno == ERANGE || !std::isfinite(v))
+    throw Error("modifier '" + k + "' needs a finite number (got '" + it->second + "')");
   return v;
 }
 
@@ -52,9 +54,31 @@ long Modifiers::integer(const std::string &k, long def) const {
   char *end = nullptr;
   errno = 0;
   long v = std::strtol(s, &end, 10);
-  if (end == s || *end != 0 || errno == ERANGE)
-    throw Error("modifier '" + k + "' needs an integer (got '" + it->second + "')");
+  if (end == s || *end != 0 || errno == ERANGE || v < INT_MIN || v > INT_MAX)
+    throw Error("modifier '" + k + "' needs an integer in [" + std::to_string(INT_MIN) + ", " +
+                std::to_string(INT_MAX) + "] (got '" + it->second + "')");
   return v;
+}
+
+uint64_t Modifiers::u64(const std::string &k, uint64_t def) const {
+  auto it = kv.find(k);
+  if (it == kv.end()) return def;
+  const std::string &v = it->second;
+  bool digits =
+      !v.empty() && std::all_of(v.begin(), v.end(), [](char c) { return c >= '0' && c <= '9'; });
+  errno = 0;
+  unsigned long long u = digits ? std::strtoull(v.c_str(), nullptr, 10) : 0;
+  if (!digits || errno == ERANGE)
+    throw Error("modifier '" + k + "' needs an integer in [0, 2^64) (got '" + v + "')");
+  return (uint64_t)u;
+}
+
+bool Modifiers::flag(const std::string &k, bool def) const {
+  auto it = kv.find(k);
+  if (it == kv.end()) return def;
+  if (it->second != "0" && it->second != "1")
+    throw Error("modifier '" + k + "' must be 0 or 1 (got '" + it->second + "')");
+  return it->second == "1";
 }
 
 OIIO::ImageBuf Context::pop() {

@@ -1,0 +1,108 @@
+// kpcntool's outputs: image writing and the all-or-nothing commit of every file a command line
+// produces (`-o`, `--patches:out=`), see kpcntool.h.
+#include "kpcntool.h"
+
+#include <OpenImageIO/imageio.h>
+
+#include <cctype>
+#include <filesystem>
+#include <system_error>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+
+namespace kpcntool {
+
+// The extension as written ("PNG" for "a/b.PNG"), "" when the file name has none.
+static std::string raw_ext(const std::string &path) {
+  size_t dot = path.find_last_of('.');
+  size_t slash = path.find_last_of('/');
+  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
+  return path.substr(dot + 1);
+}
+
+std::string lower_ext(const std::string &path) {
+  std::string e = raw_ext(path);
+  for (char &c : e)
+    c = (char)std::tolower((unsigned char)c);
+  return e;
+}
+
+bool write_image(const OIIO::ImageBuf &img, const std::string &file, const std::string &ext,
+                 std::string &err) {
+  static const char *eight_bit[] = {"png", "jpg", "jpeg", "bmp", "tga", "ppm", "pgm", "gif"};
+  OIIO::TypeDesc fmt = OIIO::TypeDesc::FLOAT;
+  for (const char *e : eight_bit)
+    if (ext == e) fmt = OIIO::TypeDesc::UINT8;
+  if (!img.write(file, fmt)) {
+    err = img.geterror();
+    if (err.empty()) err = "the image writer failed";
+    return false;
+  }
+  return true;
+}
+
+// Next to the output, unique per output (the same path may be queued twice: the later wins, as
+// if written in turn) and keeping the extension, by which image writers and --patches choose
+// the format.
+static std::string temp_path(const Context::Output &o, size_t index) {
+  std::string t = o.path + ".tmp" + std::to_string((long)getpid()) + "_" + std::to_string(index);
+  std::string e = raw_ext(o.path);
+  if (!o.is_dir && !e.empty()) t += "." + e;
+  return t;
+}
+
+// A directory output may merge into an existing directory (its files are replaced one by one).
+static bool move_into_place(const Context::Output &o, const std::string &tmp, std::string &err) {
+  std::error_code ec;
+  if (o.is_dir && fs::is_directory(o.path, ec)) {
+    for (const fs::directory_entry &e : fs::directory_iterator(tmp, ec)) {
+      fs::rename(e.path(), fs::path(o.path) / e.path().filename(), ec);
+      if (ec) break;
+    }
+    if (!ec) fs::remove(tmp, ec);
+  } else {
+    fs::rename(tmp, o.path, ec);
+  }
+  if (ec) err = "cannot move '" + tmp + "' to '" + o.path + "': " + ec.message();
+  return !ec;
+}
+
+bool commit_outputs(const std::vector<Context::Output> &outputs, std::string &failed,
+                    std::string &err) {
+  std::vector<std::string> tmp;
+  auto clean = [&]() {
+    std::error_code ec;
+    for (const std::string &t : tmp)
+      fs::remove_all(t, ec);
+  };
+  for (size_t i = 0; i < outputs.size(); ++i) {
+    const Context::Output &o = outputs[i];
+    std::error_code ec;
+    if (o.is_dir && fs::exists(o.path, ec) && !fs::is_directory(o.path, ec)) {
+      failed = o.what;
+      err = "'" + o.path + "' exists and is not a directory";
+      clean();
+      return false;
+    }
+    tmp.push_back(temp_path(o, i));
+    if (!o.write(tmp.back(), err)) {
+      failed = o.what;
+      err = "cannot write '" + o.path + "': " + err;
+      clean();
+      return false;
+    }
+  }
+  // Every output is complete; only renames are left (one directory each, so they do not fail
+  // for want of space).
+  for (size_t i = 0; i < outputs.size(); ++i) {
+    if (!move_into_place(outputs[i], tmp[i], err)) {
+      failed = outputs[i].what;
+      clean();
+      return false;
+    }
+  }
+  return true;
+}
+
+} // namespace kpcntool
