@@ -38,4 +38,28 @@ for bad in 0.5 abc; do
   grep -q firefly "$D/err" || fail "--firefly error unclear: $(cat "$D/err")"
   [ ! -e "$D/f.safetensors" ] || fail "output written for --firefly $bad"
 done
+# usage mistakes are refused before anything is read or written (exit 2), naming the option
+# (--dilations with too many values or junk, --ssim-window without an SSIM loss or even,
+# shape options an --init model does not have)
+bad_usage() {
+  pat=$1; shift
+  "$K" --store "$D/p.kps" -o "$D/u.safetensors" --iters 1 "$@" 2>"$D/err"
+  rc=$?
+  [ $rc -eq 2 ] || fail "exit $rc (want 2) for: $* ($(cat "$D/err"))"
+  grep -qF -- "$pat" "$D/err" || fail "message lacks '$pat' for: $*: $(cat "$D/err")"
+  [ ! -e "$D/u.safetensors" ] && [ ! -e "$D/u.safetensors.csv" ] || fail "output written for: $*"
+}
+bad_usage "at most 3 positive integers" --preset tiny --dilations 1,2,3,4
+bad_usage "at most 3 positive integers" --preset tiny --dilations 1,2,1x
+bad_usage "--ssim-window has no effect" --ssim-window 7
+bad_usage "the window must be odd" --loss2 ssim --ssim-window 4
+bad_usage "--layers asks for 5 hidden layers, the --init model" --init "$M" --layers 5
+bad_usage "--preset asks for" --init "$M" --preset tiny
+# an output that would overwrite the patch store is refused; the store is intact
+if "$K" --store "$D/p.kps" -o "$D/c.safetensors" --iters 1 --csv "$D/p.kps" 2>"$D/err"; then
+  fail "--csv over the store accepted"
+fi
+grep -q "are the same file" "$D/err" || fail "store clash unclear: $(cat "$D/err")"
+"$T" "$N" "$TD/dataset/sample_ref.exr" --patches:size=16:count=6:cull=1:out="$D/p2.kps" || fail "patches 2"
+cmp -s "$D/p.kps" "$D/p2.kps" || fail "the store was changed"
 echo "test_train_cli: ok"

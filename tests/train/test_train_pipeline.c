@@ -153,6 +153,28 @@ static void test_determinism_and_resume(void) {
   s.resume = 1;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
   CHECK(strstr(kpcn_last_error(), "train.seed") != NULL);
+  /* so is a resume that changes a setting the remaining iterations depend on, naming it */
+  settings(&s, tf_tmp("c.safetensors"));
+  s.loss1 = KPCN_LOSS_RELMSE;
+  s.resume = 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
+  CHECK(strstr(kpcn_last_error(), "train.loss1 = l1") && strstr(kpcn_last_error(), "--loss"));
+  settings(&s, tf_tmp("c.safetensors"));
+  s.adam.lr *= 2;
+  s.resume = 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
+  CHECK(strstr(kpcn_last_error(), "train.lr =") != NULL);
+  settings(&s, tf_tmp("c.safetensors"));
+  s.augment.rotate = 0;
+  s.resume = 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
+  CHECK(strstr(kpcn_last_error(), "train.augment") != NULL);
+  /* and one that would stop before the checkpoint's iteration (6) */
+  settings(&s, tf_tmp("c.safetensors"));
+  s.iters = 4;
+  s.resume = 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
+  CHECK(strstr(kpcn_last_error(), "beyond this run's 4 iterations") != NULL);
   /* a truncated checkpoint is refused */
   FILE *src = fopen(tf_tmp("c.safetensors.ckpt"), "rb");
   FILE *dst = fopen(tf_tmp("trunc.ckpt"), "wb");
@@ -713,6 +735,29 @@ static void test_bad_stores(void) {
   s.resume = 1;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_IO);
   CHECK(strstr(kpcn_last_error(), "nockpt.safetensors.ckpt") != NULL);
+  /* an output that is the patch store (or another output) is refused before anything is
+   * written; the store is intact */
+  settings(&s, tf_tmp("clash.safetensors"));
+  s.csv_path = s.store_path;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "the patch store (--store) and the CSV log (--csv)") != NULL);
+  settings(&s, tf_tmp("clash.safetensors"));
+  s.plot_path = tf_tmp("./clash.safetensors");
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "the model (-o) and the plot (--plot)") != NULL);
+  {
+    kpcn_patchstore *ps = NULL;
+    CHECK(kpcn_patchstore_open(&ps, g_store, NULL, 0) == KPCN_OK);
+    kpcn_patchstore_close(ps);
+  }
+  /* an SSIM window that is even or larger than the loss region is refused at create */
+  settings(&s, tf_tmp("ssimwin.safetensors"));
+  s.loss2 = KPCN_LOSS_SSIM;
+  s.loss.ssim_window = 4;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "window 4 must be odd") != NULL);
+  s.loss.ssim_window = s.patch + 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT);
 }
 
 int main(void) {

@@ -267,6 +267,52 @@ static int record_exposure_main(int argc, char **argv) {
   return 0;
 }
 
+/* An --init model keeps its architecture; a shape option that disagrees with it is a mistake to
+ * report, not to ignore (--widen, --kpa-passes and --source-weight are the changes it takes). */
+static int check_init_arch(const kpcn_train_settings *s, int preset, int layers, int channels,
+                           int conv, int kernel, int dil) {
+  kpcn_model *m = NULL;
+  if (kpcn_model_load(s->init_model, &m) != KPCN_OK) {
+    fprintf(stderr, "kpcn-train: %s\n", kpcn_last_error());
+    return 1;
+  }
+  const kpcn_arch *a = kpcn_model_arch(m), *w = &s->arch;
+  const char *bad = NULL;
+  char want[64] = "", has[64] = "";
+  if ((preset || layers) && w->n_hidden != a->n_hidden) {
+    bad = layers ? "--layers" : "--preset";
+    snprintf(want, sizeof want, "%d hidden layers", w->n_hidden);
+    snprintf(has, sizeof has, "%d", a->n_hidden);
+  } else if ((preset || channels) && !s->widen_channels && w->channels != a->channels) {
+    bad = channels ? "--channels" : "--preset";
+    snprintf(want, sizeof want, "%d channels", w->channels);
+    snprintf(has, sizeof has, "%d", a->channels);
+  } else if ((preset || kernel) && w->kernel_size != a->kernel_size) {
+    bad = kernel ? "--kernel" : "--preset";
+    snprintf(want, sizeof want, "kernel %d", w->kernel_size);
+    snprintf(has, sizeof has, "%d", a->kernel_size);
+  } else {
+    for (int l = 0; l <= a->n_hidden && !bad; l++) {
+      if ((preset || conv) && w->conv_size[l] != a->conv_size[l]) {
+        bad = conv ? "--conv" : "--preset";
+        snprintf(want, sizeof want, "conv size %d in layer %d", w->conv_size[l], l);
+        snprintf(has, sizeof has, "%d", a->conv_size[l]);
+      } else if ((preset || dil) && w->dilation[l] != a->dilation[l]) {
+        bad = dil ? "--dilations" : "--preset";
+        snprintf(want, sizeof want, "dilation %d in layer %d", w->dilation[l], l);
+        snprintf(has, sizeof has, "%d", a->dilation[l]);
+      }
+    }
+  }
+  kpcn_model_destroy(m);
+  if (!bad) return 0;
+  fprintf(stderr,
+          "kpcn-train: %s asks for %s, the --init model '%s' has %s: an --init model keeps its "
+          "architecture (--widen, --kpa-passes and --source-weight are the changes it takes)\n",
+          bad, want, s->init_model, has);
+  return 2;
+}
+
 int main(int argc, char **argv) {
   if (argc >= 3 && !strcmp(argv[1], "--compare")) return compare_main(argc, argv);
   if (argc >= 2 && !strcmp(argv[1], "--record-exposure")) return record_exposure_main(argc, argv);
@@ -275,7 +321,7 @@ int main(int argc, char **argv) {
   kpcn_train_settings_defaults(&s);
   const char *preset = "cpu", *dil = NULL, *loss2 = NULL, *best_by = NULL;
   long long layers = -1, channels = -1, conv = -1, kernel = -1, ssim_win = -1, kpa_passes = -1, v;
-  int source_weight = 0;
+  int source_weight = 0, preset_given = 0;
   int from_store = 0;
   double d;
   for (int i = 1; i < argc; i++) {
@@ -312,7 +358,11 @@ int main(int argc, char **argv) {
     }
     STR("--store", s.store_path)
     STR("-o", s.out_path)
-    STR("--preset", preset)
+    else if (!strcmp(a, "--preset")) {
+      NEEDARG;
+      preset = arg;
+      preset_given = 1;
+    }
     STR("--init", s.init_model)
     STR("--dilations", dil)
     STR("--ckpt", s.ckpt_path)
@@ -431,7 +481,7 @@ int main(int argc, char **argv) {
       }
       s.arch.dilation[l] = (int)dv;
       p = end;
-      if (*p == ',')
+      if (*p == ',' && l < s.arch.n_hidden)
         p++;
       else if (*p == 0 && l < s.arch.n_hidden) {
         for (int r = l + 1; r <= s.arch.n_hidden; r++)
@@ -439,6 +489,28 @@ int main(int argc, char **argv) {
         break;
       }
     }
+    if (*p) {
+      fprintf(stderr,
+              "kpcn-train: --dilations '%s': at most %d positive integers (one per conv "
+              "layer), separated by commas\n",
+              dil, s.arch.n_hidden + 1);
+      return 2;
+    }
+  }
+  if (ssim_win > 0 && s.loss1 != KPCN_LOSS_SSIM && s.loss2 != KPCN_LOSS_SSIM) {
+    fprintf(stderr,
+            "kpcn-train: --ssim-window has no effect: neither --loss nor --loss2 is ssim\n");
+    return 2;
+  }
+  if (ssim_win > 0 && ssim_win % 2 == 0) {
+    fprintf(stderr, "kpcn-train: --ssim-window %lld: the window must be odd\n", ssim_win);
+    return 2;
+  }
+  if (s.init_model &&
+      (preset_given || layers > 0 || channels > 0 || conv > 0 || kernel > 0 || dil)) {
+    int r = check_init_arch(&s, preset_given, layers > 0, channels > 0, conv > 0, kernel > 0,
+                            dil != NULL);
+    if (r) return r;
   }
   if (from_store && !val_from_store(s.store_path)) return 1;
   s.nval = g_nval;

@@ -52,6 +52,45 @@ static int ck_list(kpcn_trainer *t, ck_tensor *ts) {
   return n;
 }
 
+/* Settings that change what the remaining iterations compute: a resumed run must use the
+ * values its checkpoint was written with, or it would not continue bit-exactly. Written as
+ * strings; a key an older checkpoint lacks is not checked. (Architecture, seed, batch, patch,
+ * stage split, precision, exposure normalisation and firefly bound are checked separately.) */
+enum { CK_NSET = 14 };
+typedef struct ck_setting {
+  const char *key, *option;
+  char value[64];
+} ck_setting;
+
+static int ck_settings(const kpcn_trainer *t, ck_setting out[CK_NSET]) {
+  const kpcn_train_settings *s = &t->s;
+  const int ssim = s->loss1 == KPCN_LOSS_SSIM || s->loss2 == KPCN_LOSS_SSIM;
+  int n = 0;
+#define SET(k, opt, ...)                                                                           \
+  do {                                                                                             \
+    out[n].key = k, out[n].option = opt;                                                           \
+    snprintf(out[n].value, sizeof out[n].value, __VA_ARGS__);                                      \
+    n++;                                                                                           \
+  } while (0)
+  SET("train.loss1", "--loss", "%s", kpcn_loss_name(s->loss1));
+  SET("train.loss2", "--loss2", "%s", kpcn_loss_name(s->loss2));
+  SET("train.lr", "--lr", "%.17g", s->adam.lr);
+  SET("train.lr2", "--lr2", "%.17g", s->stage2_lr);
+  SET("train.lr_decay", "--lr-decay", "%.17g", s->adam.lr_decay);
+  SET("train.decay_every", "--decay-every", "%lld", (long long)s->adam.decay_every);
+  SET("train.staircase", "--staircase", "%d", s->adam.staircase);
+  SET("train.clip", "--clip", "%.17g", s->adam.clip_norm);
+  SET("train.loss_margin", "--loss-margin", "%d", s->loss_margin);
+  SET("train.ssim_window", "--ssim-window", "%d", ssim ? s->loss.ssim_window : 0);
+  SET("train.augment", "--no-colorswap/--no-mirror/--no-rotate",
+      "colorswap %d mirror %d mirror_v %d rotate %d shift %d mode %d", s->augment.colorswap,
+      s->augment.mirror, s->augment.mirror_v, s->augment.rotate, s->augment.max_shift,
+      (int)s->augment.mode);
+  SET("train.crop_jitter", "--no-shift", "%d", s->crop_jitter);
+#undef SET
+  return n;
+}
+
 static void meta_i64(cJSON *m, const char *k, int64_t v) {
   char buf[32];
   snprintf(buf, sizeof buf, "%" PRId64, v);
@@ -86,8 +125,9 @@ kpcn_status kt_checkpoint_save(kpcn_trainer *t, const char *path) {
     snprintf(buf, sizeof buf, "%.17g", t->s.firefly);
     cJSON_AddStringToObject(meta, "train.firefly", buf);
   }
-  cJSON_AddStringToObject(meta, "train.loss1", kpcn_loss_name(t->s.loss1));
-  cJSON_AddStringToObject(meta, "train.loss2", kpcn_loss_name(t->s.loss2));
+  ck_setting set[CK_NSET];
+  for (int i = 0, ns = ck_settings(t, set); i < ns; i++)
+    cJSON_AddStringToObject(meta, set[i].key, set[i].value);
   cJSON_AddItemToObject(root, "__metadata__", meta);
   uint64_t off = 0;
   for (int i = 0; i < n; i++) {
@@ -280,11 +320,22 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
   if ((ff ? strtod(ff, NULL) : 0.0) != t->s.firefly)
     BAD("checkpoint '%s' was written with firefly %s, this run uses %g (--firefly)", path,
         ff ? ff : "off", t->s.firefly);
+  ck_setting set[CK_NSET];
+  for (int i = 0, ns = ck_settings(t, set); i < ns; i++) {
+    const char *was = meta_str(meta, set[i].key);
+    if (was && strcmp(was, set[i].value))
+      BAD("checkpoint '%s' was written with %s = %s, this run uses %s (%s): a resumed run must "
+          "keep its settings",
+          path, set[i].key, was, set[i].value, set[i].option);
+  }
   long long iter = 0, steps[2] = {0, 0};
   if ((st = meta_expect(meta, "train.iteration", 0, path, &iter)) ||
       (st = meta_expect(meta, "train.adam_steps.diffuse", 0, path, &steps[0])) ||
       (st = meta_expect(meta, "train.adam_steps.specular", 0, path, &steps[1])))
     goto done;
+  if (iter > t->s.iters)
+    BAD("checkpoint '%s' is at iteration %lld, beyond this run's %lld iterations (--iters)", path,
+        iter, (long long)t->s.iters);
   const char *rng = meta_str(meta, "train.rng"), *el = meta_str(meta, "train.elapsed_s");
   if (!rng || !el) BAD("checkpoint '%s': train.rng or train.elapsed_s missing", path);
   int n = ck_list(t, NULL);

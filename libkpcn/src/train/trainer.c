@@ -1,12 +1,14 @@
 /* The trainer: set-up (store, model, nets, optimizers, validation images), one training
  * iteration of either stage, and full-image validation. The loop with logging and
  * checkpoints is in run.c; batches in batch.c; checkpoints in checkpoint.c. */
+#define _GNU_SOURCE /* realpath */
 #include "core/internal.h"
 #include "kpcn/exr.h"
 #include "kpcn/metrics.h"
 #include "train/train_internal.h"
 
 #include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -203,6 +205,50 @@ static kpcn_status record_exposure(kpcn_trainer *t) {
   return KPCN_OK;
 }
 
+/* dir's real path + "/" + name, for a file that may not exist yet; 0 if its folder does not. */
+static int canonical_path(const char *p, char *out, size_t n) {
+  const char *slash = strrchr(p, '/');
+  char dir[PATH_MAX], real[PATH_MAX];
+  if (!slash)
+    snprintf(dir, sizeof dir, ".");
+  else
+    snprintf(dir, sizeof dir, "%.*s", slash == p ? 1 : (int)(slash - p), p);
+  if (!realpath(dir, real)) return 0;
+  snprintf(out, n, "%s/%s", real, slash ? slash + 1 : p);
+  return 1;
+}
+
+/* Same file? Existing files by device and inode (links, "./" and "../" spellings); a file
+ * not yet written by its directory's real path and its name. */
+static int same_file(const char *a, const char *b) {
+  struct stat sa, sb;
+  if (stat(a, &sa) == 0 && stat(b, &sb) == 0)
+    return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+  char ra[PATH_MAX + 256], rb[PATH_MAX + 256];
+  return canonical_path(a, ra, sizeof ra) && canonical_path(b, rb, sizeof rb) &&
+         strcmp(ra, rb) == 0;
+}
+
+/* The store and the initial model are read, the rest written: no two may be one file (a CSV
+ * written over the patch store destroys it). */
+static kpcn_status check_output_paths(const kpcn_trainer *t) {
+  const char *path[7] = {t->store_path, t->init_model, t->out_path, t->ckpt_path,
+                         t->csv_path,   t->plot_path,  t->best_path};
+  static const char *what[7] = {
+      "the patch store (--store)", "the initial model (--init)", "the model (-o)",
+      "the checkpoint (--ckpt)",   "the CSV log (--csv)",        "the plot (--plot)",
+      "the best model (--best)"};
+  for (int i = 0; i < 7; i++)
+    for (int j = i + 1; j < 7; j++) {
+      if (!path[i] || !path[j] || !*path[i] || !*path[j]) continue;
+      if (i == 1 && j == 2) continue; /* fine-tuning a model in place is allowed */
+      if (same_file(path[i], path[j]))
+        return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s and %s are the same file '%s'", what[i],
+                         what[j], path[j]);
+    }
+  return KPCN_OK;
+}
+
 kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s) {
   if (!out || !s) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_trainer_create: NULL");
   *out = NULL;
@@ -222,6 +268,13 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   if (s->loss_margin < 0 || 2 * s->loss_margin >= s->patch)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "loss margin %d too large for patch %d",
                      s->loss_margin, s->patch);
+  if ((s->loss1 == KPCN_LOSS_SSIM || s->loss2 == KPCN_LOSS_SSIM) &&
+      (s->loss.ssim_window < 1 || s->loss.ssim_window % 2 == 0 ||
+       s->loss.ssim_window > s->patch - 2 * s->loss_margin))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "SSIM loss: window %d must be odd and no larger than the %d-pixel loss "
+                     "region (patch %d less twice the loss margin %d)",
+                     s->loss.ssim_window, s->patch - 2 * s->loss_margin, s->patch, s->loss_margin);
   if (!(s->stage2_lr >= 0) || s->stage2_lr > 1)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "stage-2 learning rate %g out of range",
                      s->stage2_lr);
@@ -258,9 +311,7 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   } while (0)
   if (!t->store_path || !t->out_path || !t->ckpt_path || !t->csv_path || !t->plot_path)
     GO(KPCN_ERR_OUT_OF_MEMORY);
-  if (t->snapshot_dir && mkdir(t->snapshot_dir, 0777) != 0 && errno != EEXIST)
-    GO(kpcn_fail(KPCN_ERR_IO, "cannot create snapshot directory '%s': %s", t->snapshot_dir,
-                 strerror(errno)));
+  GO(check_output_paths(t));
   /* architecture with the feature builder's inputs */
   t->arch = s->arch;
   {
@@ -302,6 +353,10 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   GO(kt_batch_setup(t));
   GO(record_exposure(t));
   GO(load_validation(t));
+  /* only now that every input has been read: a failed create leaves nothing behind */
+  if (t->snapshot_dir && mkdir(t->snapshot_dir, 0777) != 0 && errno != EEXIST)
+    GO(kpcn_fail(KPCN_ERR_IO, "cannot create snapshot directory '%s': %s", t->snapshot_dir,
+                 strerror(errno)));
   GO(setup_nets(t));
   {
     size_t pp = (size_t)t->P * t->P, N = (size_t)t->N;
