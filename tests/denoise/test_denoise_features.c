@@ -3,6 +3,7 @@
  * image's norm; inverse transforms and the recombination's derivatives by finite
  * differences; missing buffers named. */
 #include <float.h>
+#include <limits.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -178,6 +179,11 @@ static void test_values(void) {
   CHECK(kpcn_features_build(a, 0, 0.0f, &n, f, NULL, 1) == KPCN_ERR_INVALID_ARGUMENT);
   CHECK(kpcn_features_build_region(a, 0, EPS, &n, 20, 0, 5, 5, f, 0, NULL, 1) ==
         KPCN_ERR_INVALID_ARGUMENT);
+  /* x0 + w past INT_MAX must not wrap into a region that passes the bounds check */
+  CHECK(kpcn_features_build_region(a, 0, EPS, &n, 1, 0, INT_MAX, 5, f, 0, NULL, 1) ==
+        KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_features_build_region_pixels(a, 0, EPS, &n, 0, 1, 1, INT_MAX, f, KPCN_FEATURES_COUNT,
+                                          0, NULL, 1) == KPCN_ERR_INVALID_ARGUMENT);
   free(a->var[KPCN_BUF_VISIBILITY]);
   a->var[KPCN_BUF_VISIBILITY] = NULL;
   CHECK(kpcn_features_build(a, 1, EPS, &n, f, NULL, 1) == KPCN_ERR_MISSING_CHANNEL);

@@ -2,6 +2,7 @@
  * (direct conv loops, softmax, kernel apply, recombination), tiled == untiled, bf16 vs
  * fp32 bounded, the C API (model file, named strided buffers, missing buffer named,
  * cancellation), models with a foreign input list rejected. */
+#include <limits.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -316,6 +317,17 @@ static void test_api(void) {
   /* tile 0: the automatic grid; a small frame fits the memory budget in one tile, and the
    * result equals the explicitly tiled one */
   o.tile = 0;
+  CHECK(kpcn_denoiser_create(&d, &o) == KPCN_OK);
+  if (d) {
+    kpcn_denoiser_set_progress(d, NULL, NULL);
+    CHECK(kpcn_denoiser_execute_aov(d, a, out) == KPCN_OK);
+    kpcn_denoiser_get_stats(d, &st);
+    CHECK(st.tiles_total == 1 && st.tile_w == W && st.tile_h == H);
+    CHECK(max_rel(out, ref, 3 * P) < 2e-6);
+    kpcn_denoiser_destroy(d);
+  }
+  /* a tile far beyond the image ("never tile") is one piece; W + tile must not overflow */
+  o.tile = INT_MAX;
   CHECK(kpcn_denoiser_create(&d, &o) == KPCN_OK);
   if (d) {
     kpcn_denoiser_set_progress(d, NULL, NULL);

@@ -166,6 +166,32 @@ static void test_threads(void) {
   kpcn_image_destroy(img);
 }
 
+/* Writers of one path on several threads each write a temp file of their own (a shared one
+ * would interleave their bytes): every write succeeds and the file is one of the images. */
+static void test_concurrent_writers(void) {
+  enum { NW = 4 };
+  kpcn_image *img[NW];
+  for (int i = 0; i < NW; i++)
+    img[i] = make_image(64, 96, 3, NULL, 300u + (unsigned)i);
+  const char *p = kt_tmpfile("same.exr");
+  int ok[NW] = {0};
+#pragma omp parallel for num_threads(NW)
+  for (int i = 0; i < NW; i++)
+    for (int rep = 0; rep < 8; rep++)
+      ok[i] += img[i] && kpcn_exr_write_image(p, img[i], NULL) == KPCN_OK;
+  for (int i = 0; i < NW; i++)
+    CHECK(ok[i] == 8);
+  kpcn_image *r = NULL;
+  CHECK(kpcn_exr_read_image(p, &r) == KPCN_OK);
+  int found = 0;
+  for (int i = 0; r && i < NW; i++)
+    found += img[i] && same_image(img[i], r, 0);
+  CHECK(found == 1);
+  kpcn_image_destroy(r);
+  for (int i = 0; i < NW; i++)
+    kpcn_image_destroy(img[i]);
+}
+
 static kpcn_aov_set *make_full_set(int w, int h) {
   kpcn_aov_set *s = NULL;
   if (kpcn_aov_create(&s, w, h) != KPCN_OK) return NULL;
@@ -343,6 +369,7 @@ static void test_aliases_file(void) {
 int main(void) {
   test_roundtrips();
   test_threads();
+  test_concurrent_writers();
   test_aov_roundtrip();
   test_aliases_file();
   return kt_summary("test_exr_roundtrip");

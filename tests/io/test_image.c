@@ -1,6 +1,8 @@
 /* Unit tests of kpcn/image.h: images, buffers, AOV sets, channel-name aliases. */
 #include "kpcn/image.h"
 
+#include "core/internal.h"
+
 #include "testutil.h"
 
 #include <math.h>
@@ -52,6 +54,11 @@ static void test_image_bad_sizes(void) {
   CHECK(kpcn_image_create(&img, KPCN_MAX_DIM + 1, 1, 1, NULL) == KPCN_ERR_OUT_OF_MEMORY);
   CHECK(strstr(kpcn_last_error(), "absurd") != NULL);
   CHECK(kpcn_image_create(&img, 60000, 60000, 3, NULL) == KPCN_ERR_OUT_OF_MEMORY);
+  /* a block larger than any machine's memory is refused by name, not overcommitted (every
+   * large buffer, an image's planes included, comes from kpcn_aligned_alloc) */
+  CHECK(kpcn_aligned_alloc((size_t)1 << 62, "a test block") == NULL);
+  CHECK(strstr(kpcn_last_error(), "more than this machine's") &&
+        strstr(kpcn_last_error(), "a test block"));
   kpcn_aov_set *s = NULL;
   CHECK(kpcn_aov_create(&s, 0, 0) == KPCN_ERR_INVALID_ARGUMENT);
   CHECK(kpcn_aov_create(&s, 100000, 2) == KPCN_ERR_OUT_OF_MEMORY);

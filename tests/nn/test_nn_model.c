@@ -162,6 +162,18 @@ static void m_meta_number(cJSON *h) {
   cJSON_AddNumberToObject(cJSON_GetObjectItem(h, "__metadata__"), "user", 3);
 }
 
+/* The architecture claims 1024 channels: the file's few weights cannot be them, and the loader
+ * must say so before it allocates the 78 MB such a model would take. */
+static void m_huge_arch(cJSON *h) {
+  cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
+  cJSON *arch = cJSON_Parse(cJSON_GetObjectItem(meta, "kpcn.architecture")->valuestring);
+  cJSON_ReplaceItemInObject(arch, "channels", cJSON_CreateNumber(1024));
+  char *js = cJSON_PrintUnformatted(arch);
+  cJSON_ReplaceItemInObject(meta, "kpcn.architecture", cJSON_CreateString(js));
+  free(js);
+  cJSON_Delete(arch);
+}
+
 static void mutated(const blob *good, const char *what, mutate_fn fn, const char *needle) {
   uint64_t hl = hlen(good);
   char *txt = malloc(hl + 1);
@@ -415,6 +427,7 @@ static void test_malformed(const blob *good) {
   write_st(p, 8, "[1,2,3] ", good->p + 8 + hl, good->n - 8 - hl);
   expect_reject("JSON array header", p, "JSON object");
   mutated(good, "wrong dtype", m_dtype, "specular.conv1.weight");
+  mutated(good, "architecture beyond the data", m_huge_arch, "the architecture's F32 weights need");
   mutated(good, "shape mismatch", m_shape, "diffuse.conv0.weight");
   mutated(good, "missing tensor", m_missing, "diffuse.conv2.bias");
   mutated(good, "unknown tensor", m_extra, "diffuse.conv9.bias");

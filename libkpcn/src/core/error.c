@@ -4,6 +4,7 @@
 
 #include <errno.h>
 #include <omp.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -105,7 +106,26 @@ void *kpcn_calloc(size_t count, size_t size, const char *what) {
  * touch and a TLB entry afterwards (measured in bench_denoise, see docs/denoiser.md). */
 enum { HUGE_PAGE = 2u << 20, HUGE_MIN = 4u << 20 };
 
+/* This machine's physical memory in bytes (0 if unknown). */
+static uint64_t physical_memory(void) {
+  static uint64_t mem; /* a benign race: every thread computes the same value */
+  if (!mem) {
+    const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGESIZE);
+    if (pages > 0 && page > 0) mem = (uint64_t)pages * (uint64_t)page;
+  }
+  return mem;
+}
+
 void *kpcn_aligned_alloc(size_t bytes, const char *what) {
+  /* A block larger than the machine (an absurd header, a huge render) is an error to name,
+   * not an allocation that overcommits and ends in the OOM killer once its pages are touched. */
+  const uint64_t mem = physical_memory();
+  if (mem && bytes > mem) {
+    kpcn_fail(KPCN_ERR_OUT_OF_MEMORY,
+              "cannot allocate %.1f GB for %s: more than this machine's %.1f GB of memory",
+              (double)bytes * 1e-9, what, (double)mem * 1e-9);
+    return NULL;
+  }
   void *p = NULL;
   const int huge = bytes >= HUGE_MIN;
   const size_t n = huge ? (bytes + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE : bytes ? bytes : 64;
@@ -133,8 +153,16 @@ kpcn_status kpcn_check_size(int width, int height, const char *what) {
   return KPCN_OK;
 }
 
-void kpcn_temp_path(char *out, size_t outsz, const char *path) {
-  snprintf(out, outsz, "%s.tmp.%ld", path, (long)getpid());
+/* Unique per process AND per call: two threads (or two writers of one process) writing the
+ * same path must not share a temp file, or one truncates the other's half-written data. */
+kpcn_status kpcn_temp_path(char *out, size_t outsz, const char *path) {
+  static atomic_ulong counter;
+  const unsigned long k = atomic_fetch_add(&counter, 1);
+  const int n = snprintf(out, outsz, "%s.tmp.%ld.%lu", path, (long)getpid(), k);
+  if (n < 0 || (size_t)n >= outsz)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "path too long for a temporary name: '%.64s...'",
+                     path);
+  return KPCN_OK;
 }
 
 kpcn_status kpcn_commit_file(const char *tmp, const char *path) {

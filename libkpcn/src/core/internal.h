@@ -28,9 +28,10 @@ void kpcn_aligned_free(void *p);
 /* Validates an image size: positive, <= KPCN_MAX_DIM each, <= KPCN_MAX_PIXELS total. */
 kpcn_status kpcn_check_size(int width, int height, const char *what);
 
-/* Writes `path` atomically: callers write to the temp name from kpcn_temp_path, then
- * kpcn_commit_file renames it over path (or kpcn_abort_file removes it). */
-void kpcn_temp_path(char *out, size_t outsz, const char *path);
+/* Writes `path` atomically: callers write to the temp name from kpcn_temp_path (unique per
+ * call; an error if it does not fit outsz), then kpcn_commit_file renames it over path (or
+ * kpcn_abort_file removes it). */
+kpcn_status kpcn_temp_path(char *out, size_t outsz, const char *path);
 kpcn_status kpcn_commit_file(const char *tmp, const char *path);
 void kpcn_abort_file(const char *tmp);
 

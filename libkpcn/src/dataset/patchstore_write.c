@@ -211,10 +211,12 @@ kpcn_status kpcn_patchstore_create(kpcn_patchstore_writer **out, const char *pat
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch store '%s': %d channels", path, C);
   if (strlen(path) >= 4000)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch store path too long");
+  char tmp[sizeof((kpcn_patchstore_writer *)0)->tmp];
+  KPCN_TRY(kpcn_temp_path(tmp, sizeof tmp, path));
   kpcn_patchstore_writer *w = kpcn_calloc(1, sizeof *w, "patch store writer");
   if (!w) return KPCN_ERR_OUT_OF_MEMORY;
   snprintf(w->path, sizeof w->path, "%s", path);
-  kpcn_temp_path(w->tmp, sizeof w->tmp, path);
+  memcpy(w->tmp, tmp, sizeof tmp);
   w->S = s->patch_size;
   w->C = C;
   w->dtype = s->dtype;

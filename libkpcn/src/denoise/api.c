@@ -25,6 +25,7 @@ struct kpcn_denoiser {
 };
 
 void kpcn_denoiser_options_defaults(kpcn_denoiser_options *o) {
+  if (!o) return;
   memset(o, 0, sizeof *o);
   o->method = KPCN_DENOISE_KPCN;
   /* Defaults chosen on the Tungsten Cornell 16 spp pair (docs/denoiser.md, tests). */
@@ -435,6 +436,7 @@ kpcn_status kpcn_denoiser_execute_aov(kpcn_denoiser *d, const kpcn_aov_set *aov,
                                       float *out_planar) {
   if (!d || !aov || !out_planar)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_execute_aov: NULL argument");
+  KPCN_TRY(kpcn_check_size(aov->width, aov->height, "denoiser_execute_aov"));
   double t0 = now_s();
   memset(&d->stats, 0, sizeof d->stats);
   kpcn_status s = run_denoise(d, aov, out_planar);

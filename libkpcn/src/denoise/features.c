@@ -214,7 +214,7 @@ static kpcn_status build_region(const kpcn_aov_set *aov, int branch, float eps,
   if (!(eps > 0.0f) || !isfinite(eps))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "features_build: eps must be > 0 (got %g)",
                      (double)eps);
-  if (w <= 0 || h <= 0 || x0 < 0 || y0 < 0 || x0 + w > aov->width || y0 + h > aov->height)
+  if (w <= 0 || h <= 0 || x0 < 0 || y0 < 0 || w > aov->width - x0 || h > aov->height - y0)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
                      "features_build: region %dx%d+%d+%d outside the %dx%d image", w, h, x0, y0,
                      aov->width, aov->height);

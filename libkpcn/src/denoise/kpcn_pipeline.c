@@ -101,8 +101,9 @@ static int even_up(int n) { return (n + 1) & ~1; }
  * bf16. Ties go to fewer tiles. */
 static void tile_grid(const kpcn_arch *a, int bf16, int W, int H, int pad, int tile, int *tw,
                       int *th) {
-  if (tile > 0) {
-    *tw = *th = tile;
+  if (tile > 0) { /* a tile beyond the image is one piece (and keeps W + tile - 1 in int) */
+    *tw = tile < W ? tile : W;
+    *th = tile < H ? tile : H;
     return;
   }
   const double budget = (double)kpcn_tile_budget_bytes() / (double)bytes_per_pixel(a, bf16);

@@ -160,8 +160,8 @@ void kpcn_exr_read_meta(exr_context_t ctx, int *spp, int64_t *seed, char *scene,
     char *end;
     long long s = strtoll(sbuf, &end, 10);
     if (end != sbuf) *seed = s;
-  } else if (attr_number(ctx, "kpcn:seed", &v)) {
-    *seed = (int64_t)v;
+  } else if (attr_number(ctx, "kpcn:seed", &v) && v >= 0.0 && v < 9.2e18) {
+    *seed = (int64_t)v; /* the cast of NaN or of a value past int64 is undefined */
   }
   attr_string(ctx, "kpcn:scene", scene, scenesz);
   attr_string(ctx, "kpcn:version", version, versionsz);

@@ -205,7 +205,7 @@ kpcn_status kpcn_exr_write_planes(const char *path, int w, int h, int n, const c
   char tmp[4096];
   if (strlen(path) + 32 > sizeof tmp)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "EXR write: path too long: '%.64s...'", path);
-  kpcn_temp_path(tmp, sizeof tmp, path);
+  KPCN_TRY(kpcn_temp_path(tmp, sizeof tmp, path));
 
   exr_context_initializer_t init = kpcn_exr_initializer();
   exr_context_t ctx = NULL;

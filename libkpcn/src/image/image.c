@@ -242,6 +242,8 @@ kpcn_status kpcn_aov_create_for_channels(kpcn_aov_set **out, int width, int heig
   if (!out || (nch > 0 && (!names || !dst)))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_aov_create_for_channels: NULL argument");
   *out = NULL;
+  for (int c = 0; c < nch; c++) /* defined on every failure below */
+    dst[c] = NULL;
   int chan[KPCN_BUF_COUNT][3], var[KPCN_BUF_COUNT];
   KPCN_TRY(kpcn_aov_map_channels(names, nch, chan, var, what ? what : "image"));
   kpcn_aov_set *s;
@@ -261,6 +263,8 @@ kpcn_status kpcn_aov_create_for_channels(kpcn_aov_set **out, int width, int heig
     }
     if (st != KPCN_OK) {
       kpcn_aov_destroy(s);
+      for (int c = 0; c < nch; c++) /* they pointed into the destroyed set */
+        dst[c] = NULL;
       return st;
     }
     if (var[b] >= 0) dst[var[b]] = s->var[b];

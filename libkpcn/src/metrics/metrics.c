@@ -29,6 +29,7 @@ int kpcn_metric_from_name(const char *name) {
 }
 
 void kpcn_metric_options_defaults(kpcn_metric_options *opt) {
+  if (!opt) return;
   opt->display = KPCN_DISPLAY_LINEAR;
   opt->data_range = 1.0;
   opt->eps = 0.01;
@@ -173,6 +174,8 @@ static kpcn_status match_channels(const kpcn_image *x, const kpcn_image *y,
                                   int *count, const char *what) {
   if (channels && nnames > 0) {
     for (int k = 0; k < nnames; ++k) {
+      if (!channels[k])
+        return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: channel name %d is NULL", what, k);
       ix[k] = kpcn_image_find_channel(x, channels[k]);
       iy[k] = kpcn_image_find_channel(y, channels[k]);
       if (ix[k] < 0 || iy[k] < 0)

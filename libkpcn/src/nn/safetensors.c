@@ -82,7 +82,10 @@ kpcn_status kpcn_model_save(const kpcn_model *m, const char *path) {
   size_t jl = strlen(json);
   size_t padded = (jl + 7) & ~(size_t)7; /* data starts 8-byte aligned, padded with spaces */
   char tmp[4096];
-  kpcn_temp_path(tmp, sizeof tmp, path);
+  if (kpcn_temp_path(tmp, sizeof tmp, path) != KPCN_OK) {
+    free(json);
+    return kpcn_last_status();
+  }
   FILE *f = fopen(tmp, "wb");
   if (!f) {
     free(json);
@@ -132,7 +135,7 @@ static kpcn_status meta_string(const cJSON *meta, const char *key, const char **
 }
 
 /* Reads the architecture and user metadata; creates the (zeroed) model. */
-static kpcn_status parse_meta(const cJSON *h, kpcn_model **out) {
+static kpcn_status parse_meta(const cJSON *h, uint64_t data_size, kpcn_model **out) {
   const cJSON *meta = cJSON_GetObjectItemCaseSensitive(h, "__metadata__");
   if (!cJSON_IsObject(meta))
     return kpcn_fail(KPCN_ERR_FORMAT, "__metadata__: missing or not an object");
@@ -171,6 +174,14 @@ static kpcn_status parse_meta(const cJSON *h, kpcn_model **out) {
                      "__metadata__.\"kpcn.preprocess\" = '%s' disagrees with "
                      "architecture '%s'",
                      pre_s, a.preprocess);
+  /* Before allocating: a few-KB header must not make us commit the memory of a huge
+   * architecture whose weights the file does not hold (the F32 tensors fill the data section
+   * exactly). Small mismatches are left to load_tensors, whose message names the tensor. */
+  const uint64_t need = (uint64_t)KPCN_N_BRANCHES * kpcn_arch_param_count(&a) * sizeof(float);
+  if (need > data_size && need > ((uint64_t)64 << 20))
+    return kpcn_fail(KPCN_ERR_FORMAT,
+                     "data section has %llu bytes, the architecture's F32 weights need %llu",
+                     (unsigned long long)data_size, (unsigned long long)need);
   kpcn_model *m;
   KPCN_TRY(kpcn_model_alloc(&a, &m));
   for (const cJSON *it = meta->child; it; it = it->next) {
@@ -343,7 +354,7 @@ static kpcn_status load_file(FILE *f, const char *path, kpcn_model **out) {
     return kpcn_fail(KPCN_ERR_FORMAT, "'%s': header is not a JSON object", path);
   }
   kpcn_model *m = NULL;
-  kpcn_status s = parse_meta(h, &m);
+  kpcn_status s = parse_meta(h, (uint64_t)fsz - 8 - hl, &m);
   if (s == KPCN_OK) s = load_tensors(h, m, f, 8 + hl, (uint64_t)fsz - 8 - hl);
   cJSON_Delete(h);
   if (s != KPCN_OK) {

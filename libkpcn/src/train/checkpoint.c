@@ -148,12 +148,11 @@ kpcn_status kt_checkpoint_save(kpcn_trainer *t, const char *path) {
   }
   size_t hl = strlen(hdr), padded = (hl + 7) / 8 * 8;
   char tmp[4096];
-  kpcn_temp_path(tmp, sizeof tmp, path);
-  FILE *f = fopen(tmp, "wb");
-  kpcn_status st = KPCN_OK;
-  if (!f) {
+  kpcn_status st = kpcn_temp_path(tmp, sizeof tmp, path);
+  FILE *f = st == KPCN_OK ? fopen(tmp, "wb") : NULL;
+  if (st == KPCN_OK && !f) {
     st = kpcn_fail(KPCN_ERR_IO, "cannot write checkpoint '%s': %s", path, strerror(errno));
-  } else {
+  } else if (f) {
     unsigned char len[8];
     for (int i = 0; i < 8; i++)
       len[i] = (unsigned char)((uint64_t)padded >> (8 * i));

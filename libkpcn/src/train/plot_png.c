@@ -261,7 +261,10 @@ kpcn_status kpcn_plot_png(const char *path, const kpcn_plot_settings *st,
 #undef PX
 #undef PY
   char tmp[4096];
-  kpcn_temp_path(tmp, sizeof tmp, path);
+  if (kpcn_temp_path(tmp, sizeof tmp, path) != KPCN_OK) {
+    free(cv.px);
+    return kpcn_last_status();
+  }
   int ok = stbi_write_png(tmp, cv.w, cv.h, 3, cv.px, cv.w * 3);
   free(cv.px);
   if (!ok) {

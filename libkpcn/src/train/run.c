@@ -67,7 +67,10 @@ static kpcn_status csv_open(const char *path, int resume, int64_t keep_iter, int
     }
   }
   char tmp[4096];
-  kpcn_temp_path(tmp, sizeof tmp, path);
+  if (kpcn_temp_path(tmp, sizeof tmp, path) != KPCN_OK) {
+    free(kept);
+    return kpcn_last_status();
+  }
   FILE *f = fopen(tmp, "w");
   if (!f) {
     free(kept);
