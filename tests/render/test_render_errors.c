@@ -1,8 +1,12 @@
 /* Malformed scenes: every failure is a clear error naming the JSON path (or file), never a
  * crash or a silently different scene; the tool exits non-zero and writes no file. */
+#include "render/render_internal.h"
 #include "render_testutil.h"
 #include "testutil.h"
 
+#include <float.h>
+#include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -41,6 +45,64 @@ static int file_exists(const char *p) {
 static int run(const char *cmd) {
   int rc = system(cmd);
   return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+/* Runs `exe scene -o out args` with stderr captured; expects exit code rc, `needle` in the
+ * messages (NULL: any), and an output file exactly when rc is 0. */
+static void expect_cli(const char *exe, const char *scene, const char *args, int rc,
+                       const char *needle) {
+  char cmd[4096], out[1024], err[1024];
+  snprintf(out, sizeof(out), "%s", kt_tmpfile("cli.exr"));
+  snprintf(err, sizeof(err), "%s", kt_tmpfile("cli.err"));
+  remove(out);
+  snprintf(cmd, sizeof(cmd), "%s %s -o %s --threads 1 %s 2>%s", exe, scene, out, args, err);
+  int got = run(cmd);
+  char *msg = kt_slurp(err, NULL);
+  printf("kpcn-render %-40s -> rc %d: %s", args, got, msg ? msg : "(no stderr)\n");
+  CHECK(got == rc);
+  if (needle) CHECK(msg && strstr(msg, needle) != NULL);
+  CHECK(file_exists(out) == (rc == 0));
+  free(msg);
+  remove(out);
+}
+
+/* Option values that used to wrap, clamp or slip through (see docs/robustness.md). */
+static void test_tool_options(const char *exe) {
+  const char *cornell = KPCN_TESTDATA "/scenes/cornell-box/scene.json";
+  /* sscanf's %d wrapped these to 16x8 and rendered; the message quotes what was typed */
+  expect_cli(exe, cornell, "--spp 1 --resolution 4294967312x4294967304", 2,
+             "'4294967312x4294967304'");
+  expect_cli(exe, cornell, "--spp 1 --resolution 99999999999x16", 2, "'99999999999x16'");
+  expect_cli(exe, cornell, "--spp 1 --resolution 16x16x", 2, "--resolution");
+  expect_cli(exe, cornell, "--spp 1 --resolution ' 16x16'", 2, "--resolution");
+  /* cx + cw overflowed the bound check */
+  expect_cli(exe, cornell, "--spp 1 --crop 2147483647,2147483647,1,1", 2,
+             "'2147483647,2147483647,1,1'");
+  expect_cli(exe, cornell, "--spp 1 --resolution 16x16 --crop 65535,0,1,1", 1, "crop");
+  expect_cli(exe, cornell, "--spp 1 --crop -1,0,4,4", 2, "--crop");
+  /* strtoll clamped silently; a negative seed rendered without kpcn:seed in the header */
+  expect_cli(exe, cornell, "--spp 1 --seed 99999999999999999999", 2, "'99999999999999999999'");
+  expect_cli(exe, cornell, "--spp 1 --seed -1", 2, "--seed");
+  char out[1024];
+  snprintf(out, sizeof(out), "%s", kt_tmpfile("seed.exr"));
+  char cmd[4096];
+  snprintf(cmd, sizeof(cmd), "%s %s -o %s --spp 1 --threads 1 --resolution 8x8 --seed %s", exe,
+           cornell, out, "9223372036854775807");
+  CHECK(run(cmd) == 0);
+  kpcn_exr_info_t info;
+  CHECK(kpcn_exr_info(out, &info) == KPCN_OK && info.seed == INT64_MAX);
+  remove(out);
+  /* a path whose radiance overflows float is counted as black, and said so */
+  char hot[1024];
+  snprintf(hot, sizeof(hot), "%s", kt_tmpfile("hot.json"));
+  const char *json =
+      "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"null\"},\"emission\":1e15,"
+      "\"transform\":{\"position\":[0,1,0],\"scale\":0.5,\"rotation\":[180,0,0]}},"
+      "{\"type\":\"quad\",\"bsdf\":{\"type\":\"lambert\",\"albedo\":1e30},"
+      "\"transform\":{\"scale\":4}}],\"camera\":{\"type\":\"pinhole\","
+      "\"transform\":{\"position\":[0,0.5,2],\"look_at\":[0,0,0]}}}";
+  write_file(hot, json, strlen(json));
+  expect_cli(exe, hot, "--spp 2 --resolution 8x8", 0, "non-finite");
 }
 
 static void test_tool(void) {
@@ -96,6 +158,193 @@ static void test_tool(void) {
   CHECK(info.width == 16 && info.height == 16 && info.spp == 1);
   for (int b = 0; b < KPCN_BUF_COUNT; b++)
     CHECK(info.has_buffer[b] && info.has_variance[b]);
+  test_tool_options(exe);
+}
+
+#define CAM(fields) "{\"primitives\":[" LIGHT "],\"camera\":{" fields "}}"
+#define PRIM2(prim) "{\"primitives\":[" LIGHT "," prim "]}"
+
+/* Values that passed a check on the JSON double but not as the float the renderer uses, and
+ * fields whose wrong type or sign was silently accepted. */
+static void test_scene_values(void) {
+  /* 0 or a denormal as a float: 1/tan(fov/2) was Inf and Embree aborted */
+  expect_fail("tiny fov", CAM("\"type\":\"pinhole\",\"fov\":1e-38"), "camera.fov", NULL);
+  expect_fail("fov rounding to 180", CAM("\"type\":\"pinhole\",\"fov\":179.99999999"), "camera.fov",
+              "180 as a float");
+  expect_fail("huge focus distance",
+              CAM("\"type\":\"thinlens\",\"focus_distance\":1e39,\"aperture_size\":0.1"),
+              "camera.focus_distance", NULL);
+  expect_fail("tiny focus distance",
+              CAM("\"type\":\"thinlens\",\"focus_distance\":1e-300,\"aperture_size\":0.1"),
+              "camera.focus_distance", NULL);
+  expect_fail("negative aperture", CAM("\"type\":\"thinlens\",\"aperture_size\":-1"),
+              "camera.aperture_size", NULL);
+  /* emission: bounded so its square stays a float; textures follow the constants' rules */
+  expect_fail("huge emission",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"null\"},"
+              "\"emission\":1e30}]}",
+              "primitives[0].emission", "maximum");
+  expect_fail("huge checker emission",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"null\"},"
+              "\"emission\":{\"type\":\"checker\",\"off_color\":[1,1e20,1]}}]}",
+              "primitives[0].emission", "maximum");
+  expect_fail("negative checker emission",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"null\"},"
+              "\"emission\":{\"type\":\"checker\",\"on_color\":-1}}]}",
+              "primitives[0].emission", "negative");
+  expect_fail("huge environment",
+              "{\"primitives\":[{\"type\":\"infinite_sphere\",\"emission\":[1,1,2e15]}]}",
+              "primitives[0].emission", "maximum");
+  /* malformed documents */
+  expect_fail("text after the document", "{\"primitives\":[" LIGHT "]} garbage", "invalid JSON",
+              "text after the end");
+  expect_fail("duplicate key", "{\"primitives\":[" LIGHT "],\"renderer\":{\"spp\":1,\"spp\":0}}",
+              "renderer.spp", "duplicate key");
+  expect_fail("nested duplicate key",
+              PRIM2("{\"type\":\"quad\",\"bsdf\":{\"type\":\"lambert\",\"albedo\":0.5,"
+                    "\"albedo\":0.2}}"),
+              "primitives[1].bsdf.albedo", "duplicate key");
+  { /* an object too large to compare pairwise: its keys are sorted */
+    char big[4096] = "{\"primitives\":[" LIGHT "],\"camera\":{\"type\":\"pinhole\"";
+    for (int i = 0; i < 40; i++)
+      snprintf(big + strlen(big), sizeof(big) - strlen(big), ",\"k%d\":%d", i, i);
+    strcat(big, ",\"k17\":[1,2]}}");
+    expect_fail("duplicate key, large object", big, "camera.k17", "duplicate key");
+  }
+  {
+    char nul[1024];
+    snprintf(nul, sizeof(nul), "%s", kt_tmpfile("nul.json"));
+    static const char text[] = "{\"primitives\":[" LIGHT "]}\0 garbage";
+    write_file(nul, text, sizeof(text) - 1);
+    kpcn_scene *sn = NULL;
+    CHECK(kpcn_scene_load(nul, &sn) == KPCN_ERR_FORMAT && sn == NULL);
+    CHECK(strstr(kpcn_last_error(), "NUL byte") != NULL);
+  }
+  /* transforms: all 16 numbers, as floats, and an affine last row */
+  expect_fail("matrix, strings in the last row",
+              PRIM2("{\"type\":\"cube\",\"bsdf\":{\"type\":\"lambert\"},\"transform\":"
+                    "[1,0,0,0,0,1,0,0,0,0,1,0,\"a\",\"b\",\"c\",\"d\"]}"),
+              "primitives[1].transform[12]", "expected a number");
+  expect_fail("projective matrix",
+              PRIM2("{\"type\":\"cube\",\"bsdf\":{\"type\":\"lambert\"},\"transform\":"
+                    "[1,0,0,0,0,1,0,0,0,0,1,0,0,0,1,1]}"),
+              "primitives[1].transform[14]", "last row");
+  expect_fail("matrix entry beyond float",
+              PRIM2("{\"type\":\"cube\",\"bsdf\":{\"type\":\"lambert\"},\"transform\":"
+                    "[1,0,0,1e39,0,1,0,0,0,0,1,0,0,0,0,1]}"),
+              "primitives[1].transform[3]", "non-finite");
+  /* wrong types */
+  expect_fail("numeric name",
+              "{\"primitives\":[{\"type\":\"quad\",\"name\":5,\"bsdf\":{\"type\":\"null\"},"
+              "\"emission\":1}]}",
+              "primitives[0].name", "string");
+  expect_fail("infinite_sphere bsdf",
+              PRIM2("{\"type\":\"infinite_sphere\",\"emission\":1,\"bsdf\":5}"),
+              "primitives[1].bsdf", NULL);
+  expect_fail("numeric bool",
+              PRIM2("{\"type\":\"sphere\",\"bsdf\":{\"type\":\"dielectric\","
+                    "\"enable_refraction\":7}}"),
+              "primitives[1].bsdf.enable_refraction", "true or false");
+  /* negative albedo, as negative emission: constant, checker, bitmap scale */
+  expect_fail("negative albedo",
+              PRIM2("{\"type\":\"sphere\",\"bsdf\":{\"type\":\"lambert\","
+                    "\"albedo\":[0.5,-0.1,0.5]}}"),
+              "primitives[1].bsdf.albedo", "negative");
+  expect_fail("negative checker albedo",
+              PRIM2("{\"type\":\"sphere\",\"bsdf\":{\"type\":\"lambert\","
+                    "\"albedo\":{\"type\":\"checker\",\"off_color\":-0.5}}}"),
+              "primitives[1].bsdf.albedo", "negative");
+  expect_fail("negative bitmap scale",
+              PRIM2("{\"type\":\"sphere\",\"bsdf\":{\"type\":\"lambert\","
+                    "\"albedo\":{\"type\":\"bitmap\",\"file\":\"x.png\",\"scale\":-1}}}"),
+              "primitives[1].bsdf.albedo.scale", "negative");
+  expect_fail("albedo beyond float",
+              PRIM2("{\"type\":\"sphere\",\"bsdf\":{\"type\":\"lambert\","
+                    "\"albedo\":{\"type\":\"checker\",\"on_color\":1e39}}}"),
+              "primitives[1].bsdf.albedo.on_color", "non-finite");
+  /* the edges of the accepted ranges still load */
+  const char *good[] = {CAM("\"type\":\"pinhole\",\"fov\":0.001"),
+                        CAM("\"type\":\"pinhole\",\"fov\":179.99"),
+                        CAM("\"type\":\"thinlens\",\"focus_distance\":1e15"),
+                        "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"null\"},"
+                        "\"emission\":1e15,\"transform\":[1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1]}]}",
+                        PRIM2("{\"type\":\"infinite_sphere\",\"emission\":1,"
+                              "\"bsdf\":{\"type\":\"null\",\"albedo\":1}}")};
+  for (size_t i = 0; i < sizeof(good) / sizeof(good[0]); i++) {
+    kpcn_scene *sg = NULL;
+    kpcn_status st = kpcn_scene_load_json(good[i], NULL, "good.json", &sg);
+    if (st != KPCN_OK) printf("good scene %zu: %s\n", i, kpcn_last_error());
+    CHECK(st == KPCN_OK);
+    kpcn_scene_destroy(sg);
+  }
+}
+
+/* Settings the library refuses, and how it stores values beyond float range. */
+static void test_render_limits(void) {
+  kpcn_scene *s = NULL;
+  CHECK(kpcn_scene_load_json("{\"primitives\":[" LIGHT "]}", NULL, "light.json", &s) == KPCN_OK);
+  kpcn_render_settings rs = kpcn_render_settings_defaults();
+  rs.spp = 1, rs.nthreads = 1, rs.width = rs.height = 8;
+  kpcn_aov_set *aov = NULL;
+  rs.seed = -1; /* the header could not record it */
+  CHECK(kpcn_render(s, &rs, &aov) == KPCN_ERR_INVALID_ARGUMENT && aov == NULL);
+  CHECK(strstr(kpcn_last_error(), "seed") != NULL);
+  rs.seed = 1;
+  rs.crop_x = rs.crop_y = 2147483647, rs.crop_w = rs.crop_h = 1; /* cx + cw overflowed */
+  CHECK(kpcn_render(s, &rs, &aov) == KPCN_ERR_INVALID_ARGUMENT && aov == NULL);
+  CHECK(strstr(kpcn_last_error(), "crop") != NULL);
+  kpcn_scene_destroy(s);
+
+  /* the buffer estimate against physical memory: 16384^2 x 24 planes is 25.8 GB */
+  CHECK(kpcn_render_check_memory(16384, 16384, 24, 23000000000ull) == KPCN_ERR_OUT_OF_MEMORY);
+  printf("memory check: %s\n", kpcn_last_error());
+  CHECK(strstr(kpcn_last_error(), "25.77 GB") && strstr(kpcn_last_error(), "23.00 GB"));
+  CHECK(kpcn_render_check_memory(16384, 16384, 24, 26000000000ull) == KPCN_OK);
+  CHECK(kpcn_render_check_memory(1920, 1080, 24, 0) == KPCN_OK); /* this machine */
+
+  /* a thin lens whose focus plane squares past float range at this aspect ratio */
+  CHECK(kpcn_scene_load_json(CAM("\"type\":\"thinlens\",\"focus_distance\":1e15,"
+                                 "\"fov\":179.99,\"aperture_size\":0.1"),
+                             NULL, "lens.json", &s) == KPCN_OK);
+  CHECK(kpcn_render(s, &rs, &aov) == KPCN_ERR_INVALID_ARGUMENT && aov == NULL);
+  CHECK(strstr(kpcn_last_error(), "focus plane") != NULL);
+  kpcn_scene_destroy(s);
+
+  /* albedo 1e10 under emission 1e15: finite samples whose variance is beyond float range is
+   * saturated at FLT_MAX; with albedo 1e30 the samples themselves overflow: counted */
+  for (int k = 0; k < 2; k++) {
+    char json[1024];
+    snprintf(json, sizeof(json),
+             "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"null\"},\"emission\":"
+             "1e15,\"transform\":{\"position\":[0,1,0],\"scale\":0.5,\"rotation\":[180,0,0]}},"
+             "{\"type\":\"quad\",\"bsdf\":{\"type\":\"lambert\",\"albedo\":%s},"
+             "\"transform\":{\"scale\":4}}],\"camera\":{\"type\":\"pinhole\","
+             "\"transform\":{\"position\":[0,0.5,2],\"look_at\":[0,0,0]}}}",
+             k ? "1e30" : "1e10");
+    CHECK(kpcn_scene_load_json(json, NULL, "hot.json", &s) == KPCN_OK);
+    rs.crop_x = rs.crop_y = rs.crop_w = rs.crop_h = 0;
+    rs.spp = 4;
+    kpcn_render_stats stats;
+    CHECK(kpcn_render_ex(s, &rs, &aov, &stats) == KPCN_OK);
+    int finite = 1;
+    float vmax = 0.0f;
+    size_t plane = kpcn_aov_plane_size(aov);
+    for (int b = 0; b < KPCN_BUF_COUNT; b++) {
+      for (size_t i = 0; i < plane * (size_t)kpcn_buffer_channels((kpcn_buffer)b); i++)
+        finite &= isfinite(aov->buf[b][i]) != 0;
+      for (size_t i = 0; i < plane; i++) {
+        finite &= isfinite(aov->var[b][i]) != 0;
+        if (b == KPCN_BUF_COLOR && aov->var[b][i] > vmax) vmax = aov->var[b][i];
+      }
+    }
+    printf("albedo %s: max colour variance %g, %llu non-finite samples\n", k ? "1e30" : "1e10",
+           (double)vmax, (unsigned long long)stats.nonfinite_samples);
+    CHECK(finite);
+    if (k == 0) CHECK(vmax == FLT_MAX && stats.nonfinite_samples == 0);
+    if (k == 1) CHECK(stats.nonfinite_samples > 0);
+    kpcn_aov_destroy(aov);
+    kpcn_scene_destroy(s);
+  }
 }
 
 int main(void) {
@@ -200,6 +449,8 @@ int main(void) {
   /* a minimal valid scene loads */
   CHECK(kpcn_scene_load_json("{\"primitives\":[" LIGHT "]}", NULL, NULL, &s) == KPCN_OK);
   kpcn_scene_destroy(s);
+  test_scene_values();
+  test_render_limits();
   test_tool();
   return kt_summary("render_errors");
 }

@@ -8,6 +8,7 @@
 #include "kpcn/render.h"
 #include "kpcn/scene.h"
 
+#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -52,6 +53,24 @@ static int parse_int(const char *s, long lo, long hi, int *out) {
   return 1;
 }
 
+/* n integers in [lo[i], hi[i]] separated by sep ("16x16", "0,0,8,8"), digits only (no signs,
+ * no spaces). strtol with a range check, not sscanf's %d: that wraps what does not fit an int
+ * without a word, so 4294967312x4294967304 rendered as 16x8. */
+static int parse_int_list(const char *s, char sep, int n, const long *lo, const long *hi,
+                          int *out) {
+  for (int i = 0; i < n; i++) {
+    if (*s < '0' || *s > '9') return 0;
+    char *end;
+    errno = 0;
+    long v = strtol(s, &end, 10);
+    if (errno == ERANGE || v < lo[i] || v > hi[i]) return 0;
+    if (i + 1 < n ? *end != sep : *end != 0) return 0;
+    out[i] = (int)v;
+    s = end + 1;
+  }
+  return 1;
+}
+
 int main(int argc, char **argv) {
   const char *scene_path = NULL, *out_path = NULL;
   kpcn_render_settings rs = kpcn_render_settings_defaults();
@@ -73,10 +92,13 @@ int main(int argc, char **argv) {
         return 2;
       }
     } else if (strcmp(a, "--seed") == 0) {
+      /* 0 .. 2^63-1: what kpcn_render accepts and the EXR header records as kpcn:seed; an
+       * out-of-range value is an error, not strtoll's silent clamp to the limit */
       NEED_VALUE char *end;
+      errno = 0;
       long long s = strtoll(v, &end, 10);
-      if (*v == 0 || *end != 0) {
-        fprintf(stderr, "kpcn-render: --seed: expected an integer, got '%s'\n", v);
+      if (*v < '0' || *v > '9' || *end != 0 || errno == ERANGE) {
+        fprintf(stderr, "kpcn-render: --seed: expected an integer in [0, 2^63-1], got '%s'\n", v);
         return 2;
       }
       rs.seed = s;
@@ -96,19 +118,27 @@ int main(int argc, char **argv) {
         return 2;
       }
     } else if (strcmp(a, "--resolution") == 0) {
-      NEED_VALUE char extra;
-      if (sscanf(v, "%dx%d%c", &rs.width, &rs.height, &extra) != 2 || rs.width <= 0 ||
-          rs.height <= 0) {
-        fprintf(stderr, "kpcn-render: --resolution: expected WxH, got '%s'\n", v);
+      NEED_VALUE static const long lo[2] = {1, 1}, hi[2] = {KPCN_MAX_DIM, KPCN_MAX_DIM};
+      int wh[2];
+      if (!parse_int_list(v, 'x', 2, lo, hi, wh)) {
+        fprintf(stderr, "kpcn-render: --resolution: expected WxH with W, H in [1, %d], got '%s'\n",
+                KPCN_MAX_DIM, v);
         return 2;
       }
+      rs.width = wh[0], rs.height = wh[1];
     } else if (strcmp(a, "--crop") == 0) {
-      NEED_VALUE char extra;
-      if (sscanf(v, "%d,%d,%d,%d%c", &rs.crop_x, &rs.crop_y, &rs.crop_w, &rs.crop_h, &extra) != 4 ||
-          rs.crop_w <= 0 || rs.crop_h <= 0) {
-        fprintf(stderr, "kpcn-render: --crop: expected x,y,w,h, got '%s'\n", v);
+      NEED_VALUE static const long lo[4] = {0, 0, 1, 1},
+                                   hi[4] = {KPCN_MAX_DIM - 1, KPCN_MAX_DIM - 1, KPCN_MAX_DIM,
+                                            KPCN_MAX_DIM};
+      int c4[4];
+      if (!parse_int_list(v, ',', 4, lo, hi, c4)) {
+        fprintf(stderr,
+                "kpcn-render: --crop: expected x,y,w,h with x, y in [0, %d) and w, h in [1, %d], "
+                "got '%s'\n",
+                KPCN_MAX_DIM, KPCN_MAX_DIM, v);
         return 2;
       }
+      rs.crop_x = c4[0], rs.crop_y = c4[1], rs.crop_w = c4[2], rs.crop_h = c4[3];
     } else if (strcmp(a, "--color-only") == 0) {
       rs.color_only = 1;
     } else if (strcmp(a, "--half") == 0) {
@@ -158,6 +188,12 @@ int main(int argc, char **argv) {
     fprintf(stderr, "kpcn-render: %s\n", kpcn_last_error());
     return 1;
   }
+  /* not silent: these pixels are darker than the scene says (kpcn_render_stats) */
+  if (stats.nonfinite_samples)
+    fprintf(stderr,
+            "kpcn-render: warning: %llu samples had a non-finite value (radiance beyond float "
+            "range) and count as black\n",
+            (unsigned long long)stats.nonfinite_samples);
   kpcn_exr_write_options opt = kpcn_exr_write_options_defaults();
   if (half) opt.pixel_type = KPCN_EXR_HALF;
   st = kpcn_exr_write_aov(out_path, aov, &opt);

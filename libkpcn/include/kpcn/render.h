@@ -63,6 +63,9 @@ typedef struct kpcn_render_stats {
   double seconds;   /* wall time of the sampling loop */
   uint64_t samples; /* camera samples traced */
   uint64_t rays;    /* Embree queries (intersect + occluded) */
+  /* samples with a NaN/Inf value (radiance beyond float range: an albedo above 1 multiplies
+   * along a path), counted as black */
+  uint64_t nonfinite_samples;
 } kpcn_render_stats;
 
 kpcn_status kpcn_render(const kpcn_scene *scene, const kpcn_render_settings *settings,

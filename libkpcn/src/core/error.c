@@ -106,8 +106,7 @@ void *kpcn_calloc(size_t count, size_t size, const char *what) {
  * touch and a TLB entry afterwards (measured in bench_denoise, see docs/denoiser.md). */
 enum { HUGE_PAGE = 2u << 20, HUGE_MIN = 4u << 20 };
 
-/* This machine's physical memory in bytes (0 if unknown). */
-static uint64_t physical_memory(void) {
+uint64_t kpcn_physical_memory(void) {
   static uint64_t mem; /* a benign race: every thread computes the same value */
   if (!mem) {
     const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGESIZE);
@@ -119,7 +118,7 @@ static uint64_t physical_memory(void) {
 void *kpcn_aligned_alloc(size_t bytes, const char *what) {
   /* A block larger than the machine (an absurd header, a huge render) is an error to name,
    * not an allocation that overcommits and ends in the OOM killer once its pages are touched. */
-  const uint64_t mem = physical_memory();
+  const uint64_t mem = kpcn_physical_memory();
   if (mem && bytes > mem) {
     kpcn_fail(KPCN_ERR_OUT_OF_MEMORY,
               "cannot allocate %.1f GB for %s: more than this machine's %.1f GB of memory",

@@ -25,6 +25,9 @@ void *kpcn_calloc(size_t count, size_t size, const char *what);
 void *kpcn_aligned_alloc(size_t bytes, const char *what);
 void kpcn_aligned_free(void *p);
 
+/* This machine's physical memory in bytes (0 if unknown). */
+uint64_t kpcn_physical_memory(void);
+
 /* Validates an image size: positive, <= KPCN_MAX_DIM each, <= KPCN_MAX_PIXELS total. */
 kpcn_status kpcn_check_size(int width, int height, const char *what);
 

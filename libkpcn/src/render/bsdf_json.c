@@ -86,10 +86,13 @@ const kpcn_bsdf *kpcn_material_lib_find(const kpcn_material_lib *lib, const char
 
 /* ---- small JSON helpers ---- */
 
+/* Numbers are checked as the floats they become: a finite double such as 1e39 is Inf as a
+ * float (an albedo or checker colour of 1e39 reached the integrator as Inf). */
 static kpcn_status json_float(const cJSON *v, const char *path, const char *key, float *out) {
   if (!cJSON_IsNumber(v)) return kpcn_fail(KPCN_ERR_FORMAT, "%s.%s: expected a number", path, key);
   double d = v->valuedouble;
-  if (!isfinite(d)) return kpcn_fail(KPCN_ERR_NONFINITE, "%s.%s: non-finite number", path, key);
+  if (!isfinite((float)d))
+    return kpcn_fail(KPCN_ERR_NONFINITE, "%s.%s: non-finite number (as a float)", path, key);
   *out = (float)d;
   return KPCN_OK;
 }
@@ -107,7 +110,7 @@ static kpcn_status json_vec3(const cJSON *v, const char *path, const char *key, 
     float c[3];
     for (int i = 0; i < n; ++i) {
       const cJSON *e = cJSON_GetArrayItem(v, i);
-      if (!cJSON_IsNumber(e) || !isfinite(e->valuedouble))
+      if (!cJSON_IsNumber(e) || !isfinite((float)e->valuedouble))
         return kpcn_fail(KPCN_ERR_FORMAT, "%s.%s[%d]: expected a finite number", path, key, i);
       c[i] = (float)e->valuedouble;
     }
@@ -117,13 +120,11 @@ static kpcn_status json_vec3(const cJSON *v, const char *path, const char *key, 
   return kpcn_fail(KPCN_ERR_FORMAT, "%s.%s: expected a number or an array of 3 numbers", path, key);
 }
 
+/* A JSON bool only: a number (7) used to read as true, so a typo changed the material. */
 static kpcn_status json_bool(const cJSON *v, const char *path, const char *key, int *out) {
-  if (cJSON_IsBool(v))
-    *out = cJSON_IsTrue(v) ? 1 : 0;
-  else if (cJSON_IsNumber(v))
-    *out = v->valuedouble != 0.0;
-  else
+  if (!cJSON_IsBool(v))
     return kpcn_fail(KPCN_ERR_FORMAT, "%s.%s: expected true or false", path, key);
+  *out = cJSON_IsTrue(v) ? 1 : 0;
   return KPCN_OK;
 }
 
@@ -221,8 +222,12 @@ kpcn_status kpcn_texture_parse(kpcn_material_lib *lib, const cJSON *node, const 
         KPCN_TRY(json_bool(f, path, "interpolate", &opt.interpolate));
       if ((f = cJSON_GetObjectItemCaseSensitive(node, "clamp")))
         KPCN_TRY(json_bool(f, path, "clamp", &opt.clamp));
-      if ((f = cJSON_GetObjectItemCaseSensitive(node, "scale")))
+      if ((f = cJSON_GetObjectItemCaseSensitive(node, "scale"))) {
         KPCN_TRY(json_float(f, path, "scale", &opt.scale));
+        if (opt.scale < 0.0f) /* would make every texel negative */
+          return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.scale: %g is negative", path,
+                           (double)opt.scale);
+      }
     } else {
       return kpcn_fail(KPCN_ERR_UNSUPPORTED, "%s.type: unsupported texture type '%s'", path, type);
     }
@@ -303,6 +308,13 @@ static kpcn_status parse_object(kpcn_material_lib *lib, const cJSON *node, const
   if ((f = cJSON_GetObjectItemCaseSensitive(node, "albedo"))) {
     snprintf(sub, sizeof(sub), "%s.albedo", path);
     KPCN_TRY(kpcn_texture_parse(lib, f, sub, 0, &p.albedo));
+    /* a reflectance below 0 is meaningless; the same rule as for emission, for constants,
+     * checker colours and bitmaps alike */
+    float lo, hi;
+    kpcn_texture_range(p.albedo, &lo, &hi);
+    if (!(lo >= 0.0f))
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: negative albedo %g (must be >= 0)", sub,
+                       (double)lo);
   }
   if ((f = cJSON_GetObjectItemCaseSensitive(node, "roughness"))) {
     snprintf(sub, sizeof(sub), "%s.roughness", path);
@@ -310,8 +322,9 @@ static kpcn_status parse_object(kpcn_material_lib *lib, const cJSON *node, const
       KPCN_TRY(json_float(f, path, "roughness", &p.roughness_value));
     else
       KPCN_TRY(kpcn_texture_parse(lib, f, sub, 1, &p.roughness));
-    if (p.roughness_value < 0.0f)
-      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.roughness: must be >= 0", path);
+    float lo = p.roughness_value, hi;
+    if (p.roughness) kpcn_texture_range(p.roughness, &lo, &hi);
+    if (lo < 0.0f) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.roughness: must be >= 0", path);
   }
   if ((f = cJSON_GetObjectItemCaseSensitive(node, "distribution"))) {
     if (!cJSON_IsString(f) || !kpcn_mf_from_name(f->valuestring, &p.distribution))

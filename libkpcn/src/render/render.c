@@ -9,6 +9,7 @@
 #include "core/internal.h"
 #include "render/render_internal.h"
 
+#include <float.h>
 #include <math.h>
 #include <omp.h>
 #include <stdio.h>
@@ -85,7 +86,10 @@ static void pixel_samples(const kpcn_render_ctx *c, int px, int py, int n,
 }
 
 /* Buffer b of pixel pi from the accumulators of n samples: the means, and the variance of the
- * mean averaged over the buffer's channels (0 for one sample). */
+ * mean averaged over the buffer's channels (0 for one sample). The means are means of floats,
+ * so they fit a float; the variance of samples near the emission limit (1e15, its square
+ * 1e30) fits too, but a brighter path (an albedo above 1 multiplies) can overflow it: it is
+ * stored saturated at FLT_MAX, never as Inf, which the output must not contain. */
 static void store_buffer(kpcn_aov_set *set, int b, const double *mean, const double *m2, int n,
                          size_t pi) {
   const size_t plane = (size_t)set->width * (size_t)set->height;
@@ -96,7 +100,20 @@ static void store_buffer(kpcn_aov_set *set, int b, const double *mean, const dou
     set->buf[b][(size_t)c * plane + pi] = (float)mean[ch];
     if (n > 1) var += m2[ch] / ((double)(n - 1) * (double)n);
   }
-  if (set->var[b]) set->var[b][pi] = (float)(var / nc);
+  var /= nc;
+  if (set->var[b]) set->var[b][pi] = var < (double)FLT_MAX ? (float)var : FLT_MAX;
+}
+
+kpcn_status kpcn_render_check_memory(int width, int height, int planes, uint64_t phys_bytes) {
+  if (phys_bytes == 0) phys_bytes = kpcn_physical_memory();
+  if (phys_bytes == 0) return KPCN_OK; /* unknown: let the allocation decide */
+  const uint64_t need = (uint64_t)width * (uint64_t)height * (uint64_t)planes * sizeof(float);
+  if (need > phys_bytes)
+    return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY,
+                     "render %dx%d: the output buffers need %.2f GB (%d float planes), more than "
+                     "this machine's %.2f GB of physical memory",
+                     width, height, (double)need * 1e-9, planes, (double)phys_bytes * 1e-9);
+  return KPCN_OK;
 }
 
 kpcn_status kpcn_render_ctx_init(kpcn_render_ctx *ctx, const kpcn_scene *scene,
@@ -111,6 +128,20 @@ kpcn_status kpcn_render_ctx_init(kpcn_render_ctx *ctx, const kpcn_scene *scene,
                      "resolution override: give both width and height (> 0)");
   KPCN_TRY(kpcn_check_size(ctx->width, ctx->height, "render resolution"));
   ctx->ratio = (float)ctx->height / (float)ctx->width;
+  /* A thin lens scales the image-plane point by focus_distance * tan(fov/2) (camera_ray); at a
+   * tall aspect ratio a far focus plane with a wide fov squares past float range there and
+   * the ray's direction becomes zero or NaN, which Embree does not survive. The loader bounds
+   * each factor (docs/renderer.md); their product depends on the resolution, known only here. */
+  const kpcn_camera *cam = &scene->cam;
+  if (cam->thinlens && cam->aperture > 0.0f) {
+    double reach = (double)cam->focus_dist / (double)cam->plane_dist * (1.0 + ctx->ratio);
+    if (!(reach <= 1e18))
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                       "camera: the thin lens's focus plane reaches %g at %dx%d (focus_distance "
+                       "%g, fov %g); supported <= 1e18",
+                       reach, ctx->width, ctx->height, (double)cam->focus_dist,
+                       (double)cam->fov_deg);
+  }
   ctx->max_bounces = st->max_bounces >= 0 ? st->max_bounces : scene->max_bounces;
   ctx->min_bounces = scene->min_bounces;
   kpcn_light_strategy ls = st->lights;
@@ -137,6 +168,10 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   kpcn_render_settings st = settings ? *settings : kpcn_render_settings_defaults();
   kpcn_render_ctx ctx;
   KPCN_TRY(kpcn_render_ctx_init(&ctx, scene, &st));
+  /* 0 .. 2^63-1: the EXR header records the seed (kpcn:seed) only when it is >= 0 */
+  if (st.seed < 0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "seed: %lld is negative (seeds are 0 .. 2^63-1)",
+                     (long long)st.seed);
   int spp = st.spp > 0 ? st.spp : scene->spp;
   if (st.spp < 0 || spp > (1 << 24))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "spp: %d is out of range [1, 2^24]", st.spp);
@@ -152,11 +187,19 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   int cx = 0, cy = 0, cw = ctx.width, chh = ctx.height;
   if (st.crop_w > 0 || st.crop_h > 0 || st.crop_x || st.crop_y) {
     cx = st.crop_x, cy = st.crop_y, cw = st.crop_w, chh = st.crop_h;
-    if (cx < 0 || cy < 0 || cw <= 0 || chh <= 0 || cx + cw > ctx.width || cy + chh > ctx.height)
+    /* in 64 bits: cx + cw overflows an int for a crop near INT_MAX */
+    if (cx < 0 || cy < 0 || cw <= 0 || chh <= 0 || (int64_t)cx + cw > ctx.width ||
+        (int64_t)cy + chh > ctx.height)
       return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "crop %d,%d,%d,%d lies outside the %dx%d image",
                        cx, cy, cw, chh, ctx.width, ctx.height);
   }
 
+  /* calloc only reserves address space: a render larger than the machine would start, then be
+   * killed by the kernel part-way (16384x16384 needs 25.8 GB). Refuse it up front instead. */
+  int planes = 0;
+  for (int b = 0; b < KPCN_BUF_COUNT; b++)
+    if (!st.color_only || b == KPCN_BUF_COLOR) planes += kpcn_buffer_channels((kpcn_buffer)b) + 1;
+  KPCN_TRY(kpcn_render_check_memory(cw, chh, planes, 0));
   kpcn_aov_set *set = NULL;
   KPCN_TRY(kpcn_aov_create(&set, cw, chh));
   for (int b = 0; b < KPCN_BUF_COUNT; b++) {
@@ -221,8 +264,8 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
     stats->seconds = secs;
     stats->samples = (uint64_t)plane * (uint64_t)spp;
     stats->rays = total_rays;
+    stats->nonfinite_samples = nonfinite;
   }
-  (void)nonfinite;
   *out = set;
   return KPCN_OK;
 }

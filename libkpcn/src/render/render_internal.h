@@ -57,6 +57,10 @@ typedef struct kpcn_render_ctx {
                 kpcn_sample_out *out);
 } kpcn_render_ctx;
 
+/* render.c: fails with KPCN_ERR_OUT_OF_MEMORY, naming both sizes, when `planes` float planes
+ * of width x height exceed phys_bytes (0: this machine's physical memory). */
+kpcn_status kpcn_render_check_memory(int width, int height, int planes, uint64_t phys_bytes);
+
 /* geometry.c */
 void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_vec3 d, float t,
                    unsigned prim_id, float bu, float bv, kpcn_hit *h);

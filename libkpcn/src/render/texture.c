@@ -87,6 +87,20 @@ kpcn_status kpcn_texture_checker(kpcn_texture_cache *c, kpcn_vec3 on_color, kpcn
   return KPCN_OK;
 }
 
+void kpcn_texture_range(const kpcn_texture *t, float *lo, float *hi) {
+  kpcn_vec3 a = t->value, b = t->value;
+  if (t->type == KPCN_TEX_CHECKER) a = t->on_color, b = t->off_color;
+  float l = fminf(kv3_min_comp(a), kv3_min_comp(b)), h = fmaxf(kv3_max_comp(a), kv3_max_comp(b));
+  if (t->type == KPCN_TEX_BITMAP) {
+    float tl = INFINITY, th = -INFINITY;
+    for (size_t i = 0; i < 3 * (size_t)t->width * (size_t)t->height; ++i)
+      tl = fminf(tl, t->texels[i]), th = fmaxf(th, t->texels[i]);
+    /* lookups interpolate texels, then scale (either sign) */
+    l = fminf(tl * t->scale, th * t->scale), h = fmaxf(tl * t->scale, th * t->scale);
+  }
+  *lo = l, *hi = h;
+}
+
 int kpcn_gamma_byte(int c) {
   if (c <= 0) return 0;
   if (c >= 255) return 255;

@@ -70,6 +70,10 @@ kpcn_status kpcn_texture_bitmap(kpcn_texture_cache *c, const char *path,
 kpcn_status kpcn_texture_from_pixels(kpcn_texture_cache *c, int width, int height, const float *rgb,
                                      const kpcn_texture **out);
 
+/* Smallest and largest value any channel of a lookup can return (constant, both checker
+ * colours, every bitmap texel times its scale): callers bound albedo and emission with it. */
+void kpcn_texture_range(const kpcn_texture *t, float *lo, float *hi);
+
 /* Lookup at (u, v). */
 kpcn_vec3 kpcn_texture_eval(const kpcn_texture *t, float u, float v);
 static inline float kpcn_texture_eval_scalar(const kpcn_texture *t, float u, float v) {

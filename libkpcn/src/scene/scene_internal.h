@@ -99,6 +99,19 @@ struct kpcn_scene {
   void *rtc_scene;    /* RTCScene */
 };
 
+/* Smallest camera.fov in degrees: 1/tan(fov/2) stays ~1e5 (a tiny float fov made it Inf). */
+#define KPCN_MIN_FOV 1e-3
+/* Thin-lens focus_distance range: [KPCN_MIN_FOCUS_DISTANCE, KPCN_SCENE_MAX_EXTENT]. */
+#define KPCN_MIN_FOCUS_DISTANCE 1e-6f
+/* Largest emitted radiance (any channel, constant or texel): its square (1e30) and a pixel's
+ * sample variance stay within float range. */
+#define KPCN_MAX_EMISSION 1e15f
+
+/* ---- json_check.c ---- */
+/* Fails on a key that occurs twice in one object anywhere in the document, naming its JSON
+ * path (cJSON keeps both and every lookup finds the first). */
+kpcn_status kpcn_json_check_duplicates(const void *cjson_root);
+
 /* ---- transform.c ---- */
 /* Parses a Tungsten transform object (position, scale, rotation, look_at, up, x_axis, y_axis,
  * z_axis) or a 16-number matrix. Errors name json_path. */

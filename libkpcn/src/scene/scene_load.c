@@ -109,6 +109,20 @@ static void join_path(char *out, size_t n, const char *dir, const char *file) {
 
 /* ---- primitives ---- */
 
+/* Emission is radiance in [0, KPCN_MAX_EMISSION], for a constant and for every value of a
+ * texture alike (a checker with a negative on_color was accepted while a negative constant was
+ * not). The bound keeps a sample's square in float range: emission 1e30 wrote Inf into the
+ * colour variance. */
+static kpcn_status check_emission(float lo, float hi, const char *path) {
+  if (!(lo >= 0.0f))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: negative emission %g (must be >= 0)", path,
+                     (double)lo);
+  if (!(hi <= KPCN_MAX_EMISSION))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: emission %g is above the supported maximum %g",
+                     path, (double)hi, (double)KPCN_MAX_EMISSION);
+  return KPCN_OK;
+}
+
 static kpcn_status parse_emission(kpcn_scene *s, kpcn_prim *p, const cJSON *e, const char *path) {
   if (cJSON_IsNumber(e) || cJSON_IsArray(e)) {
     float v[3];
@@ -124,15 +138,16 @@ static kpcn_status parse_emission(kpcn_scene *s, kpcn_prim *p, const cJSON *e, c
         v[i] = (float)c->valuedouble;
       }
     }
-    for (int i = 0; i < 3; i++)
-      if (!isfinite(v[i]) || v[i] < 0.0f)
-        return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: emission must be finite and >= 0", path);
+    KPCN_TRY(check_emission(fminf(v[0], fminf(v[1], v[2])), fmaxf(v[0], fmaxf(v[1], v[2])), path));
     p->emission = kv3(v[0], v[1], v[2]);
     p->emissive = !kv3_is_zero(p->emission);
     return KPCN_OK;
   }
   /* a texture (bitmap, checker): looked up at the surface uv; its mean drives light selection */
   KPCN_TRY(kpcn_texture_parse(s->mats, e, path, 0, &p->emission_tex));
+  float lo, hi;
+  kpcn_texture_range(p->emission_tex, &lo, &hi);
+  KPCN_TRY(check_emission(lo, hi, path));
   p->emission = p->emission_tex->average;
   p->emissive = 1;
   return KPCN_OK;
@@ -255,6 +270,9 @@ static kpcn_status parse_primitive_into_slot(kpcn_scene *s, const cJSON *pj, int
   kpcn_prim *p = &s->prims[s->nprims];
   memset(p, 0, sizeof(*p));
   p->geom_id = ~0u;
+  const cJSON *nj = cJSON_GetObjectItemCaseSensitive(pj, "name");
+  if (nj && !cJSON_IsString(nj))
+    return kpcn_fail(KPCN_ERR_FORMAT, "%s.name: expected a string", path);
   const char *name = get_string(pj, "name");
   snprintf(p->name, sizeof(p->name), "%s", name ? name : "");
   static const char *common[] = {"name",
@@ -333,6 +351,14 @@ static kpcn_status parse_primitive_into_slot(kpcn_scene *s, const cJSON *pj, int
       return kpcn_fail(KPCN_ERR_UNSUPPORTED, "%s: only one infinite_sphere is supported", path);
     int sample = 1;
     KPCN_TRY(get_bool(pj, "sample", path, &sample));
+    /* Tungsten's scenes give it a bsdf (materialtest: null) that does nothing; a broken one is
+     * still a broken scene file */
+    const cJSON *bj = cJSON_GetObjectItemCaseSensitive(pj, "bsdf");
+    if (bj) {
+      const kpcn_bsdf *unused;
+      snprintf(sub, sizeof(sub), "%s.bsdf", path);
+      KPCN_TRY(kpcn_bsdf_parse(s->mats, bj, sub, &unused));
+    }
     const cJSON *e = cJSON_GetObjectItemCaseSensitive(pj, "emission");
     if (!e)
       return kpcn_fail(KPCN_ERR_FORMAT, "%s.emission: infinite_sphere needs an emission", path);
@@ -446,9 +472,17 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
   }
   double fov = c->fov_deg;
   KPCN_TRY(get_number(cj, "fov", path, &fov, NULL));
-  if (!(fov > 0.0 && fov < 180.0))
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera.fov: %g is outside (0, 180)", fov);
-  c->fov_deg = (float)fov;
+  /* checked as it is used: a float, through tanf. 1e-38 passed a check on the double, became
+   * 0 or a denormal as a float and 1/tan(fov/2) Inf (Embree aborted on the camera rays);
+   * 179.99999999 rounds to 180.0f, and just below it float pi/2 makes tanf negative. */
+  const float fovf = (float)fov, tan_half = tanf(fovf * (KPCN_PI / 180.0f) * 0.5f);
+  if (!(fov >= KPCN_MIN_FOV && fovf < 180.0f && tan_half > 0.0f && isfinite(tan_half))) {
+    char as_float[48] = "";
+    if ((double)fovf != fov) snprintf(as_float, sizeof(as_float), " (%.9g as a float)", fovf);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera.fov: %.12g%s is outside [%g, 180) degrees",
+                     fov, as_float, KPCN_MIN_FOV);
+  }
+  c->fov_deg = fovf;
   const char *filt = get_string(cj, "reconstruction_filter");
   if (cJSON_GetObjectItemCaseSensitive(cj, "reconstruction_filter") && !filt)
     return kpcn_fail(KPCN_ERR_FORMAT, "camera.reconstruction_filter: expected a string");
@@ -469,10 +503,15 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
   KPCN_TRY(get_number(cj, "aperture_size", path, &ap, NULL));
   KPCN_TRY(get_number(cj, "cateye", path, &ce, NULL));
   if (ce != 0.0) return kpcn_fail(KPCN_ERR_UNSUPPORTED, "camera.cateye: only 0 is supported");
-  if (!(fd > 0.0) || ap < 0.0)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "camera: focus_distance must be > 0 and aperture_size >= 0");
   c->focus_dist = (float)fd, c->aperture = (float)ap;
+  /* as floats (1e39 became Inf, the camera rays NaN, and Embree aborted), within the scene's
+   * coordinate range like the camera position, and not so small that the focus point
+   * underflows onto the lens; kpcn_render_ctx_init checks the focus plane's size */
+  if (!(c->focus_dist >= KPCN_MIN_FOCUS_DISTANCE && c->focus_dist <= KPCN_SCENE_MAX_EXTENT))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera.focus_distance: %g is outside [%g, %g]", fd,
+                     (double)KPCN_MIN_FOCUS_DISTANCE, (double)KPCN_SCENE_MAX_EXTENT);
+  if (!(ap >= 0.0))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera.aperture_size: %g is negative", ap);
   const cJSON *tj = cJSON_GetObjectItemCaseSensitive(cj, "transform");
   if (tj) {
     kpcn_xform x;
@@ -580,6 +619,7 @@ static kpcn_status parse_renderer(kpcn_scene *s, const cJSON *rj) {
 
 static kpcn_status parse_document(kpcn_scene *s, const cJSON *root) {
   if (!cJSON_IsObject(root)) return kpcn_fail(KPCN_ERR_FORMAT, "(root): expected a JSON object");
+  KPCN_TRY(kpcn_json_check_duplicates(root));
   static const char *known[] = {"media",      "bsdfs",    "primitives", "camera",
                                 "integrator", "renderer", NULL};
   KPCN_TRY(check_fields(root, "(root)", known));
@@ -629,15 +669,20 @@ kpcn_status kpcn_scene_load_json(const char *text, const char *base_dir, const c
   *out = NULL;
   if (!text) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_scene_load_json: json_text is NULL");
   if (!name) name = "<memory>";
-  cJSON *root = cJSON_Parse(text);
+  /* require_null_terminated: text after the document ("{...} garbage") is an error, not
+   * ignored */
+  cJSON *root = cJSON_ParseWithOpts(text, NULL, 1);
   if (!root) {
     const char *err = cJSON_GetErrorPtr();
     long off = err ? (long)(err - text) : -1;
     int line = 1;
     for (long k = 0; k < off; k++)
       line += text[k] == '\n';
-    return kpcn_fail(KPCN_ERR_FORMAT, "scene '%s': invalid JSON near line %d (byte %ld)", name,
-                     line, off);
+    /* say so when the document itself was complete (error path only: parsed once more) */
+    cJSON *prefix = cJSON_ParseWithOpts(text, NULL, 0);
+    cJSON_Delete(prefix);
+    return kpcn_fail(KPCN_ERR_FORMAT, "scene '%s': invalid JSON near line %d (byte %ld)%s", name,
+                     line, off, prefix ? ": text after the end of the document" : "");
   }
   kpcn_scene *s = kpcn_calloc(1, sizeof(*s), "scene");
   if (!s) {
@@ -679,6 +724,14 @@ kpcn_status kpcn_scene_load(const char *path, kpcn_scene **out) {
   size_t got = fread(text, 1, (size_t)n, f);
   fclose(f);
   text[got] = 0;
+  /* the parser stops at a NUL byte: what follows it would be ignored unseen */
+  const char *nul = memchr(text, 0, got);
+  if (nul) {
+    long off = (long)(nul - text);
+    free(text);
+    return kpcn_fail(KPCN_ERR_FORMAT, "scene '%s': NUL byte at byte %ld (not a JSON text)", path,
+                     off);
+  }
   char dir[1024];
   snprintf(dir, sizeof(dir), "%s", path);
   char *slash = strrchr(dir, '/');

@@ -119,13 +119,22 @@ kpcn_status kpcn_xform_parse(const void *node_, const char *path, kpcn_xform *ou
     if (cJSON_GetArraySize(node) != 16)
       return kpcn_fail(KPCN_ERR_FORMAT, "%s: a matrix needs 16 numbers, got %d", path,
                        cJSON_GetArraySize(node));
-    for (int i = 0; i < 12; i++) {
-      const cJSON *e = cJSON_GetArrayItem(node, i);
+    /* All 16 are checked (only the first 12 were: a last row of strings passed), each as the
+     * float it becomes (1e39 is Inf). The last row must be 0 0 0 1: kpcn transforms are
+     * affine, and a projective row would be dropped without a word. */
+    int i = 0;
+    for (const cJSON *e = node->child; e; e = e->next, i++) {
       if (!cJSON_IsNumber(e))
         return kpcn_fail(KPCN_ERR_FORMAT, "%s[%d]: expected a number", path, i);
-      if (!isfinite(e->valuedouble))
-        return kpcn_fail(KPCN_ERR_NONFINITE, "%s[%d]: non-finite value", path, i);
-      out->m[i / 4][i % 4] = (float)e->valuedouble;
+      const float v = (float)e->valuedouble;
+      if (!isfinite(v))
+        return kpcn_fail(KPCN_ERR_NONFINITE, "%s[%d]: non-finite value (as a float)", path, i);
+      if (i >= 12 && e->valuedouble != (i == 15 ? 1.0 : 0.0))
+        return kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                         "%s[%d]: the last row must be 0, 0, 0, 1 (projective matrices are not "
+                         "supported), got %g",
+                         path, i, e->valuedouble);
+      if (i < 12) out->m[i / 4][i % 4] = v;
     }
     return KPCN_OK;
   }
