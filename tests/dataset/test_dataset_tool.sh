@@ -50,6 +50,84 @@ ok '[ $rc -eq 1 ]' "missing scenes dir"
 "$DS" plan --scenes "$TD/scenes" --spp 4,x -o "$T/bad4" 2> /dev/null
 rc=$?
 ok '[ $rc -eq 2 ] && [ ! -e "$T/bad4" ]' "bad --spp, nothing written"
+# bad values: exit 2, the option and value named, nothing written
+bad_plan() { # PATTERN DESC PLAN-ARGS...
+  pat=$1; desc=$2; shift 2
+  rm -rf "$T/bp"
+  "$DS" plan --scenes "$TD/scenes" --variants 1 -o "$T/bp" "$@" > /dev/null 2> "$T/err"
+  rc=$?
+  ok '[ $rc -eq 2 ] && [ ! -e "$T/bp" ] && grep -F -q -- "$pat" "$T/err"' "$desc (rc $rc: $(cat "$T/err"))"
+}
+bad_plan "'inf' for --camera" "--camera inf refused" --camera inf
+bad_plan "'inf' for --material" "--material inf refused" --material inf
+bad_plan "'inf' for --light" "--light inf refused" --light inf
+bad_plan "'nan' for --env" "--env nan refused" --env nan
+bad_plan "'-1' for --seed" "negative --seed refused" --seed -1
+bad_plan "'18446744073709551616' for --seed" "--seed past 2^64 refused" --seed 18446744073709551616
+bad_plan "'7e3' for --variants" "--variants must be an integer" --variants 7e3
+bad_plan "sum to 2.5" "split fractions summing past 1 refused" --split train:0.5,val:1,test:1
+bad_plan "'train' is named twice" "duplicate split (fractions)" --split train:0.5,train:0.5
+bad_plan "'train' is named twice" "duplicate split (names)" \
+  --split train:cornell-box,train:cornell-teal+cornell-wide
+"$DS" plan --scenes "$TD/scenes" --variants 0 --seed 18446744073709551615 -o "$T/bigseed" > /dev/null
+ok '[ $? -eq 0 ]' "--seed 2^64-1 accepted"
+# a finite strength so large that a perturbed value overflows: refused, naming the field
+rm -rf "$T/bp"
+"$DS" plan --scenes "$TD/scenes" --variants 2 --light 1e4 -o "$T/bp" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && [ ! -e "$T/bp" ] && grep -q "made .* non-finite" "$T/err"' \
+  "overflowing perturbation refused (rc $rc: $(cat "$T/err"))"
+# a bad later scene: exit 1 naming the scene and field, and none of the earlier scene's files
+mkdir -p "$T/bs/a" "$T/bs/b"
+cp "$TD/scenes/cornell-box/scene.json" "$T/bs/a/"
+sed '/"resolution": \[/,/\],/d' "$TD/scenes/cornell-box/scene.json" > "$T/bs/b/scene.json"
+"$DS" plan --scenes "$T/bs" --variants 1 -o "$T/bsd" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && [ ! -e "$T/bsd" ] && grep -q "scene .b.*no camera.resolution" "$T/err"' \
+  "bad second scene leaves no output (rc $rc: $(cat "$T/err"))"
+sed '/"resolution": \[/{n;s/32/1e12/;}' "$TD/scenes/cornell-box/scene.json" > "$T/bs/b/scene.json"
+"$DS" plan --scenes "$T/bs" --variants 1 -o "$T/bsd" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && [ ! -e "$T/bsd" ] && grep -q "scene .b.*camera.resolution 1000000000000 x 32" "$T/err"' \
+  "scene resolution past 16384 refused (rc $rc: $(cat "$T/err"))"
+# ... also when re-planning an existing dataset: its files stay as they were, nothing is added
+rm -r "$T/bs/b"
+"$DS" plan --scenes "$T/bs" --variants 1 -o "$T/bsd" > /dev/null
+cp "$T/bsd/manifest.jsonl" "$T/bsd.m"
+mkdir "$T/bs/b" && echo '{"camera": {' > "$T/bs/b/scene.json"
+"$DS" plan --scenes "$T/bs" --variants 2 --force -o "$T/bsd" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && cmp -s "$T/bsd.m" "$T/bsd/manifest.jsonl" && [ ! -e "$T/bsd/scenes/b" ] && [ ! -e "$T/bsd/scenes/a/v002.json" ]' \
+  "failed re-plan leaves the dataset as it was (rc $rc: $(cat "$T/err"))"
+# many variants: variants.jsonl keeps every line (a fixed buffer once kept the last ~545)
+mkdir -p "$T/one" && ln -s "$TD/scenes/cornell-box" "$T/one/cornell-box"
+"$DS" plan --scenes "$T/one" --variants 7000 --spp 2 --no-preview -o "$T/many" > /dev/null
+rc=$?
+vj="$T/many/scenes/cornell-box/variants.jsonl"
+ok '[ $rc -eq 0 ] && [ $(wc -l < "$vj") -eq 7001 ] && head -1 "$vj" | grep -q "\"variant\":0," && tail -1 "$vj" | grep -q "\"variant\":7000,"' \
+  "--variants 7000 lists 7001 variants (rc $rc, $(wc -l < "$vj") lines)"
+rm -rf "$T/many"
+
+# ---- manifest values are checked: exit 1 naming file, line and field ----
+mkdir -p "$T/mf"
+bad_manifest() { # SED-EXPR PATTERN DESC
+  pat=$2
+  sed "$1" "$T/d/manifest.jsonl" > "$T/mf/manifest.jsonl"
+  "$DS" run "$T/mf" --list > /dev/null 2> "$T/err"
+  rc=$?
+  ok '[ $rc -eq 1 ] && grep -F -q -- "$pat" "$T/err"' "$3 (rc $rc: $(cat "$T/err"))"
+}
+bad_manifest '1s/"spp":[0-9]*/"spp":4.9/' 'manifest.jsonl:1: field "spp": 4.9 is not an integer' "fractional spp"
+bad_manifest '2s/"seed":"[0-9]*"/"seed":"abc"/' "manifest.jsonl:2: field \"seed\": 'abc'" "non-numeric seed"
+bad_manifest '1s/"seed":"[0-9]*"/"seed":"-1"/' "field \"seed\": '-1'" "negative seed"
+bad_manifest '1s/"width":[0-9]*/"width":1e12/' 'field "width": 1000000000000 is not an integer' "huge width"
+bad_manifest '1s/"variant":0/"variant":-7/' 'field "variant": -7' "negative variant"
+bad_manifest '1s/}$/} garbage ]]/' "manifest.jsonl:1: not a JSON object" "text after the object"
+{ printf '\n\n'; sed '1s/"spp":[0-9]*/"spp":0/' "$T/d/manifest.jsonl"; } > "$T/mf/manifest.jsonl"
+"$DS" run "$T/mf" --list > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && grep -F -q "manifest.jsonl:3: field \"spp\": 0" "$T/err"' \
+  "errors count blank lines ($(cat "$T/err"))"
 
 # ---- shards partition the job list ----
 "$DS" run "$T/d" --list > "$T/all"
@@ -100,6 +178,14 @@ ok '[ -z "$(sort "$T/started2" | uniq -d)" ]' "a job started twice in one run"
 export FAKE_LOG="$T/log3"
 "$DS" run "$T/d" --jobs 2 --renderer "$FAKE" > "$T/run3.out" 2>&1
 ok '[ ! -s "$T/log3" ] && grep -q "rendered 0, already done 15" "$T/run3.out"' "third run renders nothing"
+# preview thresholds: fractions in [0, 1], a level > 0 (-1 used to reject every variant)
+for bad in "--max-black -1" "--max-black nan" "--max-background 1.5" "--max-blown inf" \
+           "--blown-level -inf" "--blown-level 0"; do
+  # shellcheck disable=SC2086
+  "$DS" run "$T/d" --renderer "$FAKE" $bad > /dev/null 2> "$T/err"
+  rc=$?
+  ok '[ $rc -eq 2 ] && grep -F -q -- "for ${bad%% *}" "$T/err"' "run $bad refused (rc $rc: $(cat "$T/err"))"
+done
 
 # ---- degenerate variant rejection + patches ----
 "$DS" plan --scenes "$TD/scenes" --variants 2 --seed 3 --spp 2,4 --ref-spp 128 \
@@ -134,6 +220,21 @@ ok '[ $rc -eq 1 ] && [ ! -e "$T/none.kps" ] && grep -q "nothing" "$T/err"' "a se
 "$DS" patches "$T/r" --size 64 --allow-partial -o "$T/r/big.kps" 2> "$T/err"
 rc=$?
 ok '[ $rc -eq 1 ] && [ ! -e "$T/r/big.kps" ] && grep -q "does not fit" "$T/err"' "patch larger than image"
+# culling values must be finite (they go into the store's settings JSON)
+for bad in "--cull inf" "--cull nan" "--cull-tol -1" "--cull-abs 1e999"; do
+  # shellcheck disable=SC2086
+  "$DS" patches "$T/r" --size 8 --allow-partial -o "$T/c.kps" $bad > /dev/null 2> "$T/err"
+  rc=$?
+  ok '[ $rc -eq 2 ] && [ ! -e "$T/c.kps" ] && grep -F -q -- "for ${bad%% *}" "$T/err"' \
+    "patches $bad refused (rc $rc: $(cat "$T/err"))"
+done
+# any split name is safe in the settings JSON (it was pasted in unescaped)
+rm -rf "$T/q" && cp -r "$T/r" "$T/q"
+sed 's/"split":"train"/"split":"tr\\"ain"/' "$T/r/manifest.jsonl" > "$T/q/manifest.jsonl"
+"$DS" patches "$T/q" --split 'tr"ain' --size 8 --per-image 2 --allow-partial -o "$T/q.kps" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 0 ] && grep -a -F -q "\"split\":\"tr\\\"ain\"" "$T/q.kps"' \
+  "split name with a quote (rc $rc: $(cat "$T/err"))"
 "$DS" run "$T/nothing" 2> "$T/err"
 rc=$?
 ok '[ $rc -eq 1 ] && grep -q "manifest.jsonl" "$T/err"' "run without manifest"

@@ -7,6 +7,14 @@
 #include <stdio.h>
 
 #define DS_PATH 1024
+/* Largest render side `plan` accepts (--resolution, a scene's camera.resolution) and a
+ * manifest may hold. */
+#define DS_MAX_DIM 16384
+/* Most perturbed variants per scene (--variants) and most samples per pixel (--ref-spp). */
+#define DS_MAX_VARIANTS 100000
+#define DS_MAX_SPP (1 << 24)
+/* Render seeds are 31-bit (they fit any renderer's int --seed); docs/dataset.md. */
+#define DS_MAX_SEED 2147483647u
 
 typedef enum ds_kind { DS_PREVIEW = 0, DS_NOISY, DS_REFERENCE } ds_kind;
 
@@ -49,7 +57,10 @@ void ds_join(char *out, size_t n, const char *a, const char *b);
 char *ds_slurp(const char *path, size_t *len);
 int ds_write_atomic(const char *path, const char *data, size_t len);
 int ds_parse_int(const char *s, long lo, long hi, int *out);
+/* Finite numbers only (no inf/nan). */
 int ds_parse_double(const char *s, double *out);
+/* Decimal digits only, value <= hi (no sign, no blanks, no overflow). */
+int ds_parse_u64(const char *s, uint64_t hi, uint64_t *out);
 uint64_t ds_hash(const char *s, uint64_t seed);
 double ds_now(void);
 int ds_isatty(void);

@@ -4,6 +4,7 @@
 #include "ds.h"
 
 #include <cjson/cJSON.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -75,13 +76,33 @@ static int get_str(const cJSON *o, const char *k, char *dst, size_t n, int line,
   strcpy(dst, v->valuestring);
   return 1;
 }
-static int get_int(const cJSON *o, const char *k, int *dst, int line, const char *path) {
+/* An integral JSON number in [lo, hi]: valueint would truncate 4.9 to 4 and saturate 1e12
+ * to INT_MAX, so a damaged manifest would render something nobody planned. */
+static int get_int(const cJSON *o, const char *k, int lo, int hi, int *dst, int line,
+                   const char *path) {
   const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, k);
   if (!cJSON_IsNumber(v)) {
     ds_err("%s:%d: field \"%s\" missing or not a number", path, line, k);
     return 0;
   }
-  *dst = v->valueint;
+  double d = v->valuedouble;
+  if (!(d >= lo && d <= hi) || d != floor(d)) {
+    ds_err("%s:%d: field \"%s\": %.15g is not an integer in [%d, %d]", path, line, k, d, lo, hi);
+    return 0;
+  }
+  *dst = (int)d;
+  return 1;
+}
+
+/* "seed" is a string (64-bit exact in JSON) of decimal digits; plan writes 31-bit seeds. */
+static int get_seed(const cJSON *o, uint64_t *dst, int line, const char *path) {
+  char s[32];
+  if (!get_str(o, "seed", s, sizeof s, line, path)) return 0;
+  if (!ds_parse_u64(s, DS_MAX_SEED, dst)) {
+    ds_err("%s:%d: field \"seed\": '%s' is not a decimal integer in [0, %u]", path, line, s,
+           DS_MAX_SEED);
+    return 0;
+  }
   return 1;
 }
 
@@ -95,40 +116,43 @@ int ds_manifest_read(const char *dir, ds_manifest *m) {
     return -1;
   }
   int lineno = 0, ok = 1;
-  char *save = NULL;
-  for (char *line = strtok_r(text, "\n", &save); line && ok; line = strtok_r(NULL, "\n", &save)) {
+  /* Split by hand, not strtok: strtok skips empty lines, and errors must name the real line. */
+  for (char *line = text, *next; line && *line && ok; line = next) {
     lineno++;
+    next = strchr(line, '\n');
+    if (next) *next++ = 0;
     if (!line[0]) continue;
-    cJSON *o = cJSON_Parse(line);
+    /* Require the object to end the line: cJSON_Parse ignores text after it. */
+    cJSON *o = cJSON_ParseWithOpts(line, NULL, 1);
     if (!cJSON_IsObject(o)) {
-      ds_err("%s:%d: not a JSON object", path, lineno);
+      ds_err("%s:%d: not a JSON object (alone on its line)", path, lineno);
       cJSON_Delete(o);
       ok = 0;
       break;
     }
     ds_job j;
     memset(&j, 0, sizeof j);
-    char kind[32], seed[32];
+    char kind[32];
+    /* Ranges are those plan can write: --variants, --ref-spp, --resolution limits. */
     ok = get_str(o, "id", j.id, sizeof j.id, lineno, path) &&
          get_str(o, "kind", kind, sizeof kind, lineno, path) &&
          get_str(o, "scene", j.scene, sizeof j.scene, lineno, path) &&
-         get_int(o, "variant", &j.variant, lineno, path) &&
+         get_int(o, "variant", 0, DS_MAX_VARIANTS, &j.variant, lineno, path) &&
          get_str(o, "split", j.split, sizeof j.split, lineno, path) &&
          get_str(o, "scene_file", j.scene_file, sizeof j.scene_file, lineno, path) &&
-         get_int(o, "spp", &j.spp, lineno, path) &&
-         get_str(o, "seed", seed, sizeof seed, lineno, path) &&
-         get_int(o, "width", &j.width, lineno, path) &&
-         get_int(o, "height", &j.height, lineno, path) &&
+         get_int(o, "spp", 1, DS_MAX_SPP, &j.spp, lineno, path) &&
+         get_seed(o, &j.seed, lineno, path) &&
+         get_int(o, "width", 1, DS_MAX_DIM, &j.width, lineno, path) &&
+         get_int(o, "height", 1, DS_MAX_DIM, &j.height, lineno, path) &&
          get_str(o, "out", j.out, sizeof j.out, lineno, path) &&
          get_str(o, "preview", j.preview, sizeof j.preview, lineno, path);
     cJSON_Delete(o);
     if (!ok) break;
-    j.seed = strtoull(seed, NULL, 10);
     int k = -1;
     for (int i = 0; i < 3; i++)
       if (!strcmp(kind, g_kinds[i])) k = i;
-    if (k < 0 || j.spp <= 0 || j.width <= 0 || j.height <= 0) {
-      ds_err("%s:%d: bad kind '%s' or non-positive spp/size", path, lineno, kind);
+    if (k < 0) {
+      ds_err("%s:%d: field \"kind\": '%s' is not preview, noisy or reference", path, lineno, kind);
       ok = 0;
       break;
     }

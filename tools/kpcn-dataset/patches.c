@@ -122,6 +122,7 @@ int ds_cmd_patches(int argc, char **argv) {
       return 2;
     }
     int ok = 1, iv;
+    const char *want = ""; /* what the option takes, for the error */
     if (!strcmp(a, "-o") || !strcmp(a, "--output"))
       out = v;
     else if (!strcmp(a, "--split"))
@@ -131,29 +132,36 @@ int ds_cmd_patches(int argc, char **argv) {
     else if (!strcmp(a, "--dtype")) {
       dtype = v;
       ok = !strcmp(v, "f32") || !strcmp(v, "f16");
-    } else if (!strcmp(a, "--size"))
+      want = " (f32 or f16)";
+    } else if (!strcmp(a, "--size")) {
       ok = ds_parse_int(v, 2, 4096, &ps.size);
-    else if (!strcmp(a, "--per-image"))
+      want = " (an integer in [2, 4096])";
+    } else if (!strcmp(a, "--per-image")) {
       ok = ds_parse_int(v, 1, 1 << 20, &ps.count);
-    else if (!strcmp(a, "--stride")) {
+      want = " (an integer in [1, 1048576])";
+    } else if (!strcmp(a, "--stride")) {
       ok = ds_parse_int(v, 1, 4096, &ps.stride);
       ps.count = 0;
-    } else if (!strcmp(a, "--cull"))
-      ok = ds_parse_double(v, &ps.cull) && ps.cull >= 0;
-    else if (!strcmp(a, "--cull-tol"))
-      ok = ds_parse_double(v, &ps.cull_tol) && ps.cull_tol >= 0;
-    else if (!strcmp(a, "--cull-abs"))
-      ok = ds_parse_double(v, &ps.cull_abs) && ps.cull_abs >= 0;
-    else if (!strcmp(a, "--seed")) {
+      want = " (an integer in [1, 4096])";
+    } else if (!strcmp(a, "--cull") || !strcmp(a, "--cull-tol") || !strcmp(a, "--cull-abs")) {
+      /* Finite (ds_parse_double): they are recorded in the store's settings JSON, which has
+       * no inf. --cull above 1 disables culling. */
+      double *dst = !strcmp(a, "--cull")       ? &ps.cull
+                    : !strcmp(a, "--cull-tol") ? &ps.cull_tol
+                                               : &ps.cull_abs;
+      ok = ds_parse_double(v, dst) && *dst >= 0;
+      want = " (a finite number >= 0)";
+    } else if (!strcmp(a, "--seed")) {
       ok = ds_parse_int(v, 0, 2147483647, &iv);
       ps.seed = (uint64_t)iv;
+      want = " (an integer in [0, 2147483647])";
     } else {
       ds_err("patches: unknown option '%s'", a);
       usage();
       return 2;
     }
     if (!ok) {
-      ds_err("patches: bad value '%s' for %s", v, a);
+      ds_err("patches: bad value '%s' for %s%s", v, a, want);
       return 2;
     }
     i++;
@@ -210,15 +218,32 @@ int ds_cmd_patches(int argc, char **argv) {
   kpcn_patchstore_settings_defaults(&ss);
   ss.patch_size = ps.size;
   ss.dtype = !strcmp(dtype, "f16") ? KPCN_DTYPE_F16 : KPCN_DTYPE_F32;
-  char settings[512];
-  snprintf(settings, sizeof settings,
-           "{\"split\":\"%s\",\"spp\":\"%s\",\"per_image\":%d,\"stride\":%d,\"cull\":%g,"
-           "\"cull_tol\":%g,\"cull_abs\":%g,\"importance\":%d,\"seed\":%llu}",
-           split, spp_list, ps.count, ps.stride, ps.cull, ps.cull_tol, ps.cull_abs, ps.importance,
-           (unsigned long long)ps.seed);
+  /* Built with cJSON, not printf: a split name may hold any character, which must be
+   * escaped (the keys and their order are those of stores written before). */
+  cJSON *sj = cJSON_CreateObject();
+  cJSON_AddStringToObject(sj, "split", split);
+  cJSON_AddStringToObject(sj, "spp", spp_list);
+  cJSON_AddNumberToObject(sj, "per_image", ps.count);
+  cJSON_AddNumberToObject(sj, "stride", ps.stride);
+  cJSON_AddNumberToObject(sj, "cull", ps.cull);
+  cJSON_AddNumberToObject(sj, "cull_tol", ps.cull_tol);
+  cJSON_AddNumberToObject(sj, "cull_abs", ps.cull_abs);
+  cJSON_AddNumberToObject(sj, "importance", ps.importance);
+  cJSON_AddNumberToObject(sj, "seed", (double)ps.seed);
+  char *settings = cJSON_PrintUnformatted(sj);
+  cJSON_Delete(sj);
+  if (!settings) {
+    ds_err("patches: out of memory");
+    free(pairs);
+    for (int d = 0; d < ndirs; d++)
+      ds_manifest_free(&m[d]);
+    return 1;
+  }
   ss.settings_json = settings;
   kpcn_patchstore_writer *w = NULL;
-  if (kpcn_patchstore_create(&w, out, &ss) != KPCN_OK) {
+  kpcn_status cst = kpcn_patchstore_create(&w, out, &ss); /* keeps a copy of settings */
+  free(settings);
+  if (cst != KPCN_OK) {
     ds_err("patches: %s", kpcn_last_error());
     free(pairs);
     for (int d = 0; d < ndirs; d++)

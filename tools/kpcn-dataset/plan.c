@@ -7,10 +7,13 @@
 
 #include <cjson/cJSON.h>
 #include <dirent.h>
+#include <errno.h>
 #include <limits.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 typedef struct base_scene {
   char name[128];
@@ -107,12 +110,25 @@ static int assign_splits(base_scene *s, int n, const char *spec, uint64_t seed) 
   char *save = NULL;
   for (char *tok = strtok_r(buf, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
     char *colon = strchr(tok, ':');
-    if (!colon || colon == tok || nsplit == 8 || colon - tok >= 16) {
-      ds_err("--split: '%s' is not split:value (e.g. train:0.8 or val:sceneA+sceneB)", tok);
+    if (!colon || colon == tok || colon - tok >= 16) {
+      ds_err("--split: '%s' is not split:value (e.g. train:0.8 or val:sceneA+sceneB; split names "
+             "up to 15 characters)",
+             tok);
+      return -1;
+    }
+    if (nsplit == 8) {
+      ds_err("--split: more than 8 splits in '%s'", spec);
       return -1;
     }
     *colon = 0;
     const char *val = colon + 1;
+    /* Each split is named once: a second "train:" would silently take the first's place
+     * (fractions) or merge with it (names). */
+    for (int k = 0; k < nsplit; k++)
+      if (!strcmp(names[k], tok)) {
+        ds_err("--split: split '%s' is named twice in '%s'", tok, spec);
+        return -1;
+      }
     snprintf(names[nsplit], 16, "%s", tok);
     double f;
     int isf = ds_parse_double(val, &f);
@@ -151,6 +167,17 @@ static int assign_splits(base_scene *s, int n, const char *spec, uint64_t seed) 
     nsplit++;
   }
   if (fractions == 1) {
+    /* The splits after the first take round(fraction * n) scenes each and the first the
+     * rest: a sum above 1 would leave the first (training) split empty or short. */
+    double sum = 0;
+    for (int k = 0; k < nsplit; k++)
+      sum += frac[k];
+    if (sum > 1 + 1e-6) {
+      ds_err("--split: fractions of '%s' sum to %g, more than 1 (each is the share of the base "
+             "scenes in that split)",
+             spec, sum);
+      return -1;
+    }
     /* Fisher-Yates with the seed, then consecutive blocks; the first split takes the
      * rounding remainder so every scene gets a split. */
     int *order = malloc(sizeof(int) * (size_t)n);
@@ -203,21 +230,286 @@ static void rebase_paths(cJSON *node, const char *dir) {
   }
 }
 
-static int scene_resolution(const char *json, int *w, int *h) {
+/* camera.resolution of a base scene, checked as the renderer checks it (integral numbers)
+ * and against --resolution's limit: valueint would turn 1e12 into INT_MAX. Returns 1 with
+ * *w, *h set, 0 when the scene has none, -1 when it is bad (error printed). */
+static int scene_resolution(const base_scene *sc, const char *json, int *w, int *h) {
   cJSON *r = cJSON_Parse(json);
+  if (!r) {
+    ds_err("plan: scene '%s' (%s): not valid JSON", sc->name, sc->file);
+    return -1;
+  }
   const cJSON *res =
       cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(r, "camera"), "resolution");
+  double d[2];
   int ok = 0;
-  if (cJSON_IsArray(res) && cJSON_GetArraySize(res) == 2) {
-    *w = cJSON_GetArrayItem(res, 0)->valueint;
-    *h = cJSON_GetArrayItem(res, 1)->valueint;
-    ok = *w > 0 && *h > 0;
+  if (cJSON_IsArray(res) && cJSON_GetArraySize(res) == 2 &&
+      cJSON_IsNumber(cJSON_GetArrayItem(res, 0)) && cJSON_IsNumber(cJSON_GetArrayItem(res, 1))) {
+    d[0] = cJSON_GetArrayItem(res, 0)->valuedouble;
+    d[1] = cJSON_GetArrayItem(res, 1)->valuedouble;
+    ok = 1;
   } else if (cJSON_IsNumber(res)) {
-    *w = *h = res->valueint;
-    ok = *w > 0;
+    d[0] = d[1] = res->valuedouble;
+    ok = 1;
+  } else if (res) {
+    ds_err("plan: scene '%s' (%s): camera.resolution is not a number or [width, height]", sc->name,
+           sc->file);
+    ok = -1;
   }
+  for (int k = 0; k < 2 && ok == 1; k++)
+    if (!(d[k] >= 1 && d[k] <= DS_MAX_DIM) || d[k] != floor(d[k])) {
+      ds_err("plan: scene '%s' (%s): camera.resolution %.15g x %.15g: each side must be an "
+             "integer in [1, %d] (or give --resolution)",
+             sc->name, sc->file, d[0], d[1], DS_MAX_DIM);
+      ok = -1;
+    }
+  if (ok == 1) *w = (int)d[0], *h = (int)d[1];
   cJSON_Delete(r);
   return ok;
+}
+
+/* Finds the first value the perturbation made non-finite (cJSON prints it as null) where the
+ * base scene holds no null: a strength so large that exp() or a product overflowed. Its JSON
+ * path goes to path (len: the part already there). Arrays are walked alongside the base's. */
+static int new_null(const cJSON *p, const cJSON *b, char *path, size_t n, size_t len) {
+  if (cJSON_IsNull(p)) return !cJSON_IsNull(b);
+  int i = 0;
+  const cJSON *c, *bc = cJSON_IsArray(p) && cJSON_IsArray(b) ? b->child : NULL;
+  cJSON_ArrayForEach(c, p) {
+    const cJSON *bi = bc;
+    if (cJSON_IsArray(p)) {
+      snprintf(path + len, n - len, "[%d]", i++);
+      bc = bc ? bc->next : NULL;
+    } else {
+      snprintf(path + len, n - len, "%s%s", len ? "." : "", c->string);
+      bi = cJSON_IsObject(b) ? cJSON_GetObjectItemCaseSensitive(b, c->string) : NULL;
+    }
+    if (new_null(c, bi, path, n, strlen(path))) return 1;
+  }
+  path[len] = 0;
+  return 0;
+}
+
+/* What one plan writes that did not exist before (files and directories, in creation
+ * order), so that a failed plan removes them again: no half-planned dataset is left. */
+typedef struct created {
+  char **p;
+  int n, cap;
+} created;
+
+static int track_push(created *c, const char *path) {
+  if (c->n == c->cap) {
+    int cap = c->cap ? 2 * c->cap : 64;
+    char **np = realloc(c->p, sizeof *np * (size_t)cap);
+    if (!np) return -1;
+    c->p = np;
+    c->cap = cap;
+  }
+  if (!(c->p[c->n] = strdup(path))) return -1;
+  c->n++;
+  return 0;
+}
+
+/* mkdir -p that records each directory it creates. */
+static int track_mkdir(created *c, const char *path) {
+  char p[DS_PATH];
+  snprintf(p, sizeof p, "%s", path);
+  size_t l = strlen(p);
+  while (l > 1 && p[l - 1] == '/')
+    p[--l] = 0;
+  struct stat sb;
+  if (stat(p, &sb) == 0) {
+    if (S_ISDIR(sb.st_mode)) return 0;
+    errno = ENOTDIR;
+    return -1;
+  }
+  char *sl = strrchr(p, '/');
+  if (sl && sl > p) {
+    *sl = 0;
+    int r = track_mkdir(c, p);
+    *sl = '/';
+    if (r != 0) return r;
+  }
+  if (mkdir(p, 0777) != 0) return errno == EEXIST ? 0 : -1;
+  return track_push(c, p);
+}
+
+static int track_write(created *c, const char *path, const char *data, size_t len) {
+  if (access(path, F_OK) != 0 && track_push(c, path) != 0) return -1;
+  return ds_write_atomic(path, data, len);
+}
+
+/* Removes (newest first) what a failed plan created. */
+static void track_undo(created *c) {
+  for (int i = c->n - 1; i >= 0; i--)
+    remove(c->p[i]);
+}
+
+static void track_free(created *c) {
+  for (int i = 0; i < c->n; i++)
+    free(c->p[i]);
+  free(c->p);
+}
+
+typedef struct plan_ctx {
+  const char *outdir;
+  uint64_t seed;
+  int variants, eval_variants, no_preview, preview_spp, preview_scale, ref_spp, W, H;
+  const int *spps;
+  int nspp;
+  const kpcn_perturb_settings *ps;
+  ds_manifest m; /* filled by the check pass */
+  double samples;
+  created made; /* filled by the write pass */
+} plan_ctx;
+
+/* One base scene. The check pass (write = 0) reads, sizes and perturbs every variant and
+ * appends the scene's jobs to the manifest, writing nothing; the write pass (write = 1),
+ * run only once every scene passed, perturbs again (deterministic) and writes the variant
+ * JSONs and variants.jsonl. So a bad later scene leaves no files of the earlier ones. */
+static int plan_scene(plan_ctx *c, const base_scene *sc, int write) {
+  char *base = ds_slurp(sc->file, NULL);
+  if (!base) {
+    ds_err("plan: scene '%s': cannot read '%s'", sc->name, sc->file);
+    return 1;
+  }
+  int sw = c->W, sh = c->H;
+  if (!(c->W && c->H)) {
+    int r = scene_resolution(sc, base, &sw, &sh);
+    if (r == 0)
+      ds_err("plan: scene '%s' (%s): no camera.resolution (give --resolution)", sc->name, sc->file);
+    if (r != 1) {
+      free(base);
+      return 1;
+    }
+  }
+  int is_train = !strcmp(sc->split, "train");
+  int nvar = (is_train || c->eval_variants) ? c->variants : 0;
+  char sdir[DS_PATH], rel[DS_PATH], path[DS_PATH];
+  snprintf(rel, sizeof rel, "scenes/%s", sc->name);
+  ds_join(sdir, sizeof sdir, c->outdir, rel);
+  if (write) {
+    snprintf(rel, sizeof rel, "renders/%s", sc->name);
+    ds_join(path, sizeof path, c->outdir, rel);
+    if (track_mkdir(&c->made, sdir) != 0 || track_mkdir(&c->made, path) != 0) {
+      ds_err("plan: cannot create '%s' or '%s': %s", sdir, path, strerror(errno));
+      free(base);
+      return 1;
+    }
+  }
+  /* variants.jsonl grows with the count (a fixed buffer once kept only its last ~545 lines). */
+  char *vtxt = NULL;
+  size_t vlen = 0, vcap = 0;
+  int rc = 0;
+  cJSON *bjs = write ? NULL : cJSON_Parse(base); /* for the check of perturbed values */
+  for (int v = 0; v <= nvar && rc == 0; v++) {
+    char *pert = NULL, summary[512];
+    if (kpcn_perturb_scene(&pert, base, ds_hash(sc->name, c->seed), v, c->ps, summary,
+                           sizeof summary) != KPCN_OK) {
+      ds_err("plan: scene '%s' (%s), variant %d: %s", sc->name, sc->file, v, kpcn_last_error());
+      rc = 1;
+      break;
+    }
+    ds_job j;
+    memset(&j, 0, sizeof j);
+    snprintf(j.scene, sizeof j.scene, "%s", sc->name);
+    snprintf(j.split, sizeof j.split, "%s", sc->split);
+    j.variant = v;
+    snprintf(j.scene_file, sizeof j.scene_file, "scenes/%s/v%03d.json", sc->name, v);
+    if (write) {
+      cJSON *pjs = cJSON_Parse(pert);
+      rebase_paths(pjs, sc->dir);
+      char *txt = cJSON_Print(pjs);
+      cJSON_Delete(pjs);
+      /* What changed, beside the scene (renderers reject unknown scene fields); cJSON
+       * escapes the texture names the summary may quote. */
+      cJSON *lj = cJSON_CreateObject();
+      cJSON_AddNumberToObject(lj, "variant", v);
+      cJSON_AddStringToObject(lj, "perturbation", summary);
+      char *line = cJSON_PrintUnformatted(lj);
+      cJSON_Delete(lj);
+      size_t ll = line ? strlen(line) : 0;
+      if (vlen + ll + 2 > vcap) {
+        size_t cap = vcap ? 2 * vcap : 1 << 16;
+        while (cap < vlen + ll + 2)
+          cap *= 2;
+        char *nb = realloc(vtxt, cap);
+        if (nb) vtxt = nb, vcap = cap;
+      }
+      if (!txt || !line || vlen + ll + 2 > vcap) {
+        ds_err("plan: scene '%s': out of memory", sc->name);
+        rc = 1;
+      } else {
+        memcpy(vtxt + vlen, line, ll);
+        vlen += ll;
+        vtxt[vlen++] = '\n';
+        ds_join(path, sizeof path, c->outdir, j.scene_file);
+        if (track_write(&c->made, path, txt, strlen(txt)) != 0) rc = 1;
+      }
+      free(line);
+      free(txt);
+      free(pert);
+      continue;
+    }
+    /* No variant may carry a non-finite number (the renderer rejects the scene, and only
+     * at render time). */
+    cJSON *pjs = cJSON_Parse(pert);
+    char where[512] = "";
+    if (new_null(pjs, bjs, where, sizeof where, 0)) {
+      ds_err("plan: scene '%s' (%s), variant %d: the perturbation made %s non-finite (lower "
+             "the strength of --camera, --fov, --material, --light or --env)",
+             sc->name, sc->file, v, where);
+      rc = 1;
+    }
+    cJSON_Delete(pjs);
+    free(pert);
+    if (rc) break;
+    int oom = 0;
+    /* Variant 0 is the artist's scene: never rejected. */
+    if (!c->no_preview && v > 0)
+      snprintf(j.preview, sizeof j.preview, "renders/%s/v%03d_preview.exr", sc->name, v);
+    if (j.preview[0]) {
+      ds_job p = j;
+      p.kind = DS_PREVIEW;
+      p.spp = c->preview_spp;
+      int k = c->preview_scale;
+      p.width = sw / k > 16 ? sw / k : (sw < 16 ? sw : 16);
+      p.height = sh / k > 16 ? sh / k : (sh < 16 ? sh : 16);
+      snprintf(p.id, sizeof p.id, "%s/v%03d/preview", sc->name, v);
+      snprintf(p.out, sizeof p.out, "%s", j.preview);
+      p.seed = ds_hash(p.id, c->seed) & DS_MAX_SEED;
+      oom |= ds_manifest_push(&c->m, &p) != 0;
+    }
+    j.width = sw;
+    j.height = sh;
+    for (int k = 0; k <= c->nspp; k++) {
+      ds_job r = j;
+      r.kind = k < c->nspp ? DS_NOISY : DS_REFERENCE;
+      r.spp = k < c->nspp ? c->spps[k] : c->ref_spp;
+      if (k < c->nspp) {
+        snprintf(r.id, sizeof r.id, "%s/v%03d/%dspp", sc->name, v, r.spp);
+        snprintf(r.out, sizeof r.out, "renders/%s/v%03d_%dspp.exr", sc->name, v, r.spp);
+      } else {
+        snprintf(r.id, sizeof r.id, "%s/v%03d/ref", sc->name, v);
+        snprintf(r.out, sizeof r.out, "renders/%s/v%03d_ref%dspp.exr", sc->name, v, r.spp);
+      }
+      r.seed = ds_hash(r.id, c->seed) & DS_MAX_SEED; /* fits any renderer's int seed */
+      c->samples += (double)r.spp * sw * sh;
+      oom |= ds_manifest_push(&c->m, &r) != 0;
+    }
+    if (oom) {
+      ds_err("plan: out of memory for the manifest");
+      rc = 1;
+    }
+  }
+  if (write && rc == 0) {
+    ds_join(path, sizeof path, sdir, "variants.jsonl");
+    rc = track_write(&c->made, path, vtxt ? vtxt : "", vlen) != 0;
+  }
+  cJSON_Delete(bjs);
+  free(vtxt);
+  free(base);
+  return rc;
 }
 
 static void usage(void) {
@@ -259,6 +551,7 @@ int ds_cmd_plan(int argc, char **argv) {
       return 2;
     }
     int ok = 1;
+    const char *want = ""; /* what the option takes, for the error */
     if (!strcmp(a, "--scenes"))
       scenes = v;
     else if (!strcmp(a, "-o") || !strcmp(a, "--output"))
@@ -267,21 +560,26 @@ int ds_cmd_plan(int argc, char **argv) {
       split = v;
     else if (!strcmp(a, "--spp"))
       spp_list = v;
-    else if (!strcmp(a, "--variants"))
-      ok = ds_parse_int(v, 0, 100000, &variants);
-    else if (!strcmp(a, "--ref-spp"))
-      ok = ds_parse_int(v, 1, 1 << 24, &ref_spp);
-    else if (!strcmp(a, "--preview-spp"))
+    else if (!strcmp(a, "--variants")) {
+      ok = ds_parse_int(v, 0, DS_MAX_VARIANTS, &variants);
+      want = " (an integer in [0, 100000])";
+    } else if (!strcmp(a, "--ref-spp")) {
+      ok = ds_parse_int(v, 1, DS_MAX_SPP, &ref_spp);
+      want = " (an integer in [1, 16777216])";
+    } else if (!strcmp(a, "--preview-spp")) {
       ok = ds_parse_int(v, 1, 1 << 16, &preview_spp);
-    else if (!strcmp(a, "--preview-scale"))
+      want = " (an integer in [1, 65536])";
+    } else if (!strcmp(a, "--preview-scale")) {
       ok = ds_parse_int(v, 1, 64, &preview_scale);
-    else if (!strcmp(a, "--seed")) {
-      char *end;
-      seed = strtoull(v, &end, 10);
-      ok = *v && !*end;
+      want = " (an integer in [1, 64])";
+    } else if (!strcmp(a, "--seed")) {
+      ok = ds_parse_u64(v, UINT64_MAX, &seed);
+      want = " (a non-negative decimal integer below 2^64)";
     } else if (!strcmp(a, "--resolution")) {
       char extra;
-      ok = sscanf(v, "%dx%d%c", &W, &H, &extra) == 2 && W > 0 && H > 0 && W <= 16384 && H <= 16384;
+      ok = sscanf(v, "%dx%d%c", &W, &H, &extra) == 2 && W > 0 && H > 0 && W <= DS_MAX_DIM &&
+           H <= DS_MAX_DIM;
+      want = " (WxH, each side in [1, 16384])";
     } else if (!strcmp(a, "--camera"))
       dst = &ps.camera;
     else if (!strcmp(a, "--fov"))
@@ -296,6 +594,7 @@ int ds_cmd_plan(int argc, char **argv) {
       dst = &ps.env;
     else if (!strcmp(a, "--texture-swap")) {
       ok = ds_parse_double(v, &ps.texture_swap) && ps.texture_swap >= 0 && ps.texture_swap <= 1;
+      want = " (a probability in [0, 1])";
     } else if (!strcmp(a, "--texture-dir")) {
       /* Absolute, so plan.json names the same images from any working directory. */
       char *rp = realpath(v, NULL);
@@ -311,9 +610,12 @@ int ds_cmd_plan(int argc, char **argv) {
       usage();
       return 2;
     }
-    if (dst) ok = ds_parse_double(v, dst) && *dst >= 0;
+    if (dst) {
+      ok = ds_parse_double(v, dst) && *dst >= 0;
+      want = " (a finite number >= 0)";
+    }
     if (!ok) {
-      ds_err("plan: bad value '%s' for %s", v, a);
+      ds_err("plan: bad value '%s' for %s%s", v, a, want);
       return 2;
     }
     i++;
@@ -390,12 +692,6 @@ int ds_cmd_plan(int argc, char **argv) {
   char *ptxt = cJSON_Print(pj);
   cJSON_Delete(pj);
   char path[DS_PATH];
-  if (ds_mkdir_p(outdir) != 0) {
-    ds_err("plan: cannot create '%s'", outdir);
-    free(sc);
-    free(ptxt);
-    return 1;
-  }
   ds_join(path, sizeof path, outdir, "plan.json");
   char *old = ds_slurp(path, NULL);
   if (old && strcmp(old, ptxt) != 0 && !force) {
@@ -409,116 +705,49 @@ int ds_cmd_plan(int argc, char **argv) {
   }
   free(old);
 
-  ds_manifest m = {0};
+  plan_ctx c;
+  memset(&c, 0, sizeof c);
+  c.outdir = outdir;
+  c.seed = seed;
+  c.variants = variants, c.eval_variants = eval_variants, c.no_preview = no_preview;
+  c.preview_spp = preview_spp, c.preview_scale = preview_scale, c.ref_spp = ref_spp;
+  c.W = W, c.H = H;
+  c.spps = spps, c.nspp = nspp;
+  c.ps = &ps;
+  /* Every scene is checked (and the manifest built) before the first file is written. */
   int rc = 0;
-  double samples = 0;
-  for (int i = 0; i < nsc && rc == 0; i++) {
-    char *base = ds_slurp(sc[i].file, NULL);
-    int sw = W, sh = H;
-    if (!base || (!(W && H) && !scene_resolution(base, &sw, &sh))) {
-      ds_err("plan: %s: %s", sc[i].file,
-             base ? "no camera.resolution (give --resolution)" : "cannot read");
-      free(base);
-      rc = 1;
-      break;
-    }
-    int is_train = !strcmp(sc[i].split, "train");
-    int nvar = (is_train || eval_variants) ? variants : 0;
-    char sdir[DS_PATH], rel[DS_PATH];
-    snprintf(rel, sizeof rel, "scenes/%s", sc[i].name);
-    ds_join(sdir, sizeof sdir, outdir, rel);
-    ds_mkdir_p(sdir);
-    snprintf(rel, sizeof rel, "renders/%s", sc[i].name);
-    ds_join(path, sizeof path, outdir, rel);
-    ds_mkdir_p(path);
-    static char variants_txt[1 << 20];
-    size_t variants_len = 0;
-    variants_txt[0] = 0;
-    for (int v = 0; v <= nvar && rc == 0; v++) {
-      char *pert = NULL, summary[512];
-      if (kpcn_perturb_scene(&pert, base, ds_hash(sc[i].name, seed), v, &ps, summary,
-                             sizeof summary) != KPCN_OK) {
-        ds_err("plan: %s: %s", sc[i].file, kpcn_last_error());
-        rc = 1;
-        break;
-      }
-      cJSON *pjs = cJSON_Parse(pert);
-      free(pert);
-      rebase_paths(pjs, sc[i].dir);
-      char *txt = cJSON_Print(pjs);
-      cJSON_Delete(pjs);
-      /* What changed, beside the scene (renderers reject unknown scene fields). */
-      char line[1024];
-      snprintf(line, sizeof line, "{\"variant\":%d,\"perturbation\":\"%s\"}\n", v, summary);
-      size_t ll = strlen(line);
-      if (variants_len + ll + 1 > sizeof variants_txt)
-        variants_len = 0; /* absurd count: keep last */
-      memcpy(variants_txt + variants_len, line, ll + 1);
-      variants_len += ll;
-      ds_job j;
-      memset(&j, 0, sizeof j);
-      snprintf(j.scene, sizeof j.scene, "%s", sc[i].name);
-      snprintf(j.split, sizeof j.split, "%s", sc[i].split);
-      j.variant = v;
-      snprintf(j.scene_file, sizeof j.scene_file, "scenes/%s/v%03d.json", sc[i].name, v);
-      ds_join(path, sizeof path, outdir, j.scene_file);
-      if (ds_write_atomic(path, txt, strlen(txt)) != 0) rc = 1;
-      free(txt);
-      /* Variant 0 is the artist's scene: never rejected. */
-      if (!no_preview && v > 0)
-        snprintf(j.preview, sizeof j.preview, "renders/%s/v%03d_preview.exr", sc[i].name, v);
-      if (j.preview[0]) {
-        ds_job p = j;
-        p.kind = DS_PREVIEW;
-        p.spp = preview_spp;
-        p.width = sw / preview_scale > 16 ? sw / preview_scale : (sw < 16 ? sw : 16);
-        p.height = sh / preview_scale > 16 ? sh / preview_scale : (sh < 16 ? sh : 16);
-        snprintf(p.id, sizeof p.id, "%s/v%03d/preview", sc[i].name, v);
-        snprintf(p.out, sizeof p.out, "%s", j.preview);
-        p.seed = ds_hash(p.id, seed) & 0x7fffffffu;
-        ds_manifest_push(&m, &p);
-      }
-      j.width = sw;
-      j.height = sh;
-      for (int k = 0; k <= nspp; k++) {
-        ds_job r = j;
-        r.kind = k < nspp ? DS_NOISY : DS_REFERENCE;
-        r.spp = k < nspp ? spps[k] : ref_spp;
-        if (k < nspp) {
-          snprintf(r.id, sizeof r.id, "%s/v%03d/%dspp", sc[i].name, v, r.spp);
-          snprintf(r.out, sizeof r.out, "renders/%s/v%03d_%dspp.exr", sc[i].name, v, r.spp);
-        } else {
-          snprintf(r.id, sizeof r.id, "%s/v%03d/ref", sc[i].name, v);
-          snprintf(r.out, sizeof r.out, "renders/%s/v%03d_ref%dspp.exr", sc[i].name, v, r.spp);
-        }
-        r.seed = ds_hash(r.id, seed) & 0x7fffffffu; /* fits any renderer's int seed */
-        samples += (double)r.spp * sw * sh;
-        ds_manifest_push(&m, &r);
-      }
-    }
-    if (rc == 0) {
-      ds_join(path, sizeof path, sdir, "variants.jsonl");
-      rc = ds_write_atomic(path, variants_txt, variants_len) != 0;
-    }
-    free(base);
+  for (int i = 0; i < nsc && rc == 0; i++)
+    rc = plan_scene(&c, &sc[i], 0);
+  if (rc == 0 && track_mkdir(&c.made, outdir) != 0) {
+    ds_err("plan: cannot create '%s': %s", outdir, strerror(errno));
+    rc = 1;
   }
-  if (rc == 0) rc = ds_manifest_write(outdir, &m) != 0;
+  for (int i = 0; i < nsc && rc == 0; i++)
+    rc = plan_scene(&c, &sc[i], 1);
+  if (rc == 0) {
+    ds_join(path, sizeof path, outdir, "manifest.jsonl");
+    if (access(path, F_OK) != 0 && track_push(&c.made, path) != 0) rc = 1;
+    if (rc == 0) rc = ds_manifest_write(outdir, &c.m) != 0;
+  }
   if (rc == 0) {
     ds_join(path, sizeof path, outdir, "plan.json");
-    rc = ds_write_atomic(path, ptxt, strlen(ptxt)) != 0;
+    rc = track_write(&c.made, path, ptxt, strlen(ptxt)) != 0;
   }
-  if (rc == 0) {
+  if (rc != 0) {
+    track_undo(&c.made);
+  } else {
     int cnt[3] = {0, 0, 0};
-    for (int i = 0; i < m.n; i++)
-      cnt[m.jobs[i].kind]++;
+    for (int i = 0; i < c.m.n; i++)
+      cnt[c.m.jobs[i].kind]++;
     printf("planned %d scenes:", nsc);
     for (int i = 0; i < nsc; i++)
       printf(" %s(%s)", sc[i].name, sc[i].split);
     printf("\n%d jobs (%d noisy, %d reference, %d preview), %.3g camera samples -> "
            "%s/manifest.jsonl\n",
-           m.n, cnt[DS_NOISY], cnt[DS_REFERENCE], cnt[DS_PREVIEW], samples, outdir);
+           c.m.n, cnt[DS_NOISY], cnt[DS_REFERENCE], cnt[DS_PREVIEW], c.samples, outdir);
   }
-  ds_manifest_free(&m);
+  track_free(&c.made);
+  ds_manifest_free(&c.m);
   free(sc);
   free(ptxt);
   return rc;

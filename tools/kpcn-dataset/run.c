@@ -302,32 +302,40 @@ int ds_cmd_run(int argc, char **argv) {
         return 2;
       }
       int ok = 1;
-      if (!strcmp(a, "--jobs") || !strcmp(a, "-j"))
+      const char *want = ""; /* what the option takes, for the error */
+      if (!strcmp(a, "--jobs") || !strcmp(a, "-j")) {
         ok = ds_parse_int(v, 1, 1024, &o.jobs);
-      else if (!strcmp(a, "--threads-per-job"))
+        want = " (an integer in [1, 1024])";
+      } else if (!strcmp(a, "--threads-per-job")) {
         ok = ds_parse_int(v, 0, 4096, &threads);
-      else if (!strcmp(a, "--renderer"))
+        want = " (an integer in [0, 4096])";
+      } else if (!strcmp(a, "--renderer"))
         renderer = v;
       else if (!strcmp(a, "--shard")) {
         char extra;
         ok = sscanf(v, "%d/%d%c", &o.shard_i, &o.shard_n, &extra) == 2 && o.shard_n >= 1 &&
              o.shard_i >= 0 && o.shard_i < o.shard_n;
-      } else if (!strcmp(a, "--max-black"))
-        ok = ds_parse_double(v, &o.max_black);
-      else if (!strcmp(a, "--max-background"))
-        ok = ds_parse_double(v, &o.max_background);
-      else if (!strcmp(a, "--max-blown"))
-        ok = ds_parse_double(v, &o.max_blown);
-      else if (!strcmp(a, "--blown-level"))
-        ok = ds_parse_double(v, &o.blown_level);
-      else {
+        want = " (expected i/n with 0 <= i < n)";
+      } else if (!strcmp(a, "--max-black") || !strcmp(a, "--max-background") ||
+                 !strcmp(a, "--max-blown")) {
+        /* Fractions of the preview's pixels: below 0 every variant is rejected, above 1
+         * none (both silently), and nan compares false, i.e. disables the check. */
+        double *dst = !strcmp(a, "--max-black")        ? &o.max_black
+                      : !strcmp(a, "--max-background") ? &o.max_background
+                                                       : &o.max_blown;
+        ok = ds_parse_double(v, dst) && *dst >= 0 && *dst <= 1;
+        want = " (a fraction of pixels in [0, 1])";
+      } else if (!strcmp(a, "--blown-level")) {
+        /* A luminance: at 0 or below every lit pixel counts as blown out. */
+        ok = ds_parse_double(v, &o.blown_level) && o.blown_level > 0;
+        want = " (a luminance > 0)";
+      } else {
         ds_err("run: unknown option '%s'", a);
         usage();
         return 2;
       }
       if (!ok) {
-        ds_err("run: bad value '%s' for %s%s", v, a,
-               !strcmp(a, "--shard") ? " (expected i/n with 0 <= i < n)" : "");
+        ds_err("run: bad value '%s' for %s%s", v, a, want);
         return 2;
       }
       i++;

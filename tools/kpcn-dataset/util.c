@@ -3,6 +3,7 @@
 #include "ds.h"
 
 #include <errno.h>
+#include <math.h>
 #include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
@@ -100,11 +101,28 @@ int ds_parse_int(const char *s, long lo, long hi, int *out) {
   return 1;
 }
 
+/* Finite only: strtod also reads "inf" and "nan" (and 1e999 as inf), which no option means
+ * and which would reach the scene files and JSON settings as null. */
 int ds_parse_double(const char *s, double *out) {
   char *end;
   if (!s || !*s) return 0;
   double v = strtod(s, &end);
-  if (*end) return 0;
+  if (*end || !isfinite(v)) return 0;
+  *out = v;
+  return 1;
+}
+
+/* Decimal digits only: strtoull would take "-1" as 2^64-1, skip leading blanks and
+ * saturate past 2^64 with nothing but errno to tell. */
+int ds_parse_u64(const char *s, uint64_t hi, uint64_t *out) {
+  if (!s || !*s) return 0;
+  uint64_t v = 0;
+  for (const char *p = s; *p; p++) {
+    if (*p < '0' || *p > '9') return 0;
+    unsigned d = (unsigned)(*p - '0');
+    if (d > hi || v > (hi - d) / 10) return 0;
+    v = v * 10 + d;
+  }
   *out = v;
   return 1;
 }
