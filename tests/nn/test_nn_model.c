@@ -104,15 +104,17 @@ static void m_span(cJSON *h) { /* end before begin */
   set_offsets(h, "specular.conv0.bias", off0(h, "specular.conv0.bias", 1),
               off0(h, "specular.conv0.bias", 0));
 }
-static void m_arch_channels(cJSON *h) {
+/* The architecture in the header claims `channels` hidden channels. */
+static void set_arch_channels(cJSON *h, int channels) {
   cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
   cJSON *a = cJSON_Parse(cJSON_GetObjectItem(meta, "kpcn.architecture")->valuestring);
-  cJSON_ReplaceItemInObject(a, "channels", cJSON_CreateNumber(9));
+  cJSON_ReplaceItemInObject(a, "channels", cJSON_CreateNumber(channels));
   char *s = cJSON_PrintUnformatted(a);
   cJSON_ReplaceItemInObject(meta, "kpcn.architecture", cJSON_CreateString(s));
   free(s);
   cJSON_Delete(a);
 }
+static void m_arch_channels(cJSON *h) { set_arch_channels(h, 9); }
 static void m_arch_bad(cJSON *h) {
   cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
   cJSON_ReplaceItemInObject(meta, "kpcn.architecture", cJSON_CreateString("{\"n_hidden\": [}"));
@@ -164,15 +166,7 @@ static void m_meta_number(cJSON *h) {
 
 /* The architecture claims 1024 channels: the file's few weights cannot be them, and the loader
  * must say so before it allocates the 78 MB such a model would take. */
-static void m_huge_arch(cJSON *h) {
-  cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
-  cJSON *arch = cJSON_Parse(cJSON_GetObjectItem(meta, "kpcn.architecture")->valuestring);
-  cJSON_ReplaceItemInObject(arch, "channels", cJSON_CreateNumber(1024));
-  char *js = cJSON_PrintUnformatted(arch);
-  cJSON_ReplaceItemInObject(meta, "kpcn.architecture", cJSON_CreateString(js));
-  free(js);
-  cJSON_Delete(arch);
-}
+static void m_huge_arch(cJSON *h) { set_arch_channels(h, 1024); }
 
 static void mutated(const blob *good, const char *what, mutate_fn fn, const char *needle) {
   uint64_t hl = hlen(good);
