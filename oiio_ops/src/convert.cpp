@@ -77,6 +77,17 @@ static bool check_source(const ImageBuf &src, ROI &roi, std::string &err) {
   // A file-backed ImageBuf reads lazily; unreadable / truncated files surface in get_pixels
   // (read_plane names the file).
   if (!roi.defined()) roi = src.roi();
+  // get_pixels would fill what lies outside the data window with zeros (and read channel -1)
+  ROI inside = roi;
+  inside.chbegin = 0;
+  inside.chend = src.nchannels();
+  if (roi.chbegin < 0 || !src.roi().contains(inside)) {
+    err = "the region " + std::to_string(roi.width()) + "x" + std::to_string(roi.height()) + "+" +
+          std::to_string(roi.xbegin) + "+" + std::to_string(roi.ybegin) + " (channels " +
+          std::to_string(roi.chbegin) + ".." + std::to_string(roi.chend) + ") is not inside " +
+          desc(src) + "'s data window";
+    return false;
+  }
   if (roi.width() <= 0 || roi.height() <= 0 || roi.depth() != 1) {
     err = desc(src) + " has an unsupported size " + std::to_string(roi.width()) + "x" +
           std::to_string(roi.height()) + "x" + std::to_string(roi.depth());

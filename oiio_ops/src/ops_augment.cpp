@@ -18,13 +18,13 @@ namespace ops {
 
 namespace {
 
-// Copies header attributes (kpcn:spp ...) that the planar round trip does not carry.
-void copy_metadata(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src) {
-  for (const auto &p : src.spec().extra_attribs)
-    dst.specmod().attribute(p.name().string(), p.type(), p.data());
-}
-
+// Runs f on src's pixels and writes the result to dst (which may be src). The planar round
+// trip carries neither the header attributes (kpcn:spp ...) nor the data window's place, so
+// both are taken from src first (dst.reset would clear them when dst is src) and put back: a
+// result of src's size keeps src's origin and full window; a quarter turn of a non-square
+// image has no such place and starts at 0,0.
 template <class F> bool apply(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, F &&f) {
+  const OIIO::ImageSpec where = src.spec(); // a copy, attributes included
   std::string err;
   ImagePtr in = to_kpcn_image(src, err);
   if (!in) {
@@ -41,7 +41,13 @@ template <class F> bool apply(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, F 
     if (!dst.has_error()) dst.errorfmt("cannot convert the augmented image");
     return false;
   }
-  copy_metadata(dst, src);
+  for (const auto &p : where.extra_attribs)
+    dst.specmod().attribute(p.name().string(), p.type(), p.data());
+  if (dst.spec().width == where.width && dst.spec().height == where.height) {
+    dst.set_origin(where.x, where.y);
+    dst.set_full(where.full_x, where.full_x + where.full_width, where.full_y,
+                 where.full_y + where.full_height, 0, 1);
+  }
   return true;
 }
 

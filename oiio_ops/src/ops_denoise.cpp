@@ -61,14 +61,21 @@ bool denoise(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptio
   // The AOV image's data window may not start at 0,0: put the result where the input was.
   const OIIO::ImageSpec &ss = aovs.spec();
   full.set_origin(ss.x, ss.y);
-  full.set_full(ss.full_x, ss.full_y, ss.full_z, ss.full_width, ss.full_height, ss.full_depth);
+  full.set_full(ss.full_x, ss.full_x + ss.full_width, ss.full_y, ss.full_y + ss.full_height, 0, 1);
   if (!roi.defined()) {
     dst = std::move(full);
     return true;
   }
+  // The region of the result, where it was (crop, not cut: cut moves it to 0,0); the ROI's
+  // channel range is ignored, the result is R,G,B.
   roi.chbegin = 0;
   roi.chend = 3;
-  return OIIO::ImageBufAlgo::cut(dst, full, roi);
+  if (!full.roi().contains(roi)) {
+    dst.errorfmt("denoise: the region {} is not inside the image's data window {}", roi,
+                 full.roi());
+    return false;
+  }
+  return OIIO::ImageBufAlgo::crop(dst, full, roi, nthreads);
 }
 
 OIIO::ImageBuf denoise(const OIIO::ImageBuf &aovs, const DenoiseOptions &opt, OIIO::ROI roi,

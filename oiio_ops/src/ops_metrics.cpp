@@ -37,7 +37,17 @@ static MetricResult run(const ImageBuf &x, const ImageBuf &ref, Metric m, const 
     r.error = "unknown metric id " + std::to_string((int)m);
     return r;
   }
+  // The channel range of a caller's ROI is ignored (channels are matched by name, and the two
+  // images may order them differently); its pixel window must lie inside both images.
   ROI rx = roi.defined() ? roi : x.roi(), ry = roi.defined() ? roi : ref.roi();
+  rx.chbegin = ry.chbegin = 0;
+  rx.chend = x.nchannels();
+  ry.chend = ref.nchannels();
+  if (roi.defined() && (!x.roi().contains(rx) || !ref.roi().contains(ry))) {
+    r.error = std::string(what) + ": the region " + size_str(rx) + "+" + std::to_string(rx.xbegin) +
+              "+" + std::to_string(rx.ybegin) + " is not inside both images' data windows";
+    return r;
+  }
   if (rx.width() != ry.width() || rx.height() != ry.height()) {
     r.error = std::string(what) + ": image sizes differ (" + label(x, "the test image") + " is " +
               size_str(rx) + ", " + label(ref, "the reference image") + " is " + size_str(ry) + ")";
@@ -97,7 +107,12 @@ bool errormap(ImageBuf &dst, const ImageBuf &x, const ImageBuf &ref, Metric m,
     dst.errorfmt("{}", r.error);
     return false;
   }
-  return from_kpcn_image(dst, *map);
+  if (!from_kpcn_image(dst, *map)) return false;
+  // where the compared pixels are in x: its origin (or the ROI's) and full window
+  const ImageSpec &xs = x.spec();
+  dst.set_origin(roi.defined() ? roi.xbegin : xs.x, roi.defined() ? roi.ybegin : xs.y);
+  dst.set_full(xs.full_x, xs.full_x + xs.full_width, xs.full_y, xs.full_y + xs.full_height, 0, 1);
+  return true;
 }
 
 ImageBuf errormap(const ImageBuf &x, const ImageBuf &ref, Metric m, const CompareOptions &opt,

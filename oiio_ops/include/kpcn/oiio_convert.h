@@ -14,7 +14,10 @@
 //    (channel, size) in `err`; the ImageBuf-returning forms set dst.errorfmt(...) instead,
 //    as ImageBufAlgo does.
 //  - AOV metadata travels as ImageSpec attributes "kpcn:spp" (int), "kpcn:seed" (int64 stored
-//    as string when it does not fit an int), "kpcn:scene" and "kpcn:version" (strings).
+//    as string when it does not fit an int), "kpcn:albedoSpp" (int), "kpcn:scene" and
+//    "kpcn:version" (strings).
+//  - A ROI must lie inside the source's data window (an error otherwise: OIIO would fill the
+//    outside with zeros).
 #pragma once
 
 #include <OpenImageIO/imagebuf.h>

@@ -29,10 +29,11 @@ struct DenoiseOptions {
 };
 
 // Denoises the AOV image `aovs` into dst (3 channels R,G,B, float). The whole image is
-// denoised (per-image normalisation needs it); roi (default: all) selects which part of
-// the result is stored in dst. Errors (missing buffer named, bad model ...) are reported
-// with dst.errorfmt and a false return. Where the KPCN measured the input's exposure, dst's
-// spec carries float attributes kpcn:exposure (the input's, kpcn_aov_exposure) and
+// denoised (per-image normalisation needs it); roi (default: all; inside the data window,
+// its channel range ignored) selects which part of the result is stored in dst, where it lies
+// in the input (dst keeps the input's origin and full window). Errors (missing buffer named, bad
+// model ...) are reported with dst.errorfmt and a false return. Where the KPCN measured the input's
+// exposure, dst's spec carries float attributes kpcn:exposure (the input's, kpcn_aov_exposure) and
 // kpcn:exposureScale (the factor the network was shown it at).
 bool denoise(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptions &opt,
              OIIO::ROI roi = {}, int nthreads = 0);

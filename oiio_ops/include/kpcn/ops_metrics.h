@@ -11,7 +11,9 @@
 // Channels are matched by name: opt.channels, or, when empty, every channel of ref (which must
 // all exist in x). `roi` selects a pixel window (same window in both images, in each image's
 // own coordinates; default: the whole data window; the ROI's channel range is ignored — use
-// opt.channels). Images must have the same size. nthreads 0 = all cores.
+// opt.channels; a window outside either image's data window is an error). Images must have
+// the same size. errormap's image lies where the compared pixels lie in x (its origin, or the
+// ROI's, and x's full window). nthreads 0 = all cores.
 #pragma once
 
 #include <OpenImageIO/imagebuf.h>

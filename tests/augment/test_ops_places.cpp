@@ -1,0 +1,67 @@
+// The ImageBuf ops keep where the pixels are and what the header says: a data window away from
+// 0,0 stays where it was through mirror / colorswap / shift (also in place, dst == src, which
+// must not lose the kpcn:* attributes), through errormap and through a denoise with a ROI; a
+// ROI outside the data window is an error, not a comparison against zeros.
+#include "kpcn/ops_augment.h"
+#include "kpcn/ops_denoise.h"
+#include "kpcn/ops_metrics.h"
+
+extern "C" {
+#include "testutil.h" // a C header without extern "C" guards
+}
+
+#include <OpenImageIO/imagebufalgo.h>
+
+#include <string>
+
+using OIIO::ImageBuf;
+using OIIO::ROI;
+namespace ops = kpcn::ops;
+
+static bool placed_like(const ImageBuf &b, const ImageBuf &src) {
+  const OIIO::ImageSpec &a = b.spec(), &s = src.spec();
+  return a.x == s.x && a.y == s.y && a.full_x == s.full_x && a.full_y == s.full_y &&
+         a.full_width == s.full_width && a.full_height == s.full_height;
+}
+
+int main() {
+  ImageBuf aov(std::string(KPCN_TESTDATA) + "/dataset/sample_noisy.exr");
+  CHECK(aov.read(0, 0, true, OIIO::TypeDesc::FLOAT));
+  aov.set_origin(3, 5); // a crop of a larger frame
+  aov.set_full(0, 40, 0, 50, 0, 1);
+  CHECK(aov.spec().get_int_attribute("kpcn:spp") == 4);
+
+  ImageBuf m = ops::mirror(aov), c = ops::colorswap(aov, "BRG"), s = ops::shift(aov, 2, 1);
+  CHECK(!m.has_error() && placed_like(m, aov) && m.spec().get_int_attribute("kpcn:spp") == 4);
+  CHECK(!c.has_error() && placed_like(c, aov));
+  CHECK(!s.has_error() && placed_like(s, aov));
+  ImageBuf inplace = aov; // dst == src: the attributes and the place survive
+  CHECK(ops::mirror(inplace, inplace));
+  CHECK(placed_like(inplace, aov) && inplace.spec().get_int_attribute("kpcn:spp") == 4);
+  ImageBuf twice;
+  CHECK(ops::mirror(twice, inplace)); // mirroring twice is the identity, pixel for pixel
+  CHECK(OIIO::ImageBufAlgo::compare(twice, aov, 0.0f, 0.0f).nfail == 0);
+
+  // errormap: the map lies where x's compared pixels lie
+  ImageBuf map;
+  CHECK(ops::errormap(map, aov, m, ops::Metric::L1));
+  CHECK(placed_like(map, aov));
+  ROI win(10, 20, 12, 30);
+  CHECK(ops::errormap(map, aov, m, ops::Metric::L1, {}, win));
+  CHECK(map.spec().x == 10 && map.spec().y == 12 && map.spec().width == 10);
+  // a window outside the data window (which starts at 3,5) is an error naming it
+  ops::MetricResult out = ops::compare(aov, m, ops::Metric::L1, {}, ROI(0, 10, 0, 10));
+  CHECK(!out.ok && out.error.find("not inside") != std::string::npos);
+
+  // denoise: the whole result keeps the input's place; a ROI's part is stored where it was
+  ops::DenoiseOptions o;
+  o.method = "bilateral";
+  ImageBuf d = ops::denoise(aov, o), part = ops::denoise(aov, o, win);
+  CHECK(!d.has_error() && placed_like(d, aov) && d.nchannels() == 3);
+  CHECK(!part.has_error() && part.spec().x == 10 && part.spec().y == 12 &&
+        part.spec().width == 10 && part.spec().height == 18);
+  CHECK(OIIO::ImageBufAlgo::compare(part, d, 0.0f, 0.0f, win).nfail == 0);
+  ImageBuf bad = ops::denoise(aov, o, ROI(0, 10, 0, 10));
+  CHECK(bad.has_error() && bad.geterror().find("not inside") != std::string::npos);
+  return kt_summary("test_ops_places");
+}
