@@ -8,7 +8,7 @@
  *   denoise_framebuffer noisy.exr model.safetensors out.exr
  *
  * Build against an installed kpcn: CMake (find_package(kpcn), this folder's CMakeLists.txt)
- * or pkg-config (cc denoise_framebuffer.c $(pkg-config --cflags --libs kpcn)). */
+ * or pkg-config (cc denoise_framebuffer.c $(pkg-config --cflags --libs kpcn) -lm). */
 #include <kpcn/denoise.h>
 #include <kpcn/exr.h>
 

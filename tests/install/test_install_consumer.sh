@@ -70,6 +70,17 @@ else
   fail "no kpcn.pc installed"
 fi
 
+# The installed library exports the kpcn_ namespace only (libkpcn/kpcn.map): nothing that could
+# take the place of an application's own symbols (stb_image, OpenMP locks, module helpers).
+lib=$(ls "$pfx"/lib*/libkpcn.so 2>/dev/null | head -1)
+if [ -n "$lib" ]; then
+  foreign=$(nm -D --defined-only "$lib" | awk '{print $3}' | grep -v -E '^(kpcn_|kt_batch_assemble$|KPCN_)' |
+    grep -v -E '^$' | head -5)
+  [ -z "$foreign" ] || fail "libkpcn exports symbols outside kpcn_: $foreign"
+else
+  fail "no installed libkpcn.so"
+fi
+
 # Bad input through the embedding API: a clear error and a non-zero exit, no output file.
 printf 'not an exr' >bad.exr
 if cmake-build/denoise_framebuffer bad.exr "$model" never.exr 2>err.txt; then
