@@ -678,6 +678,24 @@ static void test_exposure(void) {
     CHECK(run_opts(m, a, &o, NULL, oa) == KPCN_ERR_INVALID_ARGUMENT);
     CHECK(strstr(kpcn_last_error(), "exposure") != NULL);
   }
+  /* bad thread counts are named (libgomp would abort on a huge one) */
+  kpcn_denoiser_options_defaults(&o);
+  o.nthreads = -1;
+  CHECK(run_opts(m, a, &o, NULL, oa) == KPCN_ERR_INVALID_ARGUMENT);
+  o.nthreads = KPCN_DENOISE_MAX_THREADS + 1;
+  CHECK(run_opts(m, a, &o, NULL, oa) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "nthreads") != NULL);
+  /* a NaN or Inf in any input buffer is refused, naming it, for the KPCN and the baselines */
+  kpcn_denoiser_options_defaults(&o);
+  const float was = b->buf[KPCN_BUF_NORMAL][7];
+  b->buf[KPCN_BUF_NORMAL][7] = NAN;
+  CHECK(run_opts(m, b, &o, NULL, ob) == KPCN_ERR_NONFINITE);
+  CHECK(strstr(kpcn_last_error(), "N.X") != NULL);
+  o.method = KPCN_DENOISE_NLMEANS;
+  b->buf[KPCN_BUF_NORMAL][7] = was;
+  b->var[KPCN_BUF_COLOR][3] = INFINITY;
+  CHECK(run_opts(m, b, &o, NULL, ob) == KPCN_ERR_NONFINITE);
+  CHECK(strstr(kpcn_last_error(), "1 non-finite") != NULL);
   scale_colour(a, 0.0f);
   kpcn_denoiser *d = NULL;
   kpcn_denoiser_options_defaults(&o);

@@ -205,6 +205,9 @@ typedef struct kpcn_baseline_params {
   int patch_radius;  /* nlmeans: patch half size (3 -> 7x7 patches... see doc) */
 } kpcn_baseline_params;
 
+/* kpcn_denoiser_options.nthreads' upper bound (OpenMP aborts when it cannot start threads). */
+#define KPCN_DENOISE_MAX_THREADS 1024
+
 typedef struct kpcn_denoiser_options {
   int method;             /* kpcn_denoise_method */
   const char *model_path; /* safetensors model (method KPCN); copied at create */
@@ -215,8 +218,11 @@ typedef struct kpcn_denoiser_options {
                              1 Mpx frame: one tile on a 24 GB machine). A tile
                              >= the image size denoises in one piece. Tiles overlap by
                              kpcn_denoise_tile_overlap(arch) pixels; the result does not
-                             depend on the tile size. */
-  int nthreads;           /* 0 = all cores */
+                             depend on the tile size, bit for bit, except where oneDNN's
+                             Winograd logits layer is refused for one padded size and not
+                             another (its scratchpad bound, docs/denoiser.md): then within
+                             float summation order. */
+  int nthreads;           /* 0 = all cores; at most KPCN_DENOISE_MAX_THREADS */
   int direct_conv;        /* 1: no Winograd convolutions (kpcn_net_options.direct_conv) */
   int ensemble;           /* self-ensemble: 0 or 1 = off; 2, 4 or 8 = denoise that many
                              mirrored / rotated copies of the input and average the results
@@ -262,7 +268,8 @@ void kpcn_denoiser_destroy(kpcn_denoiser *d);
 
 /* Sets an input buffer by NAME: "color", "diffuse", "specular", "albedo", "normal",
  * "depth", "visibility" (kpcn_buffer_channels(b) channels) or a variance "<name>.var"
- * (1 channel). ptr is borrowed (must stay valid until execute returns). Channel c of pixel
+ * (1 channel). ptr is borrowed and stays set: every later execute reads it, so it must stay
+ * valid until it is unset (ptr NULL) or the denoiser is destroyed. Channel c of pixel
  * (x, y) is read at ((const char*)ptr + y*row_stride + x*pixel_stride)[c * sizeof(float)];
  * pixel_stride 0 = packed (nch*4 bytes), row_stride 0 = width*pixel_stride. For planar
  * data call once per channel with kpcn_denoiser_set_buffer_channel. ptr NULL unsets. */

@@ -56,6 +56,11 @@ static double now_s(void) {
 static kpcn_status check_options(const kpcn_denoiser_options *o) {
   if (o->tile < 0)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: tile %d must be >= 0", o->tile);
+  /* libgomp aborts the process when it cannot start the threads asked for */
+  if (o->nthreads < 0 || o->nthreads > KPCN_DENOISE_MAX_THREADS)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "denoiser_create: nthreads %d must be 0 (all cores) .. %d", o->nthreads,
+                     KPCN_DENOISE_MAX_THREADS);
   if (!(o->exposure >= 0.0f || o->exposure == KPCN_EXPOSURE_AS_RENDERED) || !isfinite(o->exposure))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
                      "denoiser_create: exposure %g must be > 0, 0 (the model's) or "
@@ -376,6 +381,15 @@ static float *dup_floats(const float *src, size_t n, kpcn_status *s) {
  * with them), on a shallow copy of the input whose only own planes are the three it changes:
  * diffuse, its variance and colour (the other buffers stay the caller's, read only). */
 static kpcn_status run_denoise(kpcn_denoiser *d, const kpcn_aov_set *aov, float *out) {
+  /* A NaN or Inf reaches every softmax window (and baseline weight) that sees it and comes back
+   * as a patch of NaN while the call succeeds: refuse it, naming the buffer. */
+  const char *bad = NULL;
+  const size_t nbad = kpcn_aov_count_nonfinite(aov, &bad);
+  if (nbad)
+    return kpcn_fail(KPCN_ERR_NONFINITE,
+                     "denoise: the input holds %zu non-finite value(s) (NaN/Inf), the first in "
+                     "'%s'",
+                     nbad, bad ? bad : "?");
   float sc;
   KPCN_TRY(exposure_scale(d, aov, &sc));
   d->stats.exposure_scale = sc;
