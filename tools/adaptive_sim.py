@@ -13,12 +13,19 @@ measured against REF (relMSE, kpcntool); the noisy frames too. Results: docs/tra
   e.g. python3 tools/adaptive_sim.py dataset/v1 textures 8 64 testdata/models/kpcn-cpu.safetensors
 Needs the Python OpenImageIO module (Debian: python3-openimageio).
 """
-import os, subprocess, sys, tempfile
+import atexit, os, shutil, subprocess, sys, tempfile
 
 import numpy as np
 import OpenImageIO as oiio
 
-ds, scene, lo_spp, hi_spp, model = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
+USAGE = "usage: python3 tools/adaptive_sim.py DATASET_DIR SCENE L H MODEL [KPCN_BIN]"
+if len(sys.argv) not in (6, 7):
+    sys.exit(USAGE)
+ds, scene, model = sys.argv[1], sys.argv[2], sys.argv[5]
+try:
+    lo_spp, hi_spp = int(sys.argv[3]), int(sys.argv[4])
+except ValueError:
+    sys.exit("adaptive_sim: L and H must be integers (got %r, %r)\n%s" % (sys.argv[3], sys.argv[4], USAGE))
 if not 0 < lo_spp < 16 < hi_spp:
     sys.exit("adaptive_sim: need L < 16 < H")
 frac = (16 - lo_spp) / (hi_spp - lo_spp)
@@ -26,27 +33,38 @@ bindir = sys.argv[6] if len(sys.argv) > 6 else os.path.join(os.path.dirname(__fi
 render_bin = os.path.join(bindir, "kpcn-render", "kpcn-render")
 tool_bin = os.path.join(bindir, "kpcntool", "kpcntool")
 ref = f"{ds}/renders/{scene}/v000_ref4096spp.exr"
+for path, what in ((ref, "4096-spp reference (render it first: docs/dataset.md)"),
+                   (f"{ds}/scenes/{scene}/v000.json", "scene variant"), (model, "model"),
+                   (render_bin, "kpcn-render"), (tool_bin, "kpcntool")):
+    if not os.path.isfile(path):
+        sys.exit(f"adaptive_sim: no {what} at '{path}'")
 res = "%dx%d" % (oiio.ImageBuf(ref).spec().width, oiio.ImageBuf(ref).spec().height)
 work = tempfile.mkdtemp()
+atexit.register(shutil.rmtree, work, True)
+
+
+def run(argv, **kw):
+    """A tool's failure ends the script with its message, not a traceback."""
+    r = subprocess.run(argv, capture_output=True, text=True, **kw)
+    if r.returncode != 0:
+        sys.exit(f"adaptive_sim: {os.path.basename(argv[0])} failed: {r.stderr.strip()}")
+    return r
 
 
 def render(spp, seed):
     out = f"{work}/{spp}_{seed}.exr"
-    subprocess.run([render_bin, f"{ds}/scenes/{scene}/v000.json", "-o", out, "--spp", str(spp),
-                    "--seed", str(seed), "--resolution", res, "--quiet"], check=True)
+    run([render_bin, f"{ds}/scenes/{scene}/v000.json", "-o", out, "--spp", str(spp), "--seed",
+         str(seed), "--resolution", res, "--quiet"])
     return out
 
 
 def relmse(path):
-    r = subprocess.run([tool_bin, path, ref, "--ch", "R,G,B", "--relmse"], capture_output=True,
-                       text=True, check=True)
-    return float(r.stdout.split()[-1])
+    return float(run([tool_bin, path, ref, "--ch", "R,G,B", "--relmse"]).stdout.split()[-1])
 
 
 def denoised(path):
     out = f"{work}/d.exr"
-    subprocess.run([tool_bin, path, "--denoise:model=" + model, "-o", out], check=True,
-                   capture_output=True)
+    run([tool_bin, path, "--denoise:model=" + model, "-o", out])
     return out
 
 
@@ -80,7 +98,8 @@ for seed in (1001, 1002, 1003, 1004):
     a[mask] = b[mask]
     mixed = oiio.ImageBuf(lo.spec())
     mixed.set_pixels(oiio.ROI(), a)
-    mixed.write(f"{work}/adaptive.exr")
+    if not mixed.write(f"{work}/adaptive.exr"):
+        sys.exit("adaptive_sim: cannot write the mixed frame: " + mixed.geterror())
     rows["noisy_adaptive"].append(relmse(f"{work}/adaptive.exr"))
     rows["kpcn_adaptive"].append(relmse(denoised(f"{work}/adaptive.exr")))
 mean_spp = frac * hi_spp + (1 - frac) * lo_spp

@@ -4,9 +4,10 @@
 set -uo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 build=${1:-"$here/build"}
+build=$(cd "$build" && pwd) # absolute: each benchmark runs from its own folder
 status=0
-for b in $(find "$build/tests" -maxdepth 2 -type f -name 'bench_*' -perm -u+x | sort); do
+while IFS= read -r -d '' b; do
   echo "=== $(basename "$b") ==="
   (cd "$(dirname "$b")" && "$b") || { echo "$(basename "$b") failed"; status=1; }
-done
+done < <(find "$build/tests" -maxdepth 2 -type f -name 'bench_*' -perm -u+x -print0 | sort -z)
 exit $status

@@ -83,13 +83,15 @@ def main():
     ap.add_argument("--kpcntool", default=os.path.join(here, "build/tools/kpcntool/kpcntool"))
     ap.add_argument("--eps", type=float, default=0.00316)
     a = ap.parse_args()
+    if a.model and not os.access(a.kpcntool, os.X_OK):
+        fail("no kpcntool at '%s' (build first, or give --kpcntool)" % a.kpcntool)
     nbuf, n = load(a.noisy)
     _, r = load(a.ref)
-    if n["R"].shape != r["R"].shape:
-        fail("%s and %s differ in size" % (a.noisy, a.ref))
     d_n, s_n, a_n = (rgb(n, p, a.noisy) for p in ("diffuse.", "specular.", "albedo."))
     d_r, s_r, a_r = (rgb(r, p, a.ref) for p in ("diffuse.", "specular.", "albedo."))
     ref = rgb(r, "", a.ref)
+    if d_n.shape != ref.shape:
+        fail("%s and %s differ in size" % (a.noisy, a.ref))
     out = {
         "noisy": relmse(rgb(n, "", a.noisy), ref),
         "irradiance_oracle": relmse((a_n + a.eps) * d_r / (a_r + a.eps) + s_r, ref),

@@ -4,7 +4,8 @@
 # labelled comparison mosaic PNG (OCIO display transform, plus a false-colour relMSE error
 # map), the error map as EXR and the metrics against the bundled reference.
 #   tools/main-job.sh [outdir]        (default: out/)
-# Environment: KPCN_SCENE, KPCN_REF, KPCN_MODEL, KPCN_SPP, KPCN_RES override the defaults.
+# Environment: KPCN_SCENE, KPCN_REF, KPCN_MODEL, KPCN_SPP, KPCN_RES override the defaults
+# (KPCN_RES must match the reference's size: give KPCN_REF with it).
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 out=${1:-"$here/out"}
@@ -15,8 +16,13 @@ ref=${KPCN_REF:-"$here/testdata/references/diffuse-interreflection_256.exr"}
 model=${KPCN_MODEL:-"$here/testdata/models/kpcn-cpu.safetensors"}
 spp=${KPCN_SPP:-16}
 res=${KPCN_RES:-256x256}
-mkdir -p "$out"
 tool="$bin/kpcntool/kpcntool"
+# Everything is made in a fresh folder next to the output folder and moved into it only when
+# every step succeeded: a failed run leaves the previous outputs as they were, not a mix.
+final=$out
+mkdir -p "$(dirname "$final")"
+out=$(mktemp -d "$final.partial.XXXXXX")
+trap 'rm -rf "$out"' EXIT
 
 echo "== render: $(basename "$(dirname "$scene")") at $spp spp, $res (held out from training)"
 "$bin/kpcn-render/kpcn-render" "$scene" --spp "$spp" --seed 1 --resolution "$res" -o "$out/noisy.exr"
@@ -41,4 +47,9 @@ for name in noisy nlmeans kpcn kpcn-x8; do
   "$tool" "$img" --ch R,G,B "$ref" --ch R,G,B --relmse --ssim:display=srgb --psnr:display=srgb --json \
     | tee "$out/metrics_$name.json"
 done
-echo "outputs in $out: noisy.exr kpcn.exr kpcn-x8.exr nlmeans.exr mosaic.png kpcn_relmse.exr metrics_*.json"
+mkdir -p "$final"
+for f in noisy.exr kpcn.exr kpcn-x8.exr nlmeans.exr mosaic.png kpcn_relmse.exr metrics_noisy.json \
+  metrics_nlmeans.json metrics_kpcn.json metrics_kpcn-x8.json; do
+  mv "$out/$f" "$final/$f"
+done
+echo "outputs in $final: noisy.exr kpcn.exr kpcn-x8.exr nlmeans.exr mosaic.png kpcn_relmse.exr metrics_*.json"

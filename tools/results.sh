@@ -13,6 +13,10 @@
 # 1 = not).
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
+if [ $# -lt 2 ]; then
+  echo "usage: tools/results.sh DATASET_DIR MODEL [scene ...]" >&2
+  exit 2
+fi
 ds=$1
 model=$2
 shift 2
@@ -22,12 +26,15 @@ spps=${SPPS:-"4 16 64"}
 ens=${ENSEMBLE:-8}
 scenes=("$@")
 if [ ${#scenes[@]} -eq 0 ]; then
+  [ -f "$ds/manifest.jsonl" ] || { echo "results.sh: no '$ds/manifest.jsonl' (not a kpcn-dataset directory?)" >&2; exit 1; }
   mapfile -t scenes < <(grep '"split":"test"' "$ds/manifest.jsonl" | sed 's/.*"scene":"\([^"]*\)".*/\1/' | sort -u)
+  [ ${#scenes[@]} -gt 0 ] || { echo "results.sh: '$ds/manifest.jsonl' has no test split: name the scenes" >&2; exit 1; }
 fi
+[ -f "$model" ] || { echo "results.sh: no model '$model'" >&2; exit 1; }
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 mkdir -p "$here/docs/img"
-md="$here/docs/results.md.tmp"
+md="$work/results.md" # moved over docs/results.md only when complete
 {
   echo "# Results on held-out scenes"
   echo
@@ -160,7 +167,7 @@ fi
     echo "- $s, $spp spp: ![](img/${s}_${spp}spp.png)"
   done; done
 } >> "$md"
-mv "$md" "$here/docs/results.md"
+cp "$md" "$here/docs/results.md.tmp.$$" && mv "$here/docs/results.md.tmp.$$" "$here/docs/results.md"
 echo "wrote docs/results.md"
 # The model's own README gets the held-out figures next to the commands that made it
 # (replacing an earlier such section; ship_model.sh writes the rest of that file).

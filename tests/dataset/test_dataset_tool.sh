@@ -70,7 +70,8 @@ bad_plan "'train' is named twice" "duplicate split (fractions)" --split train:0.
 bad_plan "'train' is named twice" "duplicate split (names)" \
   --split train:cornell-box,train:cornell-teal+cornell-wide
 "$DS" plan --scenes "$TD/scenes" --variants 0 --seed 18446744073709551615 -o "$T/bigseed" > /dev/null
-ok '[ $? -eq 0 ]' "--seed 2^64-1 accepted"
+rc=$?
+ok '[ $rc -eq 0 ]' "--seed 2^64-1 accepted"
 # a finite strength so large that a perturbed value overflows: refused, naming the field
 rm -rf "$T/bp"
 "$DS" plan --scenes "$TD/scenes" --variants 2 --light 1e4 -o "$T/bp" > /dev/null 2> "$T/err"
@@ -244,9 +245,11 @@ if [ -n "$REAL" ] && [ -x "$REAL" ]; then
   "$DS" plan --scenes "$TD/scenes" --variants 1 --seed 1 --spp 2 --ref-spp 8 --resolution 24x24 \
     --split train:cornell-box,val:cornell-teal,test:cornell-wide -o "$T/real" > /dev/null
   "$DS" run "$T/real" --jobs 2 --renderer "$REAL" > "$T/real.out" 2>&1
-  ok '[ $? -eq 0 ]' "real render run ($(cat "$T/real.out"))"
+  rc=$?
+  ok '[ $rc -eq 0 ]' "real render run ($(cat "$T/real.out"))"
   "$DS" patches "$T/real" --size 8 --per-image 4 -o "$T/real/train.kps" > /dev/null
-  ok '[ $? -eq 0 ] && [ -s "$T/real/train.kps" ]' "real patches"
+  rc=$?
+  ok '[ $rc -eq 0 ] && [ -s "$T/real/train.kps" ]' "real patches"
 else
   echo "kpcn-render not built: real render part skipped"
 fi
