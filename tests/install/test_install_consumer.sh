@@ -66,6 +66,10 @@ if [ -d "$pc" ]; then
   c++ -std=c++17 -O2 -o pc_imagebuf "$src/examples/embed/denoise_imagebuf.cpp" \
     $(pkg-config --cflags --libs kpcn-oiio) -Wl,-rpath,"$libdir" || fail "pkg-config build (kpcn-oiio)"
   ./pc_imagebuf noisy.exr "$model" pci.exr || fail "denoise_imagebuf (pkg-config build)"
+  for f in pc.exr pci.exr; do
+    d=$("$pfx/bin/kpcntool" "$f" kpcntool.exr --ch R,G,B --l1 2>&1 | awk '{print $NF}')
+    [ "$d" = 0 ] || fail "$f (pkg-config build) differs from kpcntool's result (L1 $d)"
+  done
 else
   fail "no kpcn.pc installed"
 fi
