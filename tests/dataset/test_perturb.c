@@ -422,7 +422,7 @@ static void test_render_swapped(void) {
     printf("render check skipped: %s not built\n", exe);
     return;
   }
-  const char *scenes[] = {KPCN_SHARED "/scenes/tungsten/cornell-box/scene.json",
+  const char *scenes[] = {KPCN_TESTDATA "/scenes/cornell-box/scene.json",
                           KPCN_TESTDATA "/scenes/textures/scene.json"};
   kpcn_perturb_settings s;
   kpcn_perturb_settings_defaults(&s);
@@ -476,8 +476,8 @@ static void test_render_swapped(void) {
 }
 
 int main(void) {
-  test_scene(KPCN_SHARED "/scenes/tungsten/cornell-box/scene.json");
-  test_scene(KPCN_SHARED "/scenes/tungsten/materialtest/materialtest.json");
+  test_scene(KPCN_TESTDATA "/scenes/cornell-box/scene.json");
+  test_scene(KPCN_TESTDATA "/scenes/materialtest/materialtest.json");
   char *o = NULL;
   CHECK(kpcn_perturb_scene(&o, "{\"camera\": [1,", 1, 1, NULL, NULL, 0) == KPCN_ERR_FORMAT);
   CHECK(o == NULL && strstr(kpcn_last_error(), "JSON") != NULL);

@@ -172,8 +172,8 @@ static void test_errors_and_cancel(void) {
 /* Quality on the Tungsten Cornell pair, through the strided API with interleaved inputs. */
 static void test_cornell(void) {
   char np[512], rp[512];
-  snprintf(np, sizeof np, "%s/testdata/tungsten-cornell/noisy_16spp.exr", KPCN_SHARED);
-  snprintf(rp, sizeof rp, "%s/testdata/tungsten-cornell/reference_2048spp.exr", KPCN_SHARED);
+  snprintf(np, sizeof np, "%s/tungsten-cornell/noisy_16spp.exr", KPCN_TESTDATA);
+  snprintf(rp, sizeof rp, "%s/tungsten-cornell/reference_2048spp.exr", KPCN_TESTDATA);
   kpcn_aov_set *a = NULL, *r = NULL;
   CHECK(kpcn_exr_read_aov(np, &a) == KPCN_OK);
   CHECK(kpcn_exr_read_aov(rp, &r) == KPCN_OK);

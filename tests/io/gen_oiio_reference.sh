@@ -3,7 +3,7 @@
 # independent of kpcn's): recorded pixel values/statistics, plus small tiled, offset-window
 # and half files written by OIIO. Run from the repository root:  sh tests/io/gen_oiio_reference.sh
 set -eu
-SRC=${1:-../shared/testdata/tungsten-cornell/noisy_16spp.exr}
+SRC=${1:-testdata/tungsten-cornell/noisy_16spp.exr}
 OUT=testdata/io
 mkdir -p "$OUT"
 REC="$OUT/cornell_noisy_oiio.txt"

@@ -28,7 +28,7 @@ static int contains(const char *s, const char *sub) { return s && strstr(s, sub)
 static kpcn_status parse_lib(const char *text, kpcn_material_lib **lib) {
   cJSON *root = cJSON_Parse(text);
   CHECK(root != NULL);
-  CHECK(kpcn_material_lib_create(KPCN_SHARED "/scenes/tungsten/materialtest", lib) == KPCN_OK);
+  CHECK(kpcn_material_lib_create(KPCN_TESTDATA "/scenes/materialtest", lib) == KPCN_OK);
   kpcn_status s = kpcn_material_lib_parse_bsdfs(*lib, cJSON_GetObjectItem(root, "bsdfs"), "bsdfs");
   cJSON_Delete(root);
   return s;
@@ -136,7 +136,7 @@ int main(void) {
 
   /* ---- JSON: Tungsten's materialtest bsdfs ---- */
   {
-    FILE *mf = fopen(KPCN_SHARED "/scenes/tungsten/materialtest/materialtest.json", "rb");
+    FILE *mf = fopen(KPCN_TESTDATA "/scenes/materialtest/materialtest.json", "rb");
     CHECK(mf != NULL);
     if (mf) {
       fseek(mf, 0, SEEK_END);
