@@ -1,6 +1,7 @@
 /* Writes the inputs of test_denoise_cli.sh into a folder: aov.exr (synthetic AOV set with
  * every buffer), aov_nodiffuse.exr (the same without diffuse.*), model.safetensors (tiny
- * random model with the feature list). */
+ * random model with the feature list), and bilateral_api.exr / nlmeans_api.exr: the
+ * baselines' results through the C API (kpcn_denoise_aov), which kpcntool's must equal. */
 #include <stdlib.h>
 
 #include "kpcn/denoise.h"
@@ -20,6 +21,18 @@ int main(int argc, char **argv) {
   if (kpcn_exr_write_aov(p, a, NULL)) return fprintf(stderr, "%s\n", kpcn_last_error()), 1;
   snprintf(p, sizeof p, "%s/model.safetensors", argv[1]);
   if (kpcn_model_save(m, p)) return fprintf(stderr, "%s\n", kpcn_last_error()), 1;
+  const int methods[2] = {KPCN_DENOISE_BILATERAL, KPCN_DENOISE_NLMEANS};
+  const char *names[2] = {"bilateral", "nlmeans"};
+  for (int k = 0; k < 2; k++) {
+    kpcn_denoiser_options o;
+    kpcn_denoiser_options_defaults(&o);
+    o.method = methods[k];
+    kpcn_image *rgb = NULL;
+    snprintf(p, sizeof p, "%s/%s_api.exr", argv[1], names[k]);
+    if (kpcn_denoise_aov(a, &o, &rgb) || kpcn_exr_write_image(p, rgb, NULL))
+      return fprintf(stderr, "fixture: %s\n", kpcn_last_error()), 1;
+    kpcn_image_destroy(rgb);
+  }
   free(a->buf[KPCN_BUF_DIFFUSE]);
   free(a->var[KPCN_BUF_DIFFUSE]);
   a->buf[KPCN_BUF_DIFFUSE] = a->var[KPCN_BUF_DIFFUSE] = NULL;

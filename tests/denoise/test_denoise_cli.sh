@@ -75,8 +75,14 @@ if "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":ensemble=3 -o "$D/ba
 fi
 grep -q ensemble "$D/err" || fail "error does not name ensemble: $(cat "$D/err")"
 [ ! -e "$D/bad.exr" ] || fail "partial output written"
+# the baselines through kpcntool equal the C API's results (written by the fixture), pixel for
+# pixel, and are not the input
 for m in bilateral nlmeans; do
   "$T" "$D/aov.exr" --denoise:method=$m -o "$D/$m.exr" || fail "$m"
+  "$T" --json "$D/$m.exr" "$D/${m}_api.exr" --l1 >"$D/$m.json" || fail "l1 $m"
+  grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/$m.json" || fail "$m differs from the C API's: $(cat "$D/$m.json")"
+  "$T" --json "$D/$m.exr" "$D/aov.exr" --ch R,G,B --l1 >"$D/${m}_in.json" || fail "l1 $m vs input"
+  grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/${m}_in.json" && fail "$m returned its input"
 done
 # a render without diffuse.*: non-zero exit, the buffer named, no output file
 if "$T" "$D/aov_nodiffuse.exr" --denoise:model="$D/model.safetensors" -o "$D/bad.exr" 2>"$D/err"; then
