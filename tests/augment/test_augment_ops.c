@@ -341,6 +341,64 @@ static void test_rotate_any(void) {
   kpcn_aov_destroy(e);
 }
 
+/* Arbitrary angles against geometry: a counter-clockwise turn by t about the image centre shows
+ * at output pixel p the source point R(-t) p (screen coordinates, y up). Bilinear interpolation
+ * reproduces a linear field exactly, so colour = (x, y, 1) must come out as that source point's
+ * (x, y) wherever its four taps lie inside the image, and a constant normal (1, 0, 0) as
+ * (cos t, sin t, 0): a wrong centre, interpolation or turning direction fails here. */
+static void test_rotate_any_geometry(void) {
+  const int W = 21, H = 15;
+  const double degs[3] = {30.0, 45.0, -70.0};
+  for (int k = 0; k < 3; k++) {
+    kpcn_aov_set *a = NULL, *b = NULL;
+    CHECK(kpcn_aov_create(&a, W, H) == KPCN_OK);
+    if (!a) return;
+    kpcn_aov_add(a, KPCN_BUF_COLOR, 0);
+    kpcn_aov_add(a, KPCN_BUF_NORMAL, 0);
+    const size_t P = kpcn_aov_plane_size(a);
+    for (int y = 0; y < H; y++)
+      for (int x = 0; x < W; x++) {
+        const size_t i = (size_t)y * W + x;
+        a->buf[KPCN_BUF_COLOR][i] = (float)x;
+        a->buf[KPCN_BUF_COLOR][P + i] = (float)y;
+        a->buf[KPCN_BUF_COLOR][2 * P + i] = 1.0f;
+        a->buf[KPCN_BUF_NORMAL][i] = 1.0f;
+        a->buf[KPCN_BUF_NORMAL][P + i] = 0.0f;
+        a->buf[KPCN_BUF_NORMAL][2 * P + i] = 0.0f;
+      }
+    CHECK(kpcn_augment_rotate_any_aov(&b, a, degs[k], 1) == KPCN_OK);
+    if (!b) {
+      kpcn_aov_destroy(a);
+      return;
+    }
+    const double t = degs[k] * 3.14159265358979323846 / 180.0, cx = 0.5 * (W - 1),
+                 cy = 0.5 * (H - 1);
+    double maxd = 0, maxn = 0;
+    int interior = 0;
+    for (int y = 0; y < H; y++)
+      for (int x = 0; x < W; x++) {
+        const double u = x - cx, v = cy - y; /* y up */
+        const double su = cos(t) * u + sin(t) * v, sv = -sin(t) * u + cos(t) * v;
+        const double xs = cx + su, ys = cy - sv;
+        if (xs < 0 || ys < 0 || xs > W - 1 || ys > H - 1) continue;
+        const size_t i = (size_t)y * W + x;
+        interior++;
+        maxd = fmax(maxd, fabs(b->buf[KPCN_BUF_COLOR][i] - xs));
+        maxd = fmax(maxd, fabs(b->buf[KPCN_BUF_COLOR][P + i] - ys));
+        maxd = fmax(maxd, fabs(b->buf[KPCN_BUF_COLOR][2 * P + i] - 1.0));
+        maxn = fmax(maxn, fabs(b->buf[KPCN_BUF_NORMAL][i] - cos(t)));
+        maxn = fmax(maxn, fabs(b->buf[KPCN_BUF_NORMAL][P + i] - sin(t)));
+        maxn = fmax(maxn, fabs(b->buf[KPCN_BUF_NORMAL][2 * P + i]));
+      }
+    printf("rotate %.0f deg: %d interior pixels, max |colour - source point| %.2e, normal %.2e\n",
+           degs[k], interior, maxd, maxn);
+    CHECK(interior > W * H / 3);
+    CHECK(maxd < 1e-4 && maxn < 1e-6);
+    kpcn_aov_destroy(a);
+    kpcn_aov_destroy(b);
+  }
+}
+
 int main(void) {
   test_mirror_twice();
   test_rotations();
@@ -350,5 +408,6 @@ int main(void) {
   test_pair_alignment();
   test_draw();
   test_rotate_any();
+  test_rotate_any_geometry();
   return kt_summary("augment_ops");
 }
