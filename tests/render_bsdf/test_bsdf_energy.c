@@ -169,6 +169,16 @@ int main(void) {
     CHECK(u.mean < 1.0 + 3 * u.sigma);
     CHECK(fabs(u.mean - s.mean) < 3 * sqrt(u.sigma * u.sigma + s.sigma * s.sigma));
   }
+  /* ---- nearly smooth rough plastic: the white smooth plastic's albedo of 1 (above), less
+   * little; a lower anchor that an eval and a sampling weight scaled alike cannot pass ---- */
+  p.roughness_value = 0.02f;
+  kpcn_bsdf *rp0 = mk(&p);
+  for (float th = 0; th < 50; th += 20) {
+    est s = albedo_sampled(rp0, kt_dir(th, 0), 200000, 410);
+    printf("rough_plastic white r=0.02: th=%2.0f sampled %.4f+-%.4f\n", th, s.mean, s.sigma);
+    CHECK(s.mean > 0.97 && s.mean < 1.0 + 3 * s.sigma);
+  }
+  kpcn_bsdf_destroy(rp0);
   /* ---- rough dielectric energy <= 1 from both sides ---- */
   kpcn_bsdf_params_defaults(&p, KPCN_BSDF_ROUGH_DIELECTRIC);
   p.roughness_value = 0.2f;
@@ -182,6 +192,15 @@ int main(void) {
     CHECK(s.mean < 1.0 + 3 * s.sigma);
     CHECK(fabs(u.mean - s.mean) < 3 * sqrt(u.sigma * u.sigma + s.sigma * s.sigma));
   }
+  /* nearly smooth: reflection + transmission keep almost all the energy (smooth: exactly) */
+  p.roughness_value = 0.02f;
+  kpcn_bsdf *rd0 = mk(&p);
+  for (int i = 0; i < 4; ++i) {
+    est s = albedo_sampled(rd0, kt_dir(ths[i], 0), 200000, 700 + i);
+    printf("rough_dielectric r=0.02: th=%3.0f sampled %.4f+-%.4f\n", ths[i], s.mean, s.sigma);
+    if (ths[i] < 50 || ths[i] > 150) CHECK(s.mean > 0.97);
+  }
+  kpcn_bsdf_destroy(rd0);
   /* ---- smooth dielectric: reflection probability = Fresnel, refraction obeys Snell ---- */
   kpcn_bsdf_params_defaults(&p, KPCN_BSDF_DIELECTRIC);
   kpcn_bsdf *di = mk(&p);
