@@ -13,7 +13,12 @@ expect_fail "command '-o' needs 1 argument" "" "$NOISY" -o
 expect_fail "nothing to do" "" 
 expect_fail "nothing to do" "" --json --threads 1
 expect_fail "modifier 'range' of --l1 is given twice" "" "$NOISY" "$REF" --l1:range=2:range=1
+# -o's format is checked when the line is parsed: before a command that would fail at run time.
+expect_fail "-o outfile: 'outfile' has no file extension" outfile "$REF" --colorswap -o outfile
+expect_fail "-o out.xyz: no image format writes '.xyz' files" out.exr "$REF" -o out.exr -o out.xyz
 [ "$("$KT" --bogus 2>/dev/null; echo $?)" = 2 ] && pass "usage error exits 2" || fail "usage exit code"
+[ "$("$KT" "$REF" -o out.xyz 2>/dev/null; echo $?)" = 2 ] && pass "bad -o format exits 2" ||
+  fail "bad -o format exit code"
 # Files.
 expect_fail "'missing.exr': no such file" out.exr missing.exr -o out.exr
 expect_fail "truncated.exr" out.exr truncated.exr "$REF" --relmse -o out.exr
@@ -21,8 +26,6 @@ expect_fail "garbage.exr" out.exr garbage.exr -o out.exr
 expect_fail "'wide.exr' has an unsupported or absurd size 70000x1" out.exr wide.exr -o out.exr
 expect_fail "cannot write 'nodir/out.exr'" "" "$REF" -o nodir/out.exr
 expect_fail "PNG only supports 1-4 channels" out.png "$NOISY" -o out.png
-expect_fail "has no file extension" outfile "$REF" -o outfile
-expect_fail "no image format writes '.xyz' files" out.exr "$REF" -o out.exr -o out.xyz
 # All or nothing: a later output or command that fails leaves none of the earlier ones.
 expect_fail "PNG only supports 1-4 channels" out.exr "$NOISY" -o out.exr -o out.png
 expect_fail "has no channel 'Q'" p.kps "$NOISY" "$REF" --patches:size=16:count=4:out=p.kps --ch Q

@@ -64,6 +64,7 @@ bad_plan "'inf' for --light" "--light inf refused" --light inf
 bad_plan "'nan' for --env" "--env nan refused" --env nan
 bad_plan "'-1' for --seed" "negative --seed refused" --seed -1
 bad_plan "'18446744073709551616' for --seed" "--seed past 2^64 refused" --seed 18446744073709551616
+bad_plan "'1.5' for --bsdf-swap (a probability in [0, 1])" "--bsdf-swap above 1 refused" --bsdf-swap 1.5
 bad_plan "'7e3' for --variants" "--variants must be an integer" --variants 7e3
 bad_plan "sum to 2.5" "split fractions summing past 1 refused" --split train:0.5,val:1,test:1
 bad_plan "'train' is named twice" "duplicate split (fractions)" --split train:0.5,train:0.5

@@ -17,6 +17,10 @@ grep -aq '\\"exposure\\":' "$D/m.safetensors" || fail "model header records no e
 # the model's: by default the new model gives the original's result at that exposure, bit
 # for bit
 "$T" "$N" --exposure --json >"$D/e.json" || fail "--exposure"
+EI=$(sed -n 's/.*"exposure": *\([0-9.eE+-]*\).*/\1/p' "$D/e.json")
+[ -n "$EI" ] || fail "no exposure in $(cat "$D/e.json")"
+awk -v a="$E" -v b="$EI" 'BEGIN { d = a - b; if (d < 0) d = -d; exit !(b > 0 && d <= 1e-6 * b) }' ||
+  fail "recorded exposure $E is not the image's own $EI"
 "$T" "$N" --denoise:model="$D/m.safetensors" -o "$D/a.exr" || fail "denoise with the new model"
 "$T" "$N" --denoise:model="$M":exposure="$E" -o "$D/b.exr" || fail "denoise at exposure $E"
 "$T" --json "$D/a.exr" "$D/b.exr" --l1 >"$D/l1.json" || fail "l1"
@@ -25,7 +29,9 @@ grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/l1.json" || fail "new model differs: $(c
 for args in "$M $D/nope.kps" "$M $N" "$N $D/p.kps"; do
   # shellcheck disable=SC2086
   if "$K" --record-exposure "$D/bad.safetensors" $args 2>"$D/err"; then fail "accepted: $args"; fi
-  [ -s "$D/err" ] || fail "no error message: $args"
+  # the message names the file at fault (the last argument for a bad store, else the model)
+  case "$args" in "$M $D/nope.kps") want="$D/nope.kps" ;; "$M $N") want="$N" ;; *) want="$N" ;; esac
+  grep -qF -- "$want" "$D/err" || fail "error does not name '$want': $(cat "$D/err")"
   [ ! -e "$D/bad.safetensors" ] || fail "partial output written: $args"
 done
 "$K" --record-exposure "$D/bad.safetensors" "$M" 2>"$D/err" && fail "accepted without a store"
@@ -55,6 +61,7 @@ bad_usage "--ssim-window has no effect" --ssim-window 7
 bad_usage "the window must be odd" --loss2 ssim --ssim-window 4
 bad_usage "--layers asks for 5 hidden layers, the --init model" --init "$M" --layers 5
 bad_usage "--preset asks for" --init "$M" --preset tiny
+bad_usage "--average must be the first argument" --average "$M"
 # an output that would overwrite the patch store is refused; the store is intact
 if "$K" --store "$D/p.kps" -o "$D/c.safetensors" --iters 1 --csv "$D/p.kps" 2>"$D/err"; then
   fail "--csv over the store accepted"

@@ -586,9 +586,10 @@ int ds_cmd_plan(int argc, char **argv) {
       dst = &ps.fov;
     else if (!strcmp(a, "--material"))
       dst = &ps.material;
-    else if (!strcmp(a, "--bsdf-swap"))
-      dst = &ps.bsdf_swap;
-    else if (!strcmp(a, "--light"))
+    else if (!strcmp(a, "--bsdf-swap")) {
+      ok = ds_parse_double(v, &ps.bsdf_swap) && ps.bsdf_swap >= 0 && ps.bsdf_swap <= 1;
+      want = " (a probability in [0, 1])";
+    } else if (!strcmp(a, "--light"))
       dst = &ps.light;
     else if (!strcmp(a, "--env"))
       dst = &ps.env;

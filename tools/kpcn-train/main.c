@@ -424,6 +424,15 @@ int main(int argc, char **argv) {
     else if (!strcmp(a, "--no-shift")) s.crop_jitter = 0;
     else if (!strcmp(a, "--normalize-exposure")) s.normalize_exposure = 1;
     else if (!strcmp(a, "--quiet")) g_quiet = 1;
+    else if (!strcmp(a, "--compare") || !strcmp(a, "--average") ||
+             !strcmp(a, "--record-exposure")) {
+      /* These are modes of their own, not options of a training run. */
+      fprintf(stderr,
+              "kpcn-train: %s must be the first argument (and takes its own arguments; see "
+              "--help)\n",
+              a);
+      return 2;
+    }
     else {
       fprintf(stderr, "kpcn-train: unknown option '%s' (see --help)\n", a);
       return 2;

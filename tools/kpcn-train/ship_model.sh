@@ -28,13 +28,14 @@
 #   precision training, kpcn-train --bf16), KPA_PASSES (apply the predicted kernels this many
 #   times, kpcn-train --kpa-passes; with INIT it converts the model), SOURCE_WEIGHT=1 (predict
 #   a per-pixel source weight too, kpcn-train --source-weight; with INIT it adds it),
-#   SOURCE_LR_SCALE (its learning-rate multiple, kpcn-train --source-lr-scale).
+#   SOURCE_LR_SCALE (its learning-rate multiple, kpcn-train --source-lr-scale), FIREFLY (a
+#   ratio: bound diffuse fireflies in the training patches, kpcn-train --firefly).
 # With a time budget the iteration count is unknown in advance, so the script first measures
 # the speed (20 iterations) and sets --iters to fit MINUTES, --stage1-iters to STAGE1_FRACTION.
 # Resumable: if the run is interrupted, re-running continues from its checkpoint.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/../.." && pwd)
-[ $# -ge 1 ] || { sed -n 2,33p "$0"; exit 2; }
+[ $# -ge 1 ] || { sed -n 2,35p "$0"; exit 2; }
 store=$1
 shift
 bin=${KPCN_TRAIN:-$here/build/tools/kpcn-train/kpcn-train}

@@ -152,11 +152,12 @@ bool r2 = kpcntool::register_command({"rotate",
                                       "rotate counter-clockwise (:deg=90; multiples of 90 exact, "
                                       "others bilinear: alters noise statistics)",
                                       cmd_rotate});
-bool r3 = kpcntool::register_command({"colorswap",
-                                      0,
-                                      {"perm", "all"},
-                                      "permute RGB of every colour buffer (:perm=BRG)",
-                                      cmd_colorswap});
+bool r3 =
+    kpcntool::register_command({"colorswap",
+                                0,
+                                {"perm", "all"},
+                                "permute RGB of every colour buffer (:perm=XYZ required, e.g. BRG)",
+                                cmd_colorswap});
 bool r4 = kpcntool::register_command(
     {"shift", 0, {"dx", "dy", "all"}, "translate with wrap-around (:dx=N:dy=N)", cmd_shift});
 bool r5 = kpcntool::register_command({"augment",

@@ -82,6 +82,9 @@ bool write_image(const OIIO::ImageBuf &img, const std::string &file, const std::
                  std::string &err);
 // "png" for "a/b.PNG", "" when the name has no extension.
 std::string lower_ext(const std::string &path);
+// True when path's extension names a format OIIO can write; else false with err saying why.
+// Checked when the command line is parsed, so a bad -o fails before a long denoise runs.
+bool output_format_ok(const std::string &path, std::string &err);
 // Writes every pending output (Context::outputs) to its temporary path, then renames them all
 // into place. On failure removes every temporary, sets failed to the output's `what` and err to
 // why, and returns false.

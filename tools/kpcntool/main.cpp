@@ -132,6 +132,10 @@ bool parse(int argc, char **argv, std::vector<Step> &steps, std::string &err) {
       }
       st.args.push_back(argv[++i]);
     }
+    if (st.cmd->name == "o" && !kpcntool::output_format_ok(st.args[0], err)) {
+      err = "-o " + st.args[0] + ": " + err;
+      return false;
+    }
     steps.push_back(std::move(st));
   }
   return true;

@@ -28,6 +28,20 @@ std::string lower_ext(const std::string &path) {
   return e;
 }
 
+bool output_format_ok(const std::string &path, std::string &err) {
+  const std::string ext = lower_ext(path);
+  if (ext.empty()) {
+    err = "'" + path + "' has no file extension to choose the format from";
+    return false;
+  }
+  if (!OIIO::ImageOutput::create(path)) {
+    OIIO::geterror(); // consumed: the message below says it
+    err = "no image format writes '." + ext + "' files ('" + path + "')";
+    return false;
+  }
+  return true;
+}
+
 bool write_image(const OIIO::ImageBuf &img, const std::string &file, const std::string &ext,
                  std::string &err) {
   static const char *eight_bit[] = {"png", "jpg", "jpeg", "bmp", "tga", "ppm", "pgm", "gif"};
