@@ -78,7 +78,7 @@ fi
 # take the place of an application's own symbols (stb_image, OpenMP locks, module helpers).
 lib=$(ls "$pfx"/lib*/libkpcn.so 2>/dev/null | head -1)
 if [ -n "$lib" ]; then
-  foreign=$(nm -D --defined-only "$lib" | awk '{print $3}' | grep -v -E '^(kpcn_|kt_batch_assemble$|KPCN_)' |
+  foreign=$(nm -D --defined-only "$lib" | awk '{print $3}' | grep -v -E '^(kpcn_|kt_batch_assemble$|kt_loss$|KPCN_)' |
     grep -v -E '^$' | head -5)
   [ -z "$foreign" ] || fail "libkpcn exports symbols outside kpcn_: $foreign"
 else

@@ -1,7 +1,7 @@
 /* The trainer's batch assembly, checked against the definitions: the wiring of targets,
  * inputs and albedo, and the two input conditionings a run can switch on (exposure
  * normalisation, the firefly bound), each recorded in the checkpoint so that a resume with
- * another setting is refused. */
+ * another setting is refused; and the loss margin (kt_loss) against the interior's loss. */
 #include "train/train_internal.h"
 #include "kpcn/train.h"
 #include "testutil.h"
@@ -153,11 +153,105 @@ static void test_batch_firefly(void) {
   kpcn_trainer_destroy(b);
 }
 
+/* Loss margin: with --loss-margin 2 the loss is that of the (P-4)^2 interior alone and its
+ * gradient vanishes in the 2-pixel band. Truths: the mean of the per-element loss over the
+ * interior in plain double loops (the definitions, as in test_train_loss), its central finite
+ * differences w.r.t. the full-size prediction, and for SSIM the loss of the arrays cropped here. */
+static double margin_naive(kpcn_loss_kind k, const double *x, const float *y, int planes, int P,
+                           int m) {
+  double s = 0;
+  size_t cnt = 0;
+  for (int p = 0; p < planes; p++)
+    for (int r = m; r < P - m; r++)
+      for (int c = m; c < P - m; c++, cnt++) {
+        size_t i = ((size_t)p * P + r) * P + c;
+        double d = x[i] - y[i];
+        s += k == KPCN_LOSS_L1   ? fabs(d)
+             : k == KPCN_LOSS_L2 ? d * d
+                                 : d * d / (y[i] * (double)y[i] + 0.01);
+      }
+  return s / (double)cnt;
+}
+
+static void test_loss_margin(void) {
+  enum { M = 2 };
+  kpcn_train_settings s;
+  settings(&s, tf_tmp("m.safetensors"));
+  s.loss_margin = M;
+  kpcn_trainer *t = NULL;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (!t) return;
+  const int P = t->P, Q = P - 2 * M, planes = t->N * 3;
+  const size_t n = (size_t)planes * P * P, nq = (size_t)planes * Q * Q;
+  float *x = malloc(n * sizeof(float)), *y = malloc(n * sizeof(float));
+  float *g = malloc(n * sizeof(float)), *cx = malloc(nq * sizeof(float));
+  float *cy = malloc(nq * sizeof(float)), *cg = malloc(nq * sizeof(float));
+  double *xd = malloc(n * sizeof(double));
+  unsigned st = 31;
+  for (size_t i = 0; i < n; i++) {
+    y[i] = kt_randf(&st) * 1.5f - 0.2f;
+    float d = 0.05f + 0.3f * kt_randf(&st); /* |x - y| away from L1's kink */
+    x[i] = y[i] + (kt_randf(&st) < 0.5f ? -d : d);
+    xd[i] = x[i];
+  }
+  for (int p = 0; p < planes; p++) /* the interior, cropped here */
+    for (int r = 0; r < Q; r++)
+      for (int c = 0; c < Q; c++) {
+        size_t i = ((size_t)p * P + r + M) * P + c + M, j = ((size_t)p * Q + r) * Q + c;
+        cx[j] = x[i], cy[j] = y[i];
+      }
+  const kpcn_loss_kind kinds[] = {KPCN_LOSS_L1, KPCN_LOSS_L2, KPCN_LOSS_RELMSE, KPCN_LOSS_SSIM};
+  for (int ki = 0; ki < 4; ki++) {
+    const kpcn_loss_kind k = kinds[ki];
+    double v = -1, ref = 0, maxrel = 0;
+    for (size_t i = 0; i < n; i++)
+      g[i] = NAN;
+    CHECK(kt_loss(t, k, x, y, g, &v) == KPCN_OK);
+    int band_zero = 1;
+    for (int p = 0; p < planes; p++)
+      for (int r = 0; r < P; r++)
+        for (int c = 0; c < P; c++)
+          if (r < M || r >= P - M || c < M || c >= P - M)
+            band_zero &= g[((size_t)p * P + r) * P + c] == 0.0f;
+    CHECK(band_zero);
+    if (k == KPCN_LOSS_SSIM) { /* value and gradient of the cropped arrays, placed inside */
+      CHECK(kpcn_loss_compute(k, &t->s.loss, cx, cy, t->N, 3, Q, Q, cg, &ref, 1) == KPCN_OK);
+      CHECK_CLOSE(v, ref, 1e-12, 0.0);
+      for (int p = 0; p < planes; p++)
+        for (int r = 0; r < Q; r++)
+          for (int c = 0; c < Q; c++) {
+            double a = g[((size_t)p * P + r + M) * P + c + M], b = cg[((size_t)p * Q + r) * Q + c];
+            maxrel = fmax(maxrel, fabs(a - b) / (fabs(b) + 1e-9));
+          }
+    } else {
+      ref = margin_naive(k, xd, y, planes, P, M);
+      CHECK_CLOSE(v, ref, 1e-9, 1e-12);
+      for (int tr = 0; tr < 60; tr++) { /* central differences, interior and band */
+        size_t i = (size_t)(kt_randf(&st) * (float)n) % n;
+        double h = 1e-5, keep = xd[i];
+        xd[i] = keep + h;
+        double fp = margin_naive(k, xd, y, planes, P, M);
+        xd[i] = keep - h;
+        double fm = margin_naive(k, xd, y, planes, P, M);
+        xd[i] = keep;
+        double fd = (fp - fm) / (2 * h);
+        maxrel = fmax(maxrel, fabs(fd - g[i]) / (fabs(fd) + 1e-3 / (double)nq + 1e-12));
+      }
+    }
+    printf("loss margin %d, %s: loss %.6f (interior %.6f), max rel grad err %.2g\n", M,
+           kpcn_loss_name(k), v, ref, maxrel);
+    CHECK(maxrel <= 2e-3);
+  }
+  free(x), free(y), free(g), free(cx), free(cy), free(cg), free(xd);
+  kpcn_trainer_destroy(t);
+}
+
 int main(void) {
   g_store = tf_make_test_store("batch.kps");
   if (!g_store) return 1;
   test_batch_wiring();
   test_batch_exposure();
   test_batch_firefly();
+  test_loss_margin();
   return kt_summary("train_batch");
 }
