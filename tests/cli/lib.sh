@@ -54,6 +54,7 @@ expect_fail() {
 json_get() { $PY -c 'import json,sys; print(repr(json.load(open(sys.argv[1]))[sys.argv[2]]))' "$1" "$2"; }
 # near A B TOL: true if |A-B| <= TOL.
 near() { $PY -c 'import sys; a,b,t=map(float,sys.argv[1:]); sys.exit(0 if abs(a-b)<=t else 1)' "$1" "$2" "$3"; }
+near_rel() { $PY -c 'import sys; a,b,t=map(float,sys.argv[1:]); sys.exit(0 if abs(a-b)<=t*abs(b) else 1)' "$1" "$2" "$3"; }
 finish() {
   if [ $fails -eq 0 ]; then
     echo "all passed"

@@ -153,7 +153,7 @@ rc=$?
 ok '[ $rc -eq 130 ]' "interrupted run exits 130 (got $rc)"
 ls "$T"/d/renders/*/*.exr 2>/dev/null | grep -v part | sed "s|$T/d/||" | sort > "$T/done1"
 n1=$(wc -l < "$T/done1")
-ok '[ "$n1" -gt 0 ] && [ "$n1" -lt 18 ]' "some but not all outputs after the kill ($n1)"
+ok '[ "$n1" -gt 0 ]' "some outputs after the kill ($n1)"
 ok '[ -z "$(ls "$T"/d/renders/*/*.part* 2>/dev/null)" ]' "no part files left after SIGTERM"
 # a wrapper renderer's children are stopped with it (the run signals the renderer's process
 # group): otherwise they keep running and write part files after the run has removed them
@@ -176,6 +176,8 @@ ok '[ $rc -eq 0 ]' "resumed run succeeds"
 sed -n 's|^start .*/d/||p' "$T/log2" | sort > "$T/started2"
 ok '[ -z "$(comm -12 "$T/done1" "$T/started2")" ]' "resume re-rendered a finished output"
 ok '[ $(ls "$T"/d/renders/*/*.exr | grep -v preview | wc -l) -eq 15 ]' "all 15 outputs exist"
+nall=$(ls "$T"/d/renders/*/*.exr | grep -vc part)
+ok '[ "$n1" -lt "$nall" ]' "the kill left some of the $nall outputs (previews included) to do ($n1 done)"
 ok '[ -z "$(sort "$T/started2" | uniq -d)" ]' "a job started twice in one run"
 export FAKE_LOG="$T/log3"
 "$DS" run "$T/d" --jobs 2 --renderer "$FAKE" > "$T/run3.out" 2>&1

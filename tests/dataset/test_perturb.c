@@ -419,7 +419,12 @@ static void test_render_swapped(void) {
     }
   }
   if (access(exe, X_OK) != 0) {
-    printf("render check skipped: %s not built\n", exe);
+#ifdef KPCN_EXPECT_RENDERER
+    printf("FAIL: the build has kpcn-render but %s is missing\n", exe);
+    CHECK(0);
+#else
+    printf("render check skipped: kpcn-render is not part of this build\n");
+#endif
     return;
   }
   const char *scenes[] = {KPCN_TESTDATA "/scenes/cornell-box/scene.json",

@@ -118,36 +118,21 @@ static void test_tool(void) {
   snprintf(out, sizeof(out), "%s", kt_tmpfile("out.exr"));
   snprintf(bad, sizeof(bad), "%s", kt_tmpfile("bad.json"));
   write_file(bad, "{\"primitives\": [", 16);
-  /* missing scene file */
-  snprintf(cmd, sizeof(cmd), "%s /nonexistent/scene.json -o %s 2>/dev/null", exe, out);
-  CHECK(run(cmd) == 1);
-  CHECK(!file_exists(out));
-  /* malformed JSON */
-  snprintf(cmd, sizeof(cmd), "%s %s -o %s 2>/dev/null", exe, bad, out);
-  CHECK(run(cmd) == 1);
-  CHECK(!file_exists(out));
-  /* bad arguments */
-  snprintf(cmd, sizeof(cmd), "%s %s -o %s --spp zero 2>/dev/null", exe,
-           KPCN_TESTDATA "/scenes/cornell-box/scene.json", out);
-  CHECK(run(cmd) == 2);
-  snprintf(cmd, sizeof(cmd), "%s %s -o %s --crop 0,0,999,999 --resolution 16x16 2>/dev/null", exe,
-           KPCN_TESTDATA "/scenes/cornell-box/scene.json", out);
-  CHECK(run(cmd) == 1);
-  CHECK(!file_exists(out));
+  const char *cornell = KPCN_TESTDATA "/scenes/cornell-box/scene.json";
+  /* each refused naming what is wrong, with its exit status and no output file */
+  expect_cli(exe, "/nonexistent/scene.json", "", 1,
+             "cannot open scene '/nonexistent/scene.json': No such file");
+  expect_cli(exe, bad, "", 1, "invalid JSON near line 1 (byte 16)");
+  expect_cli(exe, cornell, "--spp zero", 2, "--spp: expected an integer >= 1, got 'zero'");
+  expect_cli(exe, cornell, "--crop 0,0,999,999 --resolution 16x16", 1,
+             "crop 0,0,999,999 lies outside the 16x16 image");
   /* an albedo pass with fewer samples than the colour, or on a colour-only render: refused,
    * nothing written; a non-number: usage */
-  snprintf(cmd, sizeof(cmd), "%s %s -o %s --spp 8 --albedo-spp 4 --resolution 16x16 2>/dev/null",
-           exe, KPCN_TESTDATA "/scenes/cornell-box/scene.json", out);
-  CHECK(run(cmd) == 1);
-  CHECK(!file_exists(out));
-  snprintf(cmd, sizeof(cmd),
-           "%s %s -o %s --spp 2 --albedo-spp 8 --color-only --resolution 16x16 2>/dev/null", exe,
-           KPCN_TESTDATA "/scenes/cornell-box/scene.json", out);
-  CHECK(run(cmd) == 1);
-  CHECK(!file_exists(out));
-  snprintf(cmd, sizeof(cmd), "%s %s -o %s --albedo-spp many 2>/dev/null", exe,
-           KPCN_TESTDATA "/scenes/cornell-box/scene.json", out);
-  CHECK(run(cmd) == 2);
+  expect_cli(exe, cornell, "--spp 8 --albedo-spp 4 --resolution 16x16", 1,
+             "albedo_spp: 4 is out of range");
+  expect_cli(exe, cornell, "--spp 2 --albedo-spp 8 --color-only --resolution 16x16", 1,
+             "a colour-only render has no albedo buffer");
+  expect_cli(exe, cornell, "--albedo-spp many", 2, "--albedo-spp: expected an integer");
   /* a good render writes the file, nothing else is left behind */
   snprintf(cmd, sizeof(cmd), "%s %s -o %s --spp 1 --resolution 16x16 --threads 1", exe,
            KPCN_TESTDATA "/scenes/cornell-box/scene.json", out);
