@@ -44,7 +44,9 @@ bool denoise(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptio
   kpcn_image *rgb = nullptr;
   kpcn_denoise_stats st{};
   if (kpcn_denoise_aov_stats(set.get(), &o, &rgb, &st) != KPCN_OK) {
-    dst.errorfmt("denoise: {}", kpcn_last_error());
+    // libkpcn's denoiser messages already say "denoise: ..."
+    const std::string e = kpcn_last_error();
+    dst.errorfmt("{}{}", e.rfind("denoise", 0) == 0 ? "" : "denoise: ", e);
     return false;
   }
   ImagePtr out(rgb);

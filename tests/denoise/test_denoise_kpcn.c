@@ -697,6 +697,24 @@ static void test_exposure(void) {
   kpcn_denoiser_get_stats(d, &st);
   CHECK(st.exposure == 0.0 && st.exposure_scale == 1.0); /* a black frame: scale 1 */
   kpcn_denoiser_destroy(d);
+  /* finite but absurd weights (a damaged file): the logits overflow and the softmax gives NaN;
+   * the call fails naming it instead of returning NaN as a success (found by tests/fuzz) */
+  kpcn_model *huge = NULL;
+  CHECK(kpcn_model_clone(m, &huge) == KPCN_OK);
+  const int last = kpcn_model_arch(huge)->n_hidden;
+  for (int br = 0; br < 2; br++) {
+    kpcn_layer_view lv;
+    CHECK(kpcn_model_layer(huge, (kpcn_branch)br, last, &lv) == KPCN_OK);
+    for (size_t i = 0; i < (size_t)lv.out_ch * lv.in_ch * lv.size * lv.size; i++)
+      lv.weight[i] = 3e38f;
+  }
+  kpcn_denoiser_options_defaults(&o);
+  kpcn_aov_set *fresh = synth_aov(29, 23, 9); /* finite, unlike b above */
+  CHECK(run_opts(m, fresh, &o, NULL, ob) == KPCN_OK);
+  CHECK(run_opts(huge, fresh, &o, NULL, ob) == KPCN_ERR_NONFINITE);
+  kpcn_aov_destroy(fresh);
+  CHECK(strstr(kpcn_last_error(), "weights overflow") != NULL);
+  kpcn_model_destroy(huge);
   free(oa);
   free(ob);
   free(oc);

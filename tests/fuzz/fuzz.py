@@ -4,7 +4,8 @@
 Every case feeds the tools a damaged input and classifies the outcome. Allowed: success, or a
 non-zero exit with a message on stderr and no output file. Failures: a crash (signal or a
 sanitizer report), a hang (timeout), a failure that leaves an output file behind, or a
-non-zero exit with nothing on stderr. Failing cases are kept in WORK/failures/ with the
+non-zero exit with nothing on stderr, a temporary file left anywhere in WORK, or a rendered or
+denoised image with NaN/Inf written on success. Failing cases are kept in WORK/failures/ with the
 command line and stderr, and the exit status is 1.
 
   fuzz.py --bin BUILD/tools --testdata TESTDATA --work DIR [--cases N] [--seed S] TARGET...
@@ -31,7 +32,17 @@ import struct
 import subprocess
 import sys
 
-BAD = ("CRASH", "TIMEOUT", "PARTIAL", "SILENT")
+BAD = ("CRASH", "TIMEOUT", "PARTIAL", "SILENT", "LEFTOVER", "NONFINITE")
+
+
+def temp_files(top):
+    """Temporaries the tools write before renaming into place (name.tmp.PID, name.partPID.exr)."""
+    found = set()
+    for d, _, files in os.walk(top):
+        if os.path.basename(d) == "failures":
+            continue
+        found.update(os.path.join(d, f) for f in files if ".tmp." in f or ".part" in f)
+    return found
 
 
 class Fuzzer:
@@ -46,8 +57,15 @@ class Fuzzer:
     def path(self, name):
         return os.path.join(self.work, name)
 
-    def run(self, target, argv, outputs, keep=()):
-        """Runs one case; classifies it; keeps the inputs of a failing one."""
+    def nonfinite(self, exr):
+        """True if an image written on success holds NaN/Inf (kpcntool's metrics refuse them)."""
+        p = subprocess.run([self.bin("kpcntool"), exr, exr, "--l1"], capture_output=True,
+                           text=True, errors="replace", timeout=self.a.timeout)
+        return p.returncode != 0 and "NaN/Inf" in p.stderr
+
+    def run(self, target, argv, outputs, keep=(), finite=()):
+        """Runs one case; classifies it; keeps the inputs of a failing one. finite: outputs
+        that must hold no NaN/Inf when the tool succeeds (a model or image it accepted)."""
         for o in outputs:
             if os.path.isdir(o):
                 shutil.rmtree(o)
@@ -60,12 +78,20 @@ class Fuzzer:
         except subprocess.TimeoutExpired:
             rc, err = None, ""
         left = [o for o in outputs if os.path.exists(o)]
+        temps = temp_files(self.work)
+        if temps:
+            left += sorted(temps)
+            for t in temps:
+                os.remove(t)
         if rc is None:
             kind = "TIMEOUT"
         elif rc < 0 or "Sanitizer" in err or "runtime error:" in err:
             kind = "CRASH"
+        elif temps:
+            kind = "LEFTOVER"
         elif rc == 0:
-            kind = "ok"
+            kind = "NONFINITE" if any(self.nonfinite(o) for o in finite if os.path.exists(o)) \
+                else "ok"
         elif left:
             kind = "PARTIAL"
         elif not err.strip():
@@ -169,7 +195,8 @@ def fuzz_scene(fz, rng, n):
         with open(case, "w") as f:
             f.write(text)
         fz.run("scene", [fz.bin("kpcn-render"), case, "-o", out, "--spp", "1",
-                         "--resolution", "24x16", "--threads", "1"], [out], keep=[case])
+                         "--resolution", "24x16", "--threads", "1"], [out], keep=[case],
+               finite=[out])
         os.remove(case)
 
 
@@ -236,7 +263,7 @@ def fuzz_model(fz, rng, n):
         with open(case, "wb") as f:
             f.write(blob)
         fz.run("model", [fz.bin("kpcntool"), exr, "--denoise:model=" + case, "-o", out], [out],
-               keep=[case])
+               keep=[case], finite=[out])
 
 
 # ---------------------------------------------------------------- patch store (kpcn-train)
@@ -343,7 +370,8 @@ def fuzz_exr(fz, rng, n):
         cmd = rng.choice([["--denoise:model=" + model, "-o", out],
                           ["--denoise:method=nlmeans", "-o", out], [src, "--relmse", "--ssim"],
                           ["--info"], ["--augment:seed=3", "-o", out]])
-        fz.run("exr", [fz.bin("kpcntool"), case] + cmd, [out], keep=[case])
+        fz.run("exr", [fz.bin("kpcntool"), case] + cmd, [out], keep=[case],
+               finite=[out] if cmd[0].startswith("--denoise") else [])
 
 
 TARGETS = {"scene": fuzz_scene, "model": fuzz_model, "kps": fuzz_kps, "cli": fuzz_cli,

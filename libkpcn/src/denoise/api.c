@@ -380,6 +380,22 @@ static float *dup_floats(const float *src, size_t n, kpcn_status *s) {
  * run_ensemble. The bound runs once, before the ensemble's mirrors and rotations (it commutes
  * with them), on a shallow copy of the input whose only own planes are the three it changes:
  * diffuse, its variance and colour (the other buffers stay the caller's, read only). */
+/* A finite input can still come back non-finite when a model's weights are finite but absurd
+ * (a damaged file, a diverged run): logits overflow to Inf and the softmax gives NaN. Refuse
+ * such a result rather than return it as a success. */
+static kpcn_status check_result(kpcn_status s, const float *out, size_t n) {
+  if (s != KPCN_OK) return s;
+  size_t bad = 0;
+  for (size_t i = 0; i < n; i++)
+    bad += !isfinite(out[i]);
+  if (bad)
+    return kpcn_fail(KPCN_ERR_NONFINITE,
+                     "denoise: the result holds %zu non-finite value(s) (NaN/Inf) from a finite "
+                     "input: the model's weights overflow (a damaged or diverged model?)",
+                     bad);
+  return KPCN_OK;
+}
+
 static kpcn_status run_denoise(kpcn_denoiser *d, const kpcn_aov_set *aov, float *out) {
   /* A NaN or Inf reaches every softmax window (and baseline weight) that sees it and comes back
    * as a patch of NaN while the call succeeds: refuse it, naming the buffer. */
@@ -393,10 +409,10 @@ static kpcn_status run_denoise(kpcn_denoiser *d, const kpcn_aov_set *aov, float 
   float sc;
   KPCN_TRY(exposure_scale(d, aov, &sc));
   d->stats.exposure_scale = sc;
-  if (d->opt.method != KPCN_DENOISE_KPCN || d->opt.firefly == 0.0f)
-    return run_ensemble(d, aov, sc, out);
-  KPCN_TRY(kpcn_pipeline_require(aov)); /* the pipeline's errors, not the bound's */
   const size_t P = kpcn_aov_plane_size(aov);
+  if (d->opt.method != KPCN_DENOISE_KPCN || d->opt.firefly == 0.0f)
+    return check_result(run_ensemble(d, aov, sc, out), out, 3 * P);
+  KPCN_TRY(kpcn_pipeline_require(aov)); /* the pipeline's errors, not the bound's */
   kpcn_status s = KPCN_OK;
   kpcn_aov_set b = *aov;
   b.buf[KPCN_BUF_DIFFUSE] = dup_floats(aov->buf[KPCN_BUF_DIFFUSE], 3 * P, &s);
@@ -411,7 +427,7 @@ static kpcn_status run_denoise(kpcn_denoiser *d, const kpcn_aov_set *aov, float 
   free(b.buf[KPCN_BUF_DIFFUSE]);
   free(b.var[KPCN_BUF_DIFFUSE]);
   free(b.buf[KPCN_BUF_COLOR]);
-  return s;
+  return check_result(s, out, 3 * P);
 }
 
 kpcn_status kpcn_denoiser_execute(kpcn_denoiser *d, float *out, int width, int height,
