@@ -210,7 +210,13 @@ static void test_convergence(const kpcn_scene *s) {
  * estimators, Tungsten) relies on it. The sampler stratifies (Owen-scrambled Sobol), so a render
  * varies less than independent samples would: the reported figure may only be larger, and not
  * by the spp factor (16) a variance left undivided would give. Measured (48 seeds): colour 2.9,
- * diffuse 1.5. The first-hit features (albedo 9.3, normal 6.8) integrate smooth pixel-coverage
+ * diffuse 1.5; over six sets of 48 seeds colour 2.54-3.00, diffuse 1.47-1.58, hence the upper
+ * bounds 4 and 2 (a variance 1.4x too large fails). The ratio is above 1 because the pairs of
+ * the camera and the first two bounces are stratified per pixel while the buffer is the
+ * i.i.d. estimate; colour gains more than diffuse through its directly seen light, whose only
+ * randomness is the stratified pixel position. Where nothing is stratified the ratio is 1:
+ * test_render_furnace pins the buffer to 1 +- 0.05 on a box whose only randomness is Russian
+ * roulette. The first-hit features (albedo 9.3, normal 6.8) integrate smooth pixel-coverage
  * functions, where stratification gains about the spp factor itself, so for them the test
  * could not tell that gain from the bug; they are printed, not checked. */
 static void test_variance_calibration(const kpcn_scene *s) {
@@ -244,7 +250,7 @@ static void test_variance_calibration(const kpcn_scene *s) {
     const double r = rep[k] / emp;
     printf("variance calibration %-8s: reported / measured across %d seeds = %.3f\n", names[k],
            NSEED, r);
-    if (k < 2) CHECK(r > 0.8 && r < 6.0);
+    if (k < 2) CHECK(r > 0.8 && r < (k == 0 ? 4.0 : 2.0));
   }
   free(sum);
   free(sq);
