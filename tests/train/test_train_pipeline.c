@@ -1,9 +1,8 @@
-/* Trainer end to end on a synthetic store: determinism (two runs, same seed -> identical
- * weights), checkpoint/resume equal to an uninterrupted run bit for bit (weights AND Adam
- * moments), both stages, full-image validation, CSV/plot outputs, and clear errors for a
- * store with the wrong channel list, a garbage store, a model with other inputs and a
- * checkpoint of another run; weight averaging (SWA) of checkpoints and model files, and the
- * snapshots kept for it. */
+/* Trainer end to end on a synthetic store (determinism and checkpoint/resume are in
+ * test_train_resume.c): both stages, full-image validation, the best model, CSV/plot outputs,
+ * --init conversions (kernel passes, source weights, widening), and clear errors for a store
+ * with the wrong channel list, a garbage store and a model with other inputs; weight averaging
+ * (SWA) of checkpoints and model files, and the snapshots kept for it. */
 #include "kpcn/exr.h"
 #include "train/train_internal.h"
 #include "kpcn/train.h"
@@ -18,210 +17,10 @@
 #include <unistd.h>
 
 static const char *g_store;
-static int g_bf16;       /* settings(): mixed-precision training */
-static int g_passes = 1; /* settings(): arch.kpa_passes */
-static int g_sw;         /* settings(): arch.source_weight */
-static void settings(kpcn_train_settings *s, const char *out) {
-  tf_settings(s, g_store, out);
-  s->bf16 = g_bf16;
-  s->arch.kpa_passes = g_passes;
-  s->arch.source_weight = g_sw;
-}
-
-/* All parameters of both branches, concatenated (malloc'ed). */
-static float *model_weights(kpcn_model *m, size_t *n) {
-  const kpcn_arch *a = kpcn_model_arch(m);
-  size_t tot = 2 * kpcn_arch_param_count(a), k = 0;
-  float *w = malloc(tot * sizeof(float));
-  for (int b = 0; b < 2; b++)
-    for (int l = 0; l < kpcn_arch_n_layers(a); l++) {
-      kpcn_layer_view v;
-      kpcn_model_layer(m, (kpcn_branch)b, l, &v);
-      size_t nw = (size_t)v.out_ch * v.in_ch * v.size * v.size;
-      memcpy(w + k, v.weight, nw * sizeof(float)), k += nw;
-      memcpy(w + k, v.bias, v.out_ch * sizeof(float)), k += v.out_ch;
-    }
-  *n = k;
-  return w;
-}
+static void settings(kpcn_train_settings *s, const char *out) { tf_settings(s, g_store, out); }
 
 static float *weights(kpcn_trainer *t, size_t *n) {
-  return model_weights(kpcn_trainer_model(t), n);
-}
-
-static float *run_full(const char *out, size_t *n) {
-  kpcn_train_settings s;
-  settings(&s, out);
-  kpcn_trainer *t = NULL;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
-  if (!t) {
-    fprintf(stderr, "%s\n", kpcn_last_error());
-    return NULL;
-  }
-  int stopped = -1;
-  CHECK(kpcn_trainer_run(t, &stopped) == KPCN_OK);
-  CHECK(stopped == 0 && kpcn_trainer_iteration(t) == 6);
-  CHECK(kpcn_trainer_validate(t, NULL) == KPCN_ERR_INVALID_ARGUMENT);
-  float *w = weights(t, n);
-  kpcn_trainer_destroy(t);
-  return w;
-}
-
-/* Run once in f32 and once in bf16 (g_bf16): the file names are reused; a bf16 run's
- * weights must differ from the f32 run's (the precision is really switched). */
-static void test_determinism_and_resume(void) {
-  static float *f32_weights;
-  static size_t f32_n;
-  size_t n1, n2, n3;
-  float *w1 = run_full(tf_tmp("a.safetensors"), &n1);
-  float *w2 = run_full(tf_tmp("b.safetensors"), &n2);
-  CHECK(w1 && w2 && n1 == n2 && memcmp(w1, w2, n1 * sizeof(float)) == 0);
-  /* the training changed the weights (not a no-op) */
-  kpcn_train_settings s;
-  settings(&s, tf_tmp("c.safetensors"));
-  kpcn_trainer *t;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
-  size_t n0;
-  float *w0 = weights(t, &n0);
-  CHECK(n0 == n1 && memcmp(w0, w1, n0 * sizeof(float)) != 0);
-  { /* the model records its training images' median exposure (one source: its own) */
-    kpcn_patchstore *ps = NULL;
-    CHECK(kpcn_patchstore_open(&ps, g_store, NULL, 0) == KPCN_OK);
-    const float e = ps ? (float)kpcn_patchstore_source(ps, 0)->exposure : 0.0f;
-    CHECK(e > 0.0f && kpcn_model_arch(kpcn_trainer_model(t))->exposure == e);
-    kpcn_patchstore_close(ps);
-  }
-  /* interrupted at iteration 2 (stage 1), resumed to 6 (through stage 2) */
-  tf_stop_at = 2;
-  s.progress = tf_stop_cb;
-  kpcn_trainer_destroy(t);
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
-  int stopped = 0;
-  CHECK(kpcn_trainer_run(t, &stopped) == KPCN_OK);
-  CHECK(stopped == 1 && kpcn_trainer_iteration(t) == 2);
-  kpcn_trainer_destroy(t);
-  s.progress = NULL;
-  s.resume = 1;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
-  CHECK(kpcn_trainer_iteration(t) == 2);
-  CHECK(kpcn_trainer_run(t, &stopped) == KPCN_OK && stopped == 0);
-  float *w3 = weights(t, &n3);
-  CHECK(n3 == n1 && memcmp(w3, w1, n1 * sizeof(float)) == 0);
-  kpcn_trainer_destroy(t);
-  printf("determinism and resume (%s, %d kernel passes%s): bit-identical\n",
-         g_bf16 ? "bf16" : "f32", g_passes, g_sw ? ", source weights" : "");
-  /* bf16, two kernel passes or source weights really change the training (the run without
-   * any is first); source weights also add parameters */
-  if (g_bf16 || g_passes > 1 || g_sw)
-    CHECK(f32_weights && (f32_n != n1 || memcmp(f32_weights, w1, n1 * sizeof(float)) != 0));
-  /* a checkpoint written in the other precision is refused, naming the key */
-  settings(&s, tf_tmp("c.safetensors"));
-  s.bf16 = !g_bf16;
-  s.resume = 1;
-  if (s.bf16 == 0 || kt_have_bf16("a bf16 resume of an f32 checkpoint")) {
-    CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
-    CHECK(strstr(kpcn_last_error(), "train.precision") != NULL);
-  }
-  /* the resumed CSV reads as one run: rows 2,4,6 */
-  FILE *f = fopen(tf_tmp("c.safetensors.csv"), "r");
-  CHECK(f != NULL);
-  if (f) {
-    char line[512];
-    int rows = 0, last = 0, ordered = 1;
-    while (fgets(line, sizeof line, f))
-      if (line[0] != 'i') {
-        int it = atoi(line);
-        if (it <= last) ordered = 0;
-        last = it, rows++;
-      }
-    fclose(f);
-    CHECK(rows == 3 && ordered && last == 6);
-  }
-  /* outputs: model loads, plot exists */
-  kpcn_model *m = NULL;
-  CHECK(kpcn_model_load(tf_tmp("c.safetensors"), &m) == KPCN_OK);
-  if (m)
-    CHECK(kpcn_model_get_meta(m, "train.iterations") &&
-          !strcmp(kpcn_model_get_meta(m, "train.iterations"), "6"));
-  kpcn_model_destroy(m);
-  FILE *p = fopen(tf_tmp("c.safetensors.png"), "rb");
-  CHECK(p != NULL);
-  if (p) fclose(p);
-  /* a checkpoint of another run (other seed) is refused, naming the key */
-  settings(&s, tf_tmp("c.safetensors"));
-  s.seed = 6;
-  s.resume = 1;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
-  CHECK(strstr(kpcn_last_error(), "train.seed") != NULL);
-  /* so is a resume that changes a setting the remaining iterations depend on, naming it */
-  settings(&s, tf_tmp("c.safetensors"));
-  s.loss1 = KPCN_LOSS_RELMSE;
-  s.resume = 1;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
-  CHECK(strstr(kpcn_last_error(), "train.loss1 = l1") && strstr(kpcn_last_error(), "--loss"));
-  settings(&s, tf_tmp("c.safetensors"));
-  s.adam.lr *= 2;
-  s.resume = 1;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
-  CHECK(strstr(kpcn_last_error(), "train.lr =") != NULL);
-  settings(&s, tf_tmp("c.safetensors"));
-  s.augment.rotate = 0;
-  s.resume = 1;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
-  CHECK(strstr(kpcn_last_error(), "train.augment") != NULL);
-  /* and one that would stop before the checkpoint's iteration (6) */
-  settings(&s, tf_tmp("c.safetensors"));
-  s.iters = 4;
-  s.resume = 1;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
-  CHECK(strstr(kpcn_last_error(), "beyond this run's 4 iterations") != NULL);
-  /* a truncated checkpoint is refused */
-  FILE *src = fopen(tf_tmp("c.safetensors.ckpt"), "rb");
-  FILE *dst = fopen(tf_tmp("trunc.ckpt"), "wb");
-  if (src && dst) {
-    char buf[1000];
-    size_t k = fread(buf, 1, sizeof buf, src);
-    fwrite(buf, 1, k, dst);
-  }
-  if (src) fclose(src);
-  if (dst) fclose(dst);
-  settings(&s, tf_tmp("c.safetensors"));
-  s.ckpt_path = tf_tmp("trunc.ckpt");
-  s.resume = 1;
-  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
-  if (g_passes > 1 || g_sw) {
-    /* the checkpoint of a two-pass or source-weighted run does not resume as a plain one */
-    settings(&s, tf_tmp("c.safetensors"));
-    s.arch.kpa_passes = 1;
-    s.arch.source_weight = 0;
-    s.resume = 1;
-    CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT);
-    CHECK(strstr(kpcn_last_error(), "architecture") != NULL);
-  } else if (!g_bf16) {
-    free(f32_weights);
-    f32_weights = w1, f32_n = n1, w1 = NULL;
-  } else {
-    free(f32_weights);
-    f32_weights = NULL;
-  }
-  free(w0), free(w1), free(w2), free(w3);
-}
-
-/* Writes a synthetic 40x32 validation pair as EXRs (names from tf_tmp) into the settings. */
-static void with_val_pair(kpcn_train_settings *s, const char *prefix, const char **vn,
-                          const char **vr) {
-  kpcn_aov_set *n, *r;
-  char name[64];
-  CHECK(tf_make_pair(&n, &r, 40, 32, 9, 0) == 0);
-  snprintf(name, sizeof name, "%s_noisy.exr", prefix);
-  vn[0] = tf_tmp(name);
-  snprintf(name, sizeof name, "%s_ref.exr", prefix);
-  vr[0] = tf_tmp(name);
-  CHECK(kpcn_exr_write_aov(vn[0], n, NULL) == KPCN_OK);
-  CHECK(kpcn_exr_write_aov(vr[0], r, NULL) == KPCN_OK);
-  kpcn_aov_destroy(n), kpcn_aov_destroy(r);
-  s->nval = 1, s->val_noisy = vn, s->val_ref = vr;
-  s->nthreads = 1;
+  return tf_model_weights(kpcn_trainer_model(t), n);
 }
 
 /* Two pairs: the trainer's mean and geometric mean equal those of the two single-pair
@@ -288,7 +87,7 @@ static void test_validation_geomean(void) {
 static int train_then_init(const char *path, const char *next, const char *tag, const char **vn,
                            const char **vr, kpcn_val_result *val, kpcn_train_settings *s) {
   settings(s, path);
-  with_val_pair(s, tag, vn, vr);
+  tf_val_pair(s, tag, vn, vr);
   kpcn_trainer *t = NULL;
   CHECK(kpcn_trainer_create(&t, s) == KPCN_OK);
   if (!t) return 0;
@@ -296,7 +95,7 @@ static int train_then_init(const char *path, const char *next, const char *tag, 
   CHECK(kpcn_trainer_validate(t, val) == KPCN_OK);
   kpcn_trainer_destroy(t);
   settings(s, next);
-  with_val_pair(s, tag, vn, vr);
+  tf_val_pair(s, tag, vn, vr);
   s->init_model = path;
   return 1;
 }
@@ -390,7 +189,7 @@ static void test_init_source_weight(void) {
   CHECK(moved > 0);
   /* --source-lr-scale: the same run with the score learning at 20x moves it much further */
   settings(&s, tf_tmp("s3.safetensors"));
-  with_val_pair(&s, "s", vn, vr);
+  tf_val_pair(&s, "s", vn, vr);
   s.init_model = base;
   s.source_weight = 1;
   s.source_lr_scale = 20;
@@ -433,7 +232,7 @@ static void test_validation(void) {
   kpcn_train_settings s;
   settings(&s, tf_tmp("v.safetensors"));
   const char *vn[1], *vr[1];
-  with_val_pair(&s, "val", vn, vr);
+  tf_val_pair(&s, "val", vn, vr);
   s.val_every = 3;
   kpcn_trainer *t;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
@@ -468,7 +267,7 @@ static void test_best_and_stage2_lr(void) {
   kpcn_train_settings s;
   settings(&s, tf_tmp("b.safetensors"));
   const char *vn[1], *vr[1], *best = tf_tmp("b.best.safetensors");
-  with_val_pair(&s, "best", vn, vr);
+  tf_val_pair(&s, "best", vn, vr);
   s.val_every = 1, s.log_every = 1;
   s.best_path = best;
   s.stage2_lr = 1e-4;
@@ -538,7 +337,7 @@ static void test_snapshots(void) {
   CHECK(kpcn_checkpoint_load_model(p4, &m) == KPCN_OK);
   if (t && m) {
     size_t n1, n2;
-    float *w1 = weights(t, &n1), *w2 = model_weights(m, &n2);
+    float *w1 = weights(t, &n1), *w2 = tf_model_weights(m, &n2);
     CHECK(n1 == n2 && memcmp(w1, w2, n1 * sizeof(float)) == 0);
     free(w1), free(w2);
   }
@@ -581,11 +380,11 @@ static void test_average(void) {
   kpcn_model *m3 = NULL, *avg = NULL;
   CHECK(kpcn_model_create(kpcn_model_arch(kpcn_trainer_model(t)), 77, &m3) == KPCN_OK);
   CHECK(kpcn_model_save(m3, in[2]) == KPCN_OK);
-  w[2] = model_weights(m3, &n[2]);
+  w[2] = tf_model_weights(m3, &n[2]);
   CHECK(kpcn_model_average(in, 3, &avg) == KPCN_OK);
   if (avg) {
     size_t na;
-    float *wa = model_weights(avg, &na);
+    float *wa = tf_model_weights(avg, &na);
     double worst = 0;
     CHECK(na == n[0] && n[0] == n[1] && n[1] == n[2]);
     for (size_t i = 0; i < na && na == n[0]; i++) {
@@ -763,16 +562,6 @@ static void test_bad_stores(void) {
 int main(void) {
   g_store = tf_make_test_store("train.kps");
   if (!g_store) return 1;
-  test_determinism_and_resume();
-  g_passes = 2;
-  test_determinism_and_resume();
-  g_sw = 1;
-  test_determinism_and_resume();
-  g_passes = 1;
-  g_sw = 0;
-  g_bf16 = 1;
-  if (kt_have_bf16("determinism and resume")) test_determinism_and_resume();
-  g_bf16 = 0;
   test_init_passes();
   test_init_source_weight();
   test_validation();

@@ -1,6 +1,7 @@
 #include "train_fixture.h"
 
 #include "kpcn/denoise.h"
+#include "kpcn/exr.h"
 #include "testutil.h"
 
 #include <math.h>
@@ -153,6 +154,37 @@ void tf_settings(kpcn_train_settings *s, const char *store, const char *out) {
   s->seed = 5;
   s->adam.lr = 1e-2;
   s->log_every = 2;
+}
+
+float *tf_model_weights(kpcn_model *m, size_t *n) {
+  const kpcn_arch *a = kpcn_model_arch(m);
+  size_t tot = 2 * kpcn_arch_param_count(a), k = 0;
+  float *w = malloc(tot * sizeof(float));
+  for (int b = 0; b < 2; b++)
+    for (int l = 0; l < kpcn_arch_n_layers(a); l++) {
+      kpcn_layer_view v;
+      kpcn_model_layer(m, (kpcn_branch)b, l, &v);
+      size_t nw = (size_t)v.out_ch * v.in_ch * v.size * v.size;
+      memcpy(w + k, v.weight, nw * sizeof(float)), k += nw;
+      memcpy(w + k, v.bias, v.out_ch * sizeof(float)), k += v.out_ch;
+    }
+  *n = k;
+  return w;
+}
+
+void tf_val_pair(kpcn_train_settings *s, const char *prefix, const char **vn, const char **vr) {
+  kpcn_aov_set *n = NULL, *r = NULL;
+  char name[64];
+  CHECK(tf_make_pair(&n, &r, 40, 32, 9, 0) == 0);
+  snprintf(name, sizeof name, "%s_noisy.exr", prefix);
+  vn[0] = tf_tmp(name);
+  snprintf(name, sizeof name, "%s_ref.exr", prefix);
+  vr[0] = tf_tmp(name);
+  CHECK(kpcn_exr_write_aov(vn[0], n, NULL) == KPCN_OK);
+  CHECK(kpcn_exr_write_aov(vr[0], r, NULL) == KPCN_OK);
+  kpcn_aov_destroy(n), kpcn_aov_destroy(r);
+  s->nval = 1, s->val_noisy = vn, s->val_ref = vr;
+  s->nthreads = 1;
 }
 
 int tf_stop_at;

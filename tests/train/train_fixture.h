@@ -31,6 +31,14 @@ const char *tf_make_test_store(const char *name);
  * of which 3 in stage 1, 2 threads, seed 5, lr 1e-2. */
 void tf_settings(kpcn_train_settings *s, const char *store, const char *out);
 
+/* All parameters of both branches of m, concatenated (malloc'ed); *n receives the count. */
+float *tf_model_weights(kpcn_model *m, size_t *n);
+
+/* Writes a synthetic 40x32 validation pair (seed 9) as EXRs named "<prefix>_noisy.exr" and
+ * "<prefix>_ref.exr" (tf_tmp) and sets it as the settings' one validation pair (vn, vr: arrays
+ * of one that must outlive the trainer); also sets nthreads 1. */
+void tf_val_pair(kpcn_train_settings *s, const char *prefix, const char **vn, const char **vr);
+
 /* A progress callback that stops the run once it reaches iteration tf_stop_at. */
 extern int tf_stop_at;
 int tf_stop_cb(void *user, const kpcn_train_progress *p);
