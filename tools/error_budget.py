@@ -25,10 +25,17 @@ With --model, also the model's own output split by branch (kpcntool --denoise):
   kpcn_top1pct       share of kpcn's error in its worst 1 % of pixels
 The diffuse branch's part D_kpcn is the denoised result of the same input with the specular
 buffers zeroed: that branch never reads them, and the specular branch then filters zeros
-(exp(0) - 1 = 0), so the split is exact."""
+(exp(0) - 1 = 0), so the split is exact (to float rounding). One coupling is undone by hand:
+the denoiser scales both branches' inputs by target / exposure(input) (docs/denoiser.md,
+"Exposure"; the target is the model's recorded exposure, none = as rendered), and the
+exposure statistic reads diffuse + specular, so the zeroed input is denoised at an exposure
+chosen to give it the full input's scale. (The firefly bound's floor, 0.01 x the input's
+exposure, is not pinned: a pixel whose irradiance lies between the two floors is bounded in
+one run only.)"""
 import argparse
 import json
 import os
+import struct
 import subprocess
 import sys
 import tempfile
@@ -66,8 +73,28 @@ def relmse(x, y):
     return float(relmse_map(x, y).mean())
 
 
-def denoise(tool, model, src, dst):
-    r = subprocess.run([tool, src, "--denoise:model=" + model, "-o", dst],
+def model_exposure(path):
+    """The exposure target a model records (kpcn.architecture's "exposure"), 0 if none."""
+    try:
+        with open(path, "rb") as f:
+            n = struct.unpack("<Q", f.read(8))[0]
+            arch = json.loads(json.loads(f.read(n))["__metadata__"]["kpcn.architecture"])
+        e = float(arch.get("exposure", 0.0))
+    except (OSError, ValueError, KeyError, TypeError, struct.error) as err:
+        fail("%s: cannot read the model's exposure: %s" % (path, err))
+    return float(np.float32(e)) if e > 0 else 0.0  # the library keeps it as a float
+
+
+def exposure(tool, path):
+    r = subprocess.run([tool, path, "--exposure", "--json"], stdout=subprocess.PIPE,
+                       stderr=subprocess.PIPE, text=True)
+    if r.returncode != 0:
+        fail("kpcntool --exposure on %s: %s" % (path, r.stderr.strip()))
+    return json.loads(r.stdout)["exposure"]
+
+
+def denoise(tool, model, src, dst, opts=""):
+    r = subprocess.run([tool, src, "--denoise:model=" + model + opts, "-o", dst],
                        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     if r.returncode != 0:
         fail("kpcntool --denoise on %s: %s" % (src, r.stderr.strip()))
@@ -111,7 +138,16 @@ def main():
             path = os.path.join(tmp, "nospec.exr")
             if not nospec.write(path):
                 fail("cannot write %s: %s" % (path, nospec.geterror()))
-            diff = denoise(a.kpcntool, a.model, path, os.path.join(tmp, "diffuse.exr"))
+            # the full run's colour scale, target / exposure(noisy) (1 as rendered), for the
+            # zeroed input too: exposure(nospec) * scale is the target that gives it
+            target, opts = model_exposure(a.model), ""
+            if target > 0:
+                e_full, e_nospec = exposure(a.kpcntool, a.noisy), exposure(a.kpcntool, path)
+                if not e_full > 0:
+                    opts = ":exposure=off"
+                elif e_nospec > 0:
+                    opts = ":exposure=%r" % (e_nospec * target / e_full)
+            diff = denoise(a.kpcntool, a.model, path, os.path.join(tmp, "diffuse.exr"), opts)
         err = np.sort(relmse_map(full, ref).ravel())[::-1]
         out.update({
             "kpcn": float(err.mean()),

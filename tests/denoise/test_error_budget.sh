@@ -1,6 +1,7 @@
 #!/bin/sh
 # tools/error_budget.py: zero for a perfect input, its kpcn figure equals kpcntool's relMSE,
-# the branch split adds up, bad input is a clear error.
+# the branch split adds up, exact identities and independent recomputation
+# (error_budget_check.py), bad input is a clear error.
 # usage: test_error_budget.sh SCRIPT KPCNTOOL FIXTURE
 set -u
 S=$1; T=$2; F=$3
@@ -42,6 +43,10 @@ PY
 check "$j" "0.01 < d['kpcn_top1pct'] < 1 and abs(d['kpcn_top1pct'] - $t) <= 1e-9"
 check "$j" "abs(d['kpcn_diffuse'] ** 0.5 - d['kpcn_specular'] ** 0.5) <= d['kpcn'] ** 0.5 * 1.000001"
 check "$j" "d['kpcn'] ** 0.5 <= (d['kpcn_diffuse'] ** 0.5 + d['kpcn_specular'] ** 0.5) * 1.000001"
+# independent checks: exact identities on one-buffer perturbations, the network-free figures
+# recomputed from their definitions, the branch split computed the other way round (also for
+# a model that records an exposure); see the helper's docstring
+/usr/bin/python3 "$(dirname "$0")/error_budget_check.py" "$S" "$T" "$D" || fail "error_budget_check.py"
 # bad input: a reference without diffuse.*, a missing file, a bad model
 if /usr/bin/python3 "$S" "$D/aov.exr" "$D/aov_nodiffuse.exr" 2>"$D/err"; then fail "missing diffuse accepted"; fi
 grep -q "diffuse.R" "$D/err" || fail "error does not name diffuse.R: $(cat "$D/err")"

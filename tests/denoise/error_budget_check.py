@@ -1,0 +1,253 @@
+#!/usr/bin/python3
+"""Independent checks of tools/error_budget.py, run by test_error_budget.sh.
+
+usage: error_budget_check.py SCRIPT KPCNTOOL DIR   (DIR holds denoise_fixture's aov.exr and
+model.safetensors; the fixtures below are written there)
+
+1. Exact identities on pairs where one buffer of NOISY differs from REF by a known amount.
+   Diffuse, specular and albedo are rounded to multiples of 2^-10 and colour = diffuse +
+   specular, so every sum below is exact in float32 and float64 and the identities hold to
+   the bit, not to a tolerance:
+   - only diffuse differs (d): diffuse_exact = D_ref + S_noisy = colour_ref -> 0;
+     specular_exact = D_noisy + S_ref = colour_noisy -> == noisy; the albedos agree, so the
+     oracle is D_ref + S_ref -> 0 (to the rounding of x * D / x); noisy = mean(d^2 / (C^2 + 0.01)).
+   - only specular differs: the same with the branches swapped.
+   - only albedo differs, A_noisy = 2 A_ref + eps (eps = 2^-8, given as --eps): noisy and both
+     *_exact are 0, the oracle remodulates D_ref by (A_noisy + eps) / (A_ref + eps) = 2 exactly:
+     irradiance_oracle = mean(D_ref^2 / (C^2 + 0.01)).
+2. The four figures that need no network, recomputed here from the definitions
+   (docs/results.md, the script's docstring) on a pair where every buffer differs, at the
+   default albedo eps (0.00316, the pipeline's) and another: 1e-9 relative. noisy also equals
+   kpcntool --relmse.
+3. With the tiny fixture model, as saved (no exposure recorded: the input is denoised as
+   rendered) and with an exposure target written into it (the denoiser then scales both
+   branches' inputs by target / exposure(input)):
+   - NOISY and REF without specular: the zeroed input is the input itself, so
+     kpcn_specular = 0 exactly and kpcn_diffuse == kpcn.
+   - every buffer differs: the specular branch's part, computed here the other way round (the
+     input with diffuse.* zeroed, denoised at the full input's colour scale; the diffuse branch
+     then filters zeros), must give the script's kpcn_specular, and full - it its kpcn_diffuse;
+     and full = (diffuse zeroed) + (specular zeroed) pixelwise, the premise of the split.
+Prints the measured figures."""
+import json
+import os
+import struct
+import subprocess
+import sys
+
+import numpy as np
+import OpenImageIO as oiio
+
+SCRIPT, TOOL, DIR = sys.argv[1:4]
+RGB = "RGB"
+
+
+def fail(msg):
+    print("FAIL: " + msg)
+    sys.exit(1)
+
+
+def read(path):
+    """name -> float64 plane, through ImageInput (the script reads through ImageBuf)."""
+    inp = oiio.ImageInput.open(path)
+    if not inp:
+        fail("cannot open %s: %s" % (path, oiio.geterror()))
+    spec = inp.spec()
+    px = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+    inp.close()
+    return spec, {n: px[..., i].astype(np.float64) for i, n in enumerate(spec.channelnames)}
+
+
+def get(ch, pre):
+    return np.stack([ch[pre + c] for c in RGB], -1)
+
+
+def put(ch, pre, v):
+    for i, c in enumerate(RGB):
+        ch[pre + c] = v[..., i]
+
+
+def write(path, spec, ch, exact=True):
+    px = np.stack([ch[n] for n in spec.channelnames], -1)
+    if exact and not np.array_equal(px.astype(np.float32).astype(np.float64), px):
+        fail("fixture %s is not exact in float32" % path)
+    out = oiio.ImageOutput.create(path)
+    if not out or not out.open(path, spec) or not out.write_image(px.astype(np.float32)):
+        fail("cannot write %s: %s" % (path, oiio.geterror()))
+    out.close()
+    return path
+
+
+def budget(noisy, ref, *args):
+    r = subprocess.run([sys.executable, SCRIPT, noisy, ref, *args], stdout=subprocess.PIPE,
+                       stderr=subprocess.PIPE, text=True)
+    if r.returncode != 0:
+        fail("error_budget.py %s %s %s: %s" % (noisy, ref, " ".join(args), r.stderr.strip()))
+    return json.loads(r.stdout)
+
+
+def relmse(x, y):
+    return float(np.mean((x - y) ** 2 / (y ** 2 + 0.01)))
+
+
+def close(a, b, tol):
+    return abs(a - b) <= tol * max(abs(a), abs(b))
+
+
+def show(name, d):
+    print("%-22s %s" % (name, " ".join("%s=%.6g" % kv for kv in d.items())))
+
+
+spec, base = read(os.path.join(DIR, "aov.exr"))
+q = lambda v: np.round(v * 1024.0) / 1024.0
+D, S, A = q(get(base, "diffuse.")), q(get(base, "specular.")), q(get(base, "albedo."))
+if not A.min() > 0:
+    fail("fixture albedo not positive")
+C = D + S
+w = C ** 2 + 0.01
+ref = dict(base)
+put(ref, "diffuse.", D), put(ref, "specular.", S), put(ref, "albedo.", A), put(ref, "", C)
+REF = write(os.path.join(DIR, "eb_ref.exr"), spec, ref)
+rng = np.random.default_rng(7)
+delta = rng.integers(0, 129, C.shape) / 1024.0  # 0 .. 1/8, exact
+
+# 1. one buffer differs
+x = dict(ref)
+put(x, "diffuse.", D + delta), put(x, "", C + delta)
+j = budget(write(os.path.join(DIR, "eb_diffuse.exr"), spec, x), REF)
+show("diffuse perturbed", j)
+if not (j["diffuse_exact"] == 0.0 and j["specular_exact"] == j["noisy"] > 0):
+    fail("only diffuse perturbed: want diffuse_exact == 0 and specular_exact == noisy: %s" % j)
+if not (j["irradiance_oracle"] < 1e-28 and close(j["noisy"], float(np.mean(delta ** 2 / w)), 1e-12)):
+    fail("only diffuse perturbed: want oracle 0, noisy mean(d^2/(C^2+0.01)): %s" % j)
+delta = rng.integers(0, 129, C.shape) / 1024.0  # another draw
+x = dict(ref)
+put(x, "specular.", S + delta), put(x, "", C + delta)
+j = budget(write(os.path.join(DIR, "eb_specular.exr"), spec, x), REF)
+show("specular perturbed", j)
+if not (j["specular_exact"] == 0.0 and j["diffuse_exact"] == j["noisy"] > 0):
+    fail("only specular perturbed: want specular_exact == 0 and diffuse_exact == noisy: %s" % j)
+if not (j["irradiance_oracle"] < 1e-28 and close(j["noisy"], float(np.mean(delta ** 2 / w)), 1e-12)):
+    fail("only specular perturbed: want oracle 0, noisy mean(d^2/(C^2+0.01)): %s" % j)
+EPS = 2.0 ** -8
+x = dict(ref)
+put(x, "albedo.", 2 * A + EPS)
+j = budget(write(os.path.join(DIR, "eb_albedo.exr"), spec, x), REF, "--eps", repr(EPS))
+show("albedo x2 (+eps)", j)
+want = float(np.mean(D ** 2 / w))
+if not (j["noisy"] == j["diffuse_exact"] == j["specular_exact"] == 0.0 and
+        close(j["irradiance_oracle"], want, 1e-12)):
+    fail("only albedo perturbed: want 0, 0, 0 and oracle %.17g: %s" % (want, j))
+
+# 2. every buffer differs (float32 values, colour = diffuse + specular in float32)
+f32 = lambda v: v.astype(np.float32).astype(np.float64)
+u = lambda: rng.uniform(-1.0, 1.0, C.shape)
+_, orig = read(os.path.join(DIR, "aov.exr"))
+Dr, Sr, Ar, Cr = (get(orig, p) for p in ("diffuse.", "specular.", "albedo.", ""))
+Dn, Sn, An = f32(Dr * (1 + 0.4 * u())), f32(Sr * (1 + 0.6 * u())), f32(Ar * (1 + 0.3 * u()))
+Cn = (Dn.astype(np.float32) + Sn.astype(np.float32)).astype(np.float64)
+noisy = dict(orig)
+put(noisy, "diffuse.", Dn), put(noisy, "specular.", Sn), put(noisy, "albedo.", An), put(noisy, "", Cn)
+NOISY = write(os.path.join(DIR, "eb_noisy.exr"), spec, noisy)
+AOV = os.path.join(DIR, "aov.exr")
+for eps in (None, 0.05):
+    j = budget(NOISY, AOV, *(["--eps", repr(eps)] if eps else []))
+    e = 0.00316 if eps is None else eps
+    want = {"noisy": relmse(Cn, Cr),
+            "irradiance_oracle": relmse((An + e) * Dr / (Ar + e) + Sr, Cr),
+            "diffuse_exact": relmse(Dr + Sn, Cr),
+            "specular_exact": relmse(Dn + Sr, Cr)}
+    show("all perturbed eps=%g" % e, j)
+    for k, v in want.items():
+        if not (v > 0 and close(j[k], v, 1e-9)):
+            fail("%s (eps %g): script %.17g, recomputed %.17g" % (k, e, j[k], v))
+r = subprocess.run([TOOL, "--json", NOISY, AOV, "--ch", "R,G,B", "--relmse"],
+                   stdout=subprocess.PIPE, text=True)
+if r.returncode != 0 or not close(json.loads(r.stdout)["relmse"], j["noisy"], 1e-6):
+    fail("noisy %.17g != kpcntool --relmse %s" % (j["noisy"], r.stdout.strip()))
+
+# 3. with a model
+MODEL = os.path.join(DIR, "model.safetensors")
+TARGET = 0.5  # exact in float32, as the library keeps it
+
+
+def with_exposure(src, dst, target):
+    with open(src, "rb") as f:
+        n = struct.unpack("<Q", f.read(8))[0]
+        head = json.loads(f.read(n))
+        data = f.read()
+    arch = json.loads(head["__metadata__"]["kpcn.architecture"])
+    if "exposure" in arch:
+        fail("the fixture model already records an exposure")
+    arch["exposure"] = target
+    head["__metadata__"]["kpcn.architecture"] = json.dumps(arch, separators=(",", ":"))
+    h = json.dumps(head, separators=(",", ":")).encode()
+    h += b" " * (-len(h) % 8)
+    with open(dst, "wb") as f:
+        f.write(struct.pack("<Q", len(h)) + h + data)
+    return dst
+
+
+def exposure(path):
+    r = subprocess.run([TOOL, path, "--exposure", "--json"], stdout=subprocess.PIPE, text=True)
+    if r.returncode != 0:
+        fail("kpcntool --exposure %s" % path)
+    return json.loads(r.stdout)["exposure"]
+
+
+def denoise(src, model, opts, name):
+    dst = os.path.join(DIR, name)
+    if subprocess.run([TOOL, src, "--denoise:model=" + model + opts, "-o", dst]).returncode:
+        fail("kpcntool --denoise %s" % src)
+    return get(read(dst)[1], "")
+
+
+def zeroed(ch, pre, name):
+    y = dict(ch)
+    for k in y:
+        if k.startswith(pre):
+            y[k] = np.zeros_like(y[k])
+    return write(os.path.join(DIR, name), spec, y, exact=False)
+
+
+nospec_ref = dict(ref)
+put(nospec_ref, "specular.", 0 * S), put(nospec_ref, "", D)
+NSREF = write(os.path.join(DIR, "eb_nospec_ref.exr"), spec, nospec_ref)
+nospec_noisy = dict(noisy)
+for k in nospec_noisy:
+    if k.startswith("specular."):
+        nospec_noisy[k] = np.zeros_like(nospec_noisy[k])
+put(nospec_noisy, "", Dn)
+NSNOISY = write(os.path.join(DIR, "eb_nospec_noisy.exr"), spec, nospec_noisy)
+NODIFF = zeroed(noisy, "diffuse.", "eb_nodiff.exr")
+NOSPEC = zeroed(noisy, "specular.", "eb_nospec.exr")
+e_full, e_nodiff, e_nospec = exposure(NOISY), exposure(NODIFF), exposure(NOSPEC)
+if not (e_full > 0 and e_nodiff > 0 and e_nospec > 0):
+    fail("fixture exposures %g %g %g" % (e_full, e_nodiff, e_nospec))
+EXPMODEL = with_exposure(MODEL, os.path.join(DIR, "eb_model_exposure.safetensors"), TARGET)
+print("exposures: full %.6g, diffuse zeroed %.6g, specular zeroed %.6g; target %g"
+      % (e_full, e_nodiff, e_nospec, TARGET))
+for model, target in ((MODEL, 0.0), (EXPMODEL, TARGET)):
+    tag = "exposure %g" % target if target else "as rendered"
+    j = budget(NSNOISY, NSREF, "--model", model, "--kpcntool", TOOL)
+    show("no specular, " + tag, j)
+    if not (j["kpcn_specular"] == 0.0 and j["kpcn"] > 0 and close(j["kpcn_diffuse"], j["kpcn"], 1e-12)):
+        fail("no specular (%s): want kpcn_specular == 0, kpcn_diffuse == kpcn: %s" % (tag, j))
+    # the other way round: each branch alone, at the full input's colour scale
+    pin = lambda e: ":exposure=%r" % (e * target / e_full) if target else ""
+    full = denoise(NOISY, model, "", "eb_full.exr")
+    spec_part = denoise(NODIFF, model, pin(e_nodiff), "eb_spec_part.exr")
+    diff_part = denoise(NOSPEC, model, pin(e_nospec), "eb_diff_part.exr")
+    res = np.abs(full - diff_part - spec_part).max() / np.abs(full).max()
+    if not res < 1e-6:
+        fail("%s: full != diffuse part + specular part pixelwise (max rel %.3g)" % (tag, res))
+    j = budget(NOISY, AOV, "--model", model, "--kpcntool", TOOL)
+    show("all perturbed, " + tag, j)
+    want = {"kpcn": relmse(full, Cr), "kpcn_specular": relmse(Dr + spec_part, Cr),
+            "kpcn_diffuse": relmse(full - spec_part + Sr, Cr)}
+    dev = max(abs(j[k] / v - 1) for k, v in want.items())
+    print("  split residual %.3g (max |full - parts| / max |full|), figures within %.3g" % (res, dev))
+    for k, v in want.items():
+        if not (v > 0 and close(j[k], v, 1e-6)):
+            fail("%s (%s): script %.9g, via the zeroed-diffuse run %.9g" % (k, tag, j[k], v))
+print("error_budget_check: all passed")
