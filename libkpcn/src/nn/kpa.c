@@ -92,9 +92,10 @@ static inline int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? 
  * cpu preset). Range reduction x = n ln2 + r, |r| <= ln2/2, degree-6 Taylor/Horner for e^r
  * (truncation < 2e-8 relative), 2^n through the exponent bits. x < -87 flushes to 0. */
 static inline float exp_nonpos(float x) {
-  x = x < -87.f ? -87.f : x;
+  x = x < -87.f ? -87.f : x; /* a NaN stays NaN (and comes out NaN: see below) */
   float t = x * 1.44269504088896341f;
-  float nf = (t + 12582912.f) - 12582912.f; /* round to nearest (|t| < 2^22) */
+  const float big = t + 12582912.f; /* 1.5 * 2^23: its low mantissa bits hold round(t) */
+  float nf = big - 12582912.f;      /* round to nearest (|t| < 2^22) */
   float r = x - nf * 0.693145751953125f - nf * 1.428606765330187e-06f;
   float p = 1.f / 720.f;
   p = p * r + 1.f / 120.f;
@@ -103,10 +104,14 @@ static inline float exp_nonpos(float x) {
   p = p * r + 0.5f;
   p = p * r + 1.f;
   p = p * r + 1.f;
+  /* 2^n from the integer in big's bits, not (int)nf: converting a NaN to int is undefined
+   * behaviour, and a NaN logit (an overflowing model) must come out as NaN for the denoiser's
+   * result check to see it. Unsigned arithmetic: for finite x, n + 127 is in [1, 127]. */
   union {
-    int32_t i;
     float f;
-  } u = {.i = ((int32_t)nf + 127) * (1 << 23)};
+    uint32_t u;
+  } b = {.f = big}, u;
+  u.u = (b.u - 0x4B400000u + 127u) << 23;
   return p * u.f;
 }
 
@@ -192,7 +197,7 @@ __attribute__((target("avx512f"))) static void transpose16x16(const float *src, 
  * adds, so the last bit may differ from the default build's). */
 __attribute__((target("avx512f"), always_inline)) static inline __m512 exp_nonpos16(__m512 x) {
   const __m512 magic = _mm512_set1_ps(12582912.f);
-  x = _mm512_max_ps(x, _mm512_set1_ps(-87.f));
+  x = _mm512_max_ps(_mm512_set1_ps(-87.f), x); /* NaN in x is returned, so it propagates */
   const __m512 nf =
       _mm512_sub_ps(_mm512_fmadd_ps(x, _mm512_set1_ps(1.44269504088896341f), magic), magic);
   __m512 r = _mm512_fnmadd_ps(nf, _mm512_set1_ps(0.693145751953125f), x);
