@@ -113,6 +113,18 @@ static void test_aovs(const kpcn_scene *s) {
   /* corner pixel: the ray leaves the open box: miss -> zeros everywhere */
   for (int k = 0; k < KPCN_BUF_COUNT; k++)
     CHECK(a->buf[k][0] == 0.0f);
+  /* the bounce limit cuts the light transport, not the features: with max_bounces 0 (direct
+   * emission only) albedo, normal and depth are the full render's, bit for bit */
+  kpcn_aov_set *z = rt_render(s, 16, 3, 0, W, W, KPCN_LIGHTS_SCENE, 0);
+  CHECK(z != NULL);
+  if (z) {
+    const kpcn_buffer feat[] = {KPCN_BUF_ALBEDO, KPCN_BUF_NORMAL, KPCN_BUF_DEPTH};
+    for (int f = 0; f < 3; f++) {
+      const int nc = feat[f] == KPCN_BUF_DEPTH ? 1 : 3;
+      CHECK(memcmp(z->buf[feat[f]], a->buf[feat[f]], sizeof(float) * nc * plane) == 0);
+    }
+    kpcn_aov_destroy(z);
+  }
   kpcn_aov_destroy(a);
 }
 

@@ -254,7 +254,6 @@ static void shade_hit(const kpcn_render_ctx *ctx, path_state *L, unsigned geom_i
     }
     return;
   }
-  if (L->bounce >= ctx->max_bounces) return;
   kpcn_vec3 wo = kv3_neg(d), ng = h.ng, ns = h.ns;
   if (!kpcn_bsdf_is_transmissive(bsdf) && kv3_dot(wo, ng) < 0.0f) { /* two-sided shading */
     ng = kv3_neg(ng);
@@ -275,6 +274,9 @@ static void shade_hit(const kpcn_render_ctx *ctx, path_state *L, unsigned geom_i
      * arithmetic, so its features are the same bits */
     if (ctx->features_only) return;
   }
+  /* after the features: a path cut by the bounce limit still has its feature surface (with
+   * --max-bounces 0 every surface used to get albedo, normal and depth 0) */
+  if (L->bounce >= ctx->max_bounces) return;
   /* three dimension pairs per bounce: (light choice, lobe choice), light point, direction */
   kpcn_sampler_set_pair(smp, 2 + 3 * (uint32_t)L->bounce);
   float ul, ulobe, u1, u2, ub1, ub2;
