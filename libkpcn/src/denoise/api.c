@@ -376,10 +376,6 @@ static float *dup_floats(const float *src, size_t n, kpcn_status *s) {
   return p;
 }
 
-/* The exposure scale (measured on the input as given), the KPCN's firefly bound, then
- * run_ensemble. The bound runs once, before the ensemble's mirrors and rotations (it commutes
- * with them), on a shallow copy of the input whose only own planes are the three it changes:
- * diffuse, its variance and colour (the other buffers stay the caller's, read only). */
 /* A finite input can still come back non-finite when a model's weights are finite but absurd
  * (a damaged file, a diverged run): logits overflow to Inf and the softmax gives NaN. Refuse
  * such a result rather than return it as a success. */
@@ -396,6 +392,10 @@ static kpcn_status check_result(kpcn_status s, const float *out, size_t n) {
   return KPCN_OK;
 }
 
+/* The exposure scale (measured on the input as given), the KPCN's firefly bound, then
+ * run_ensemble, then the result check. The bound runs once, before the ensemble's mirrors and rotations (it commutes
+ * with them), on a shallow copy of the input whose only own planes are the three it changes:
+ * diffuse, its variance and colour (the other buffers stay the caller's, read only). */
 static kpcn_status run_denoise(kpcn_denoiser *d, const kpcn_aov_set *aov, float *out) {
   /* A NaN or Inf reaches every softmax window (and baseline weight) that sees it and comes back
    * as a patch of NaN while the call succeeds: refuse it, naming the buffer. */
