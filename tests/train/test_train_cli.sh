@@ -1,6 +1,8 @@
 #!/bin/sh
 # kpcn-train --record-exposure: a copy of a model recording the median exposure of a patch
-# store's training images; same weights; bad inputs named, no output file. --firefly: bad ratios named.
+# store's training images; same weights; bad inputs named, no output file. --set-eps: the
+# same weights with another demodulation epsilon; set back, the original function bit for bit.
+# --firefly: bad ratios named.
 # usage: test_train_cli.sh KPCN_TRAIN KPCNTOOL TESTDATA
 set -u
 K=$1; T=$2; TD=$3
@@ -36,6 +38,37 @@ for args in "$M $D/nope.kps" "$M $N" "$N $D/p.kps"; do
 done
 "$K" --record-exposure "$D/bad.safetensors" "$M" 2>"$D/err" && fail "accepted without a store"
 grep -q 'expected' "$D/err" || fail "usage error unclear: $(cat "$D/err")"
+# --set-eps: the model's eps changes the denoised result; set back to the original's (0.00316,
+# stored as the float 0.00316000008), the result equals the original model's bit for bit
+"$K" --set-eps "$D/e4.safetensors" "$M" 1e-4 >"$D/log" || fail "set-eps"
+grep -aq '"kpcn.eps":"9.99999975e-05"' "$D/e4.safetensors" || fail "model header lacks eps 1e-4"
+"$K" --set-eps "$D/back.safetensors" "$D/e4.safetensors" 0.00316 >"$D/log" || fail "set-eps back"
+"$T" "$N" --denoise:model="$D/e4.safetensors" -o "$D/e4.exr" || fail "denoise eps 1e-4"
+"$T" "$N" --denoise:model="$D/back.safetensors" -o "$D/back.exr" || fail "denoise eps back"
+"$T" "$N" --denoise:model="$M" -o "$D/orig.exr" || fail "denoise original"
+"$T" --json "$D/back.exr" "$D/orig.exr" --l1 >"$D/l1.json" || fail "l1 back"
+grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/l1.json" || fail "eps set back differs: $(cat "$D/l1.json")"
+"$T" --json "$D/e4.exr" "$D/orig.exr" --l1 >"$D/l1.json" || fail "l1 e4"
+grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/l1.json" && fail "eps 1e-4 changed nothing"
+# --eps trains a new model with it, and sets it on an --init model
+"$K" --store "$D/p.kps" -o "$D/t.safetensors" --preset tiny --iters 1 --batch 2 --patch 16 \
+  --eps 1e-4 --csv '' --plot '' --ckpt '' --quiet || fail "train --eps"
+grep -aq '"kpcn.eps":"9.99999975e-05"' "$D/t.safetensors" || fail "trained model lacks eps 1e-4"
+"$K" --store "$D/p.kps" -o "$D/i.safetensors" --init "$D/t.safetensors" --iters 1 --batch 2 \
+  --patch 16 --eps 2e-4 --csv '' --plot '' --ckpt '' --quiet || fail "train --init --eps"
+grep -aq '"kpcn.eps":"0.000199999995"' "$D/i.safetensors" || fail "--init model lacks eps 2e-4"
+for bad in 0 1 -1e-3 abc 1e-3x; do
+  "$K" --set-eps "$D/bad.safetensors" "$M" "$bad" 2>"$D/err"
+  rc=$?
+  [ $rc -eq 2 ] || fail "--set-eps $bad: exit $rc (want 2)"
+  grep -q "not a number in (0, 1)" "$D/err" || fail "--set-eps $bad unclear: $(cat "$D/err")"
+  [ ! -e "$D/bad.safetensors" ] || fail "output written for --set-eps $bad"
+done
+"$K" --set-eps "$D/bad.safetensors" "$N" 1e-4 2>"$D/err" && fail "--set-eps of a non-model accepted"
+grep -qF -- "$N" "$D/err" || fail "--set-eps error does not name the model: $(cat "$D/err")"
+[ ! -e "$D/bad.safetensors" ] || fail "output written for a non-model"
+"$K" --set-eps "$D/bad.safetensors" "$M" 2>"$D/err" && fail "--set-eps without EPS accepted"
+grep -q 'expected' "$D/err" || fail "--set-eps usage error unclear: $(cat "$D/err")"
 # --firefly: a ratio below 1 or no number is refused naming the option, nothing is written
 for bad in 0.5 abc; do
   if "$K" --store "$D/p.kps" -o "$D/f.safetensors" --iters 1 --firefly $bad 2>"$D/err"; then
@@ -62,6 +95,8 @@ bad_usage "the window must be odd" --loss2 ssim --ssim-window 4
 bad_usage "--layers asks for 5 hidden layers, the --init model" --init "$M" --layers 5
 bad_usage "--preset asks for" --init "$M" --preset tiny
 bad_usage "--average must be the first argument" --average "$M"
+bad_usage "--set-eps must be the first argument" --set-eps "$M"
+bad_usage "--eps" --eps 0
 # an output that would overwrite the patch store is refused; the store is intact
 if "$K" --store "$D/p.kps" -o "$D/c.safetensors" --iters 1 --csv "$D/p.kps" 2>"$D/err"; then
   fail "--csv over the store accepted"

@@ -29,6 +29,8 @@ static void usage(FILE *f) {
         "                            function: new units get zero outgoing weights)\n"
         "  --kpa-passes N            apply the predicted kernels N times (1..3, default 1;\n"
         "                            with --init: the model's own unless given)\n"
+        "  --eps X                   the albedo epsilon of the diffuse demodulation (default\n"
+        "                            0.00316; with --init: the model's own unless given)\n"
         "  --source-weight           predict a per-pixel source weight too (arch.source_weight;\n"
         "                            with --init: added with zero weights, same function)\n"
         "  --source-lr-scale X       the source score's weights learn at X times the rate\n"
@@ -70,7 +72,11 @@ static void usage(FILE *f) {
         "usage: kpcn-train --record-exposure OUT.safetensors MODEL STORE.kps\n"
         "  a copy of MODEL (same weights) recording the median exposure of the training images\n"
         "  of the patch store it was trained on (a model trained by kpcn-train records it\n"
-        "  itself); the denoiser shows the network every input at that exposure\n",
+        "  itself); the denoiser shows the network every input at that exposure\n"
+        "\n"
+        "usage: kpcn-train --set-eps OUT.safetensors MODEL EPS\n"
+        "  a copy of MODEL (same weights) with the albedo epsilon EPS (0 < EPS < 1) in its\n"
+        "  diffuse demodulation, diffuse / (albedo + EPS)\n",
         f);
 }
 
@@ -235,6 +241,30 @@ static int average_main(int argc, char **argv) {
   return 0;
 }
 
+static int set_eps_main(int argc, char **argv) {
+  if (argc != 5) {
+    fprintf(stderr, "kpcn-train --set-eps: expected OUT.safetensors MODEL EPS\n");
+    return 2;
+  }
+  char *end;
+  double e = strtod(argv[4], &end);
+  if (end == argv[4] || *end || !(e > 0.0 && e < 1.0)) {
+    fprintf(stderr, "kpcn-train --set-eps: EPS '%s' is not a number in (0, 1)\n", argv[4]);
+    return 2;
+  }
+  kpcn_model *m = NULL;
+  kpcn_status st = kpcn_model_load(argv[3], &m);
+  if (st == KPCN_OK) st = kpcn_model_set_eps(m, (float)e);
+  if (st == KPCN_OK) st = kpcn_model_save(m, argv[2]);
+  kpcn_model_destroy(m);
+  if (st != KPCN_OK) {
+    fprintf(stderr, "kpcn-train --set-eps: %s\n", kpcn_last_error());
+    return 1;
+  }
+  if (!g_quiet) printf("kpcn-train: %s = %s with eps %.9g\n", argv[2], argv[3], (double)(float)e);
+  return 0;
+}
+
 static int record_exposure_main(int argc, char **argv) {
   if (argc != 5) {
     fprintf(stderr, "kpcn-train --record-exposure: expected OUT.safetensors MODEL STORE.kps\n");
@@ -268,7 +298,8 @@ static int record_exposure_main(int argc, char **argv) {
 }
 
 /* An --init model keeps its architecture; a shape option that disagrees with it is a mistake to
- * report, not to ignore (--widen, --kpa-passes and --source-weight are the changes it takes). */
+ * report, not to ignore (--widen, --kpa-passes, --eps and --source-weight are the changes it
+ * takes). */
 static int check_init_arch(const kpcn_train_settings *s, int preset, int layers, int channels,
                            int conv, int kernel, int dil) {
   kpcn_model *m = NULL;
@@ -306,10 +337,11 @@ static int check_init_arch(const kpcn_train_settings *s, int preset, int layers,
   }
   kpcn_model_destroy(m);
   if (!bad) return 0;
-  fprintf(stderr,
-          "kpcn-train: %s asks for %s, the --init model '%s' has %s: an --init model keeps its "
-          "architecture (--widen, --kpa-passes and --source-weight are the changes it takes)\n",
-          bad, want, s->init_model, has);
+  fprintf(
+      stderr,
+      "kpcn-train: %s asks for %s, the --init model '%s' has %s: an --init model keeps its "
+      "architecture (--widen, --kpa-passes, --eps and --source-weight are the changes it takes)\n",
+      bad, want, s->init_model, has);
   return 2;
 }
 
@@ -317,13 +349,14 @@ int main(int argc, char **argv) {
   if (argc >= 3 && !strcmp(argv[1], "--compare")) return compare_main(argc, argv);
   if (argc >= 2 && !strcmp(argv[1], "--record-exposure")) return record_exposure_main(argc, argv);
   if (argc >= 2 && !strcmp(argv[1], "--average")) return average_main(argc, argv);
+  if (argc >= 2 && !strcmp(argv[1], "--set-eps")) return set_eps_main(argc, argv);
   kpcn_train_settings s;
   kpcn_train_settings_defaults(&s);
   const char *preset = "cpu", *dil = NULL, *loss2 = NULL, *best_by = NULL;
   long long layers = -1, channels = -1, conv = -1, kernel = -1, ssim_win = -1, kpa_passes = -1, v;
   int source_weight = 0, preset_given = 0;
   int from_store = 0;
-  double d;
+  double d, eps = 0;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i];
     const char *arg = i + 1 < argc ? argv[i + 1] : NULL;
@@ -394,6 +427,7 @@ int main(int argc, char **argv) {
     DBL("--source-lr-scale", 1e-3, 1e4, s.source_lr_scale)
     DBL("--firefly", 1, 1e30, s.firefly)
     DBL("--lr", 1e-12, 10, s.adam.lr)
+    DBL("--eps", 1e-9, 0.5, eps)
     DBL("--lr2", 1e-12, 1, s.stage2_lr)
     DBL("--lr-decay", 1e-6, 1, s.adam.lr_decay)
     DBL("--clip", 0, 1e12, s.adam.clip_norm)
@@ -425,7 +459,7 @@ int main(int argc, char **argv) {
     else if (!strcmp(a, "--normalize-exposure")) s.normalize_exposure = 1;
     else if (!strcmp(a, "--quiet")) g_quiet = 1;
     else if (!strcmp(a, "--compare") || !strcmp(a, "--average") ||
-             !strcmp(a, "--record-exposure")) {
+             !strcmp(a, "--record-exposure") || !strcmp(a, "--set-eps")) {
       /* These are modes of their own, not options of a training run. */
       fprintf(stderr,
               "kpcn-train: %s must be the first argument (and takes its own arguments; see "
@@ -478,6 +512,7 @@ int main(int argc, char **argv) {
   if (kernel > 0) s.arch.kernel_size = (int)kernel;
   if (kpa_passes > 0) s.arch.kpa_passes = s.kpa_passes = (int)kpa_passes;
   if (source_weight) s.arch.source_weight = s.source_weight = 1;
+  if (eps > 0) s.arch.eps = s.eps = (float)eps;
   if (dil) {
     const char *p = dil;
     for (int l = 0; l <= s.arch.n_hidden; l++) {

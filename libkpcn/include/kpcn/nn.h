@@ -152,6 +152,11 @@ kpcn_status kpcn_model_widen(const kpcn_model *m, int channels, uint64_t seed, k
  * KPCN_NN_MAX_KPA_PASSES): the weights are kept, so a fine-tune can start a multi-pass model
  * from a single-pass one. */
 kpcn_status kpcn_model_set_kpa_passes(kpcn_model *m, int passes);
+/* Sets the albedo epsilon of the diffuse demodulation, diffuse / (albedo + eps) and its
+ * inverse (arch.eps, in (0, 1)); the weights are kept. The smaller it is, the flatter the
+ * demodulated irradiance across a texture edge (docs/denoiser.md, "The demodulation
+ * epsilon"). */
+kpcn_status kpcn_model_set_eps(kpcn_model *m, float eps);
 /* Records the median exposure of the images the model was trained on (arch.exposure):
  * > 0, or 0 to clear. */
 kpcn_status kpcn_model_set_exposure(kpcn_model *m, float exposure);

@@ -229,6 +229,9 @@ typedef struct kpcn_train_settings {
   int kpa_passes;          /* > 0 (needs init_model): apply its kernels this many times
                               (kpcn_model_set_kpa_passes); 0 = as the model says. Without
                               init_model, arch.kpa_passes decides */
+  float eps;               /* > 0 (needs init_model): set its demodulation epsilon
+                              (kpcn_model_set_eps); 0 = as the model says. Without
+                              init_model, arch.eps decides */
   int source_weight;       /* 1 (needs init_model): add the source score channel to it
                               (kpcn_model_add_source_weight: same function at the start).
                               Without init_model, arch.source_weight decides */

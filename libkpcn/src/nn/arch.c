@@ -112,8 +112,9 @@ kpcn_status kpcn_arch_validate(const kpcn_arch *a) {
         return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.inputs[%d] = '%s' duplicates inputs[%d]",
                          i, a->inputs[i], j);
   }
-  if (!(a->eps >= 0.0f && a->eps < 1.0f))
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.eps = %g not in [0, 1)", (double)a->eps);
+  /* 0 would divide by zero wherever the albedo is 0 (misses, black materials) */
+  if (!(a->eps > 0.0f && a->eps < 1.0f))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.eps = %g not in (0, 1)", (double)a->eps);
   if (a->kpa_passes < 0 || a->kpa_passes > KPCN_NN_MAX_KPA_PASSES)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.kpa_passes = %d not in [1, %d]",
                      a->kpa_passes, KPCN_NN_MAX_KPA_PASSES);

@@ -108,6 +108,11 @@ kpcn_status kpcn_net_make_pd(kpcn_net *n, dnnl_primitive_desc_t *pd, const void 
 /* net_layer.c */
 int kpcn_net_impl_is(const_dnnl_primitive_desc_t pd, const char *prefix);
 void kpcn_net_flip_weights(const layer *y, const float *w);
+/* Tests: nets created after this with on = 1 run every layer's backward-data as a forward conv
+ * wherever that forward is no fallback, not only where oneDNN's own backward-data is one
+ * (which depends on the CPU: Zen 4 falls back for dilation 8, an AVX-512 Xeon does not), so
+ * the path is checked on every CPU. Not thread-safe; 0 restores the default. */
+void kpcn_net_set_bwdd_as_forward_always(int on);
 kpcn_status kpcn_net_choose_tag(kpcn_net *n, int l);
 kpcn_status kpcn_net_build_layer(kpcn_net *n, int l, const dnnl_memory_desc_t *src_md,
                                  size_t *scratch);

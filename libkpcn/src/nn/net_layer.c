@@ -84,12 +84,15 @@ static void replace_pd(kpcn_net *n, dnnl_primitive_desc_t *slot, dnnl_primitive_
  * backward-data runs as that forward primitive instead (y->bwdd_pd replaced, y->bwdd_fwd
  * set; the flipped OIHW weights are built in y->wflip before each use). Kept only when the
  * forward kernel is not itself a fallback. *iohw: the flipped weights' user descriptor. */
+static int g_bwdd_as_forward_always;
+void kpcn_net_set_bwdd_as_forward_always(int on) { g_bwdd_as_forward_always = on != 0; }
+
 static kpcn_status try_bwdd_as_forward(kpcn_net *n, int l, const dnnl_dims_t strides,
                                        const dnnl_dims_t dil, const dnnl_dims_t pl,
                                        const dnnl_dims_t pr, dnnl_memory_desc_t *iohw,
                                        size_t *scratch) {
   layer *y = &n->L[l];
-  if (!is_fallback(y->bwdd_pd)) return KPCN_OK;
+  if (!g_bwdd_as_forward_always && !is_fallback(y->bwdd_pd)) return KPCN_OK;
   dnnl_dims_t wd = {y->cin, y->cout, y->k, y->k};
   dnnl_memory_desc_t wany;
   DN(dnnl_memory_desc_init_by_tag(&wany, 4, wd, dnnl_f32, dnnl_format_tag_any));

@@ -332,6 +332,7 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
       t->model = wide;
     }
     if (s->kpa_passes > 0) GO(kpcn_model_set_kpa_passes(t->model, s->kpa_passes));
+    if (s->eps > 0) GO(kpcn_model_set_eps(t->model, s->eps));
     if (s->source_weight && !kpcn_model_arch(t->model)->source_weight) {
       kpcn_model *sw = NULL;
       GO(kpcn_model_add_source_weight(t->model, &sw));
