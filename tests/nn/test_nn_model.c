@@ -144,6 +144,18 @@ static void arch_add(cJSON *h, const char *key, double v) {
   arch_set_raw(h, key, num);
 }
 static void m_arch_passes(cJSON *h) { arch_add(h, "kpa_passes", 0); }
+/* eps 0 in both places the file records it (they must agree): refused as an architecture that
+ * would divide by zero at albedo 0, not as a disagreement */
+static void m_eps_zero(cJSON *h) {
+  cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
+  cJSON *a = cJSON_Parse(cJSON_GetObjectItem(meta, "kpcn.architecture")->valuestring);
+  cJSON_ReplaceItemInObject(a, "eps", cJSON_CreateNumber(0));
+  char *s = cJSON_PrintUnformatted(a);
+  cJSON_ReplaceItemInObject(meta, "kpcn.architecture", cJSON_CreateString(s));
+  cJSON_ReplaceItemInObject(meta, "kpcn.eps", cJSON_CreateString("0"));
+  free(s);
+  cJSON_Delete(a);
+}
 static void m_exp_zero(cJSON *h) { arch_set_raw(h, "exposure", "0"); }
 static void m_exp_neg(cJSON *h) { arch_set_raw(h, "exposure", "-1"); }
 static void m_exp_arr(cJSON *h) { arch_set_raw(h, "exposure", "[1]"); }
@@ -435,6 +447,7 @@ static void test_malformed(const blob *good) {
   mutated(good, "arch kpa_passes 0", m_arch_passes, "kpa_passes");
   mutated(good, "arch source_weight 2", m_arch_sw2, "source_weight");
   mutated(good, "arch exposure 0", m_exp_zero, "exposure");
+  mutated(good, "arch eps 0", m_eps_zero, "arch.eps = 0 not in (0, 1)");
   mutated(good, "arch exposure -1", m_exp_neg, "exposure");
   mutated(good, "arch exposure [1]", m_exp_arr, "exposure");
   mutated(good, "arch exposure \"a\"", m_exp_str, "exposure");
