@@ -128,11 +128,14 @@ static void m_arch_k(cJSON *h) {
   free(s);
   cJSON_Delete(a);
 }
-/* adds "key": <the JSON text v> to the stored architecture */
+/* sets "key": <the JSON text v> in the stored architecture (replaced if present) */
 static void arch_set_raw(cJSON *h, const char *key, const char *v) {
   cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
   cJSON *a = cJSON_Parse(cJSON_GetObjectItem(meta, "kpcn.architecture")->valuestring);
-  cJSON_AddItemToObject(a, key, cJSON_Parse(v));
+  if (cJSON_GetObjectItem(a, key))
+    cJSON_ReplaceItemInObject(a, key, cJSON_Parse(v));
+  else
+    cJSON_AddItemToObject(a, key, cJSON_Parse(v));
   char *s = cJSON_PrintUnformatted(a);
   cJSON_ReplaceItemInObject(meta, "kpcn.architecture", cJSON_CreateString(s));
   free(s);
@@ -147,14 +150,9 @@ static void m_arch_passes(cJSON *h) { arch_add(h, "kpa_passes", 0); }
 /* eps 0 in both places the file records it (they must agree): refused as an architecture that
  * would divide by zero at albedo 0, not as a disagreement */
 static void m_eps_zero(cJSON *h) {
-  cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
-  cJSON *a = cJSON_Parse(cJSON_GetObjectItem(meta, "kpcn.architecture")->valuestring);
-  cJSON_ReplaceItemInObject(a, "eps", cJSON_CreateNumber(0));
-  char *s = cJSON_PrintUnformatted(a);
-  cJSON_ReplaceItemInObject(meta, "kpcn.architecture", cJSON_CreateString(s));
-  cJSON_ReplaceItemInObject(meta, "kpcn.eps", cJSON_CreateString("0"));
-  free(s);
-  cJSON_Delete(a);
+  arch_set_raw(h, "eps", "0");
+  cJSON_ReplaceItemInObject(cJSON_GetObjectItem(h, "__metadata__"), "kpcn.eps",
+                            cJSON_CreateString("0"));
 }
 static void m_exp_zero(cJSON *h) { arch_set_raw(h, "exposure", "0"); }
 static void m_exp_neg(cJSON *h) { arch_set_raw(h, "exposure", "-1"); }

@@ -141,22 +141,26 @@ kpcn_status kpcn_model_set_kpa_passes(kpcn_model *m, int passes) {
   return KPCN_OK;
 }
 
+/* The model takes `a` (a copy of its architecture with one field changed; the weights stay)
+ * only if it validates as a whole. */
+static kpcn_status replace_arch(kpcn_model *m, const kpcn_arch *a) {
+  KPCN_TRY(kpcn_arch_validate(a));
+  m->arch = *a;
+  return KPCN_OK;
+}
+
 kpcn_status kpcn_model_set_eps(kpcn_model *m, float eps) {
   if (!m) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_set_eps: NULL model");
   kpcn_arch a = m->arch;
   a.eps = eps;
-  KPCN_TRY(kpcn_arch_validate(&a));
-  m->arch = a;
-  return KPCN_OK;
+  return replace_arch(m, &a);
 }
 
 kpcn_status kpcn_model_set_exposure(kpcn_model *m, float exposure) {
   if (!m) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_set_exposure: NULL model");
   kpcn_arch a = m->arch;
   a.exposure = exposure;
-  KPCN_TRY(kpcn_arch_validate(&a));
-  m->arch = a;
-  return KPCN_OK;
+  return replace_arch(m, &a);
 }
 
 kpcn_status kpcn_model_add_source_weight(const kpcn_model *src, kpcn_model **out) {
