@@ -96,13 +96,13 @@ def main():
         fail("no model file '%s'" % a.model)
     variants = int_list(a.variants, "--variants") if a.variants else None
     spps = int_list(a.spp, "--spp") if a.spp else None
-    todo = [(ds,) + p for ds in a.datasets for p in pairs(ds, variants, spps)]
-    if not todo:
+    jobs = [(ds,) + p for ds in a.datasets for p in pairs(ds, variants, spps)]
+    if not jobs:
         fail("no pairs found in %s" % ", ".join(a.datasets))
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "denoised.exr")
-        for ds, scene, v, spp, noisy, ref in todo:
+        for ds, scene, v, spp, noisy, ref in jobs:
             run([a.kpcntool, noisy, "--denoise:model=" + a.model + a.denoise_opts, "-o", out])
             d = json.loads(run([a.kpcntool, out, ref, "--ch", "R,G,B", "--relmse",
                                 "--psnr:display=srgb", "--json"]))
