@@ -3,6 +3,9 @@
 
 usage: tools/error_budget.py NOISY.exr REF.exr [--model M.safetensors] [--kpcntool PATH] [--eps E]
 
+--eps is the albedo epsilon of the oracle's demodulation: by default the model's (kpcn.eps), or
+0.00316 (Bako 2017's) without --model.
+
 Both files are kpcn AOV EXRs (REF with its diffuse / specular / albedo buffers, as the
 dataset's references are). Prints one JSON object of relMSE values (R, G, B; eps 0.01, as
 kpcntool --relmse) against REF's colour:
@@ -73,16 +76,31 @@ def relmse(x, y):
     return float(relmse_map(x, y).mean())
 
 
-def model_exposure(path):
-    """The exposure target a model records (kpcn.architecture's "exposure"), 0 if none."""
+def model_meta(path):
+    """A model file's __metadata__ (kpcn_model_save's safetensors header)."""
     try:
         with open(path, "rb") as f:
             n = struct.unpack("<Q", f.read(8))[0]
-            arch = json.loads(json.loads(f.read(n))["__metadata__"]["kpcn.architecture"])
-        e = float(arch.get("exposure", 0.0))
+            return json.loads(f.read(n))["__metadata__"]
     except (OSError, ValueError, KeyError, TypeError, struct.error) as err:
+        fail("%s: cannot read the model's header: %s" % (path, err))
+
+
+def model_exposure(path):
+    """The exposure target a model records (kpcn.architecture's "exposure"), 0 if none."""
+    try:
+        e = float(json.loads(model_meta(path)["kpcn.architecture"]).get("exposure", 0.0))
+    except (ValueError, KeyError, TypeError) as err:
         fail("%s: cannot read the model's exposure: %s" % (path, err))
     return float(np.float32(e)) if e > 0 else 0.0  # the library keeps it as a float
+
+
+def model_eps(path):
+    """The albedo epsilon of a model's diffuse demodulation (kpcn.eps)."""
+    try:
+        return float(model_meta(path)["kpcn.eps"])
+    except (ValueError, KeyError, TypeError) as err:
+        fail("%s: cannot read the model's eps: %s" % (path, err))
 
 
 def exposure(tool, path):
@@ -108,8 +126,10 @@ def main():
     ap.add_argument("--model")
     here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ap.add_argument("--kpcntool", default=os.path.join(here, "build/tools/kpcntool/kpcntool"))
-    ap.add_argument("--eps", type=float, default=0.00316)
+    ap.add_argument("--eps", type=float)
     a = ap.parse_args()
+    if a.eps is None:  # the model's own, so the oracle remodulates as its pipeline does
+        a.eps = model_eps(a.model) if a.model else 0.00316
     if a.model and not os.access(a.kpcntool, os.X_OK):
         fail("no kpcntool at '%s' (build first, or give --kpcntool)" % a.kpcntool)
     nbuf, n = load(a.noisy)

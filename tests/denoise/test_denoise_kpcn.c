@@ -2,7 +2,8 @@
  * (direct conv loops, softmax, kernel apply, recombination), tiled == untiled, bf16 vs
  * fp32 bounded, the C API (model file, named strided buffers, missing buffer named,
  * cancellation), models with a foreign input list rejected; a flat irradiance under a texture
- * within the bound any convex kernel must keep, at two demodulation epsilons. */
+ * within the bound any convex kernel must keep, at two demodulation epsilons; a model whose
+ * branches come from two models gives each one's result where only its light is present. */
 #include <limits.h>
 #include <stdlib.h>
 #include <string.h>
@@ -783,6 +784,64 @@ static void test_eps_flat_irradiance(void) {
   kpcn_model_destroy(m);
 }
 
+/* kpcn_model_graft_branch: the two branches are separate networks whose results are added, so
+ * a model with m1's diffuse and m2's specular branch must give m1's result where the input has
+ * no specular light and m2's where it has no diffuse light, bit for bit (a branch's result on a
+ * zero colour is zero whatever its kernels: they are normalised). The specular branch may come
+ * from a model of another eps; a diffuse one, another exposure or architecture may not, and a
+ * refused graft leaves the model unchanged. */
+static void test_graft_branch(void) {
+  const int W = 40, H = 36;
+  kpcn_model *m1 = make_model(31), *m2 = make_model(32), *h = NULL,
+             *other = make_model_chain(33, 2, 0);
+  kpcn_aov_set *a = synth_aov(W, H, 5), *nd = synth_aov(W, H, 5), *ns = synth_aov(W, H, 5);
+  CHECK(m1 && m2 && other && a && nd && ns);
+  if (!m1 || !m2 || !other || !a || !nd || !ns) return;
+  CHECK(kpcn_model_set_eps(m2, 1e-3f) == KPCN_OK);
+  CHECK(kpcn_model_clone(m1, &h) == KPCN_OK);
+  CHECK(kpcn_model_graft_branch(h, m2, KPCN_BRANCH_SPECULAR) == KPCN_OK);
+  CHECK(kpcn_model_arch(h)->eps == kpcn_model_arch(m1)->eps);
+  const size_t P = kpcn_aov_plane_size(a), n = 3 * P;
+  for (size_t i = 0; i < n; i++) { /* colour = diffuse + specular in both */
+    nd->buf[KPCN_BUF_DIFFUSE][i] = 0.0f;
+    nd->buf[KPCN_BUF_COLOR][i] = nd->buf[KPCN_BUF_SPECULAR][i];
+    ns->buf[KPCN_BUF_SPECULAR][i] = 0.0f;
+    ns->buf[KPCN_BUF_COLOR][i] = ns->buf[KPCN_BUF_DIFFUSE][i];
+  }
+  float *o1 = malloc(sizeof(float) * n), *o2 = malloc(sizeof(float) * n),
+        *oh = malloc(sizeof(float) * n);
+  CHECK(run(m1, ns, 0, 0, o1) == KPCN_OK && run(h, ns, 0, 0, oh) == KPCN_OK);
+  CHECK(memcmp(o1, oh, sizeof(float) * n) == 0); /* no specular light: m1's result */
+  CHECK(run(m2, nd, 0, 0, o2) == KPCN_OK && run(h, nd, 0, 0, oh) == KPCN_OK);
+  CHECK(memcmp(o2, oh, sizeof(float) * n) == 0); /* no diffuse light: m2's result */
+  CHECK(run(m1, a, 0, 0, o1) == KPCN_OK && run(m2, a, 0, 0, o2) == KPCN_OK &&
+        run(h, a, 0, 0, oh) == KPCN_OK);
+  CHECK(max_rel(oh, o1, n) > 1e-3 && max_rel(oh, o2, n) > 1e-3); /* both branches matter */
+  /* refusals, each leaving h as it was */
+  CHECK(kpcn_model_graft_branch(h, m2, KPCN_BRANCH_DIFFUSE) == KPCN_ERR_FORMAT);
+  CHECK(strstr(kpcn_last_error(), "eps") != NULL);
+  CHECK(kpcn_model_graft_branch(h, other, KPCN_BRANCH_SPECULAR) == KPCN_ERR_FORMAT);
+  CHECK(strstr(kpcn_last_error(), "architecture") != NULL);
+  CHECK(kpcn_model_set_exposure(m2, 0.5f) == KPCN_OK);
+  CHECK(kpcn_model_graft_branch(h, m2, KPCN_BRANCH_SPECULAR) == KPCN_ERR_FORMAT);
+  CHECK(strstr(kpcn_last_error(), "exposure") != NULL);
+  CHECK(kpcn_model_graft_branch(h, NULL, KPCN_BRANCH_SPECULAR) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_model_graft_branch(h, m1, (kpcn_branch)2) == KPCN_ERR_INVALID_ARGUMENT);
+  float *o3 = malloc(sizeof(float) * n);
+  CHECK(run(h, a, 0, 0, o3) == KPCN_OK && memcmp(o3, oh, sizeof(float) * n) == 0);
+  free(o1);
+  free(o2);
+  free(oh);
+  free(o3);
+  kpcn_aov_destroy(a);
+  kpcn_aov_destroy(nd);
+  kpcn_aov_destroy(ns);
+  kpcn_model_destroy(m1);
+  kpcn_model_destroy(m2);
+  kpcn_model_destroy(h);
+  kpcn_model_destroy(other);
+}
+
 int main(void) {
   test_exposure();
   test_reference_and_tiling(1, 0);
@@ -794,5 +853,6 @@ int main(void) {
   test_api();
   test_ensemble();
   test_eps_flat_irradiance();
+  test_graft_branch();
   return kt_summary("test_denoise_kpcn");
 }

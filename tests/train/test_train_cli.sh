@@ -2,7 +2,7 @@
 # kpcn-train --record-exposure: a copy of a model recording the median exposure of a patch
 # store's training images; same weights; bad inputs named, no output file. --set-eps: the
 # same weights with another demodulation epsilon; set back, the original function bit for bit.
-# --firefly: bad ratios named.
+# --graft: one branch from another model, mismatches named. --firefly: bad ratios named.
 # usage: test_train_cli.sh KPCN_TRAIN KPCNTOOL TESTDATA
 set -u
 K=$1; T=$2; TD=$3
@@ -38,11 +38,13 @@ for args in "$M $D/nope.kps" "$M $N" "$N $D/p.kps"; do
 done
 "$K" --record-exposure "$D/bad.safetensors" "$M" 2>"$D/err" && fail "accepted without a store"
 grep -q 'expected' "$D/err" || fail "usage error unclear: $(cat "$D/err")"
-# --set-eps: the model's eps changes the denoised result; set back to the original's (0.00316,
-# stored as the float 0.00316000008), the result equals the original model's bit for bit
+# --set-eps: the model's eps changes the denoised result; set back to the original's (as its
+# header writes it, e.g. 0.00316000008), the result equals the original model's bit for bit
+ME=$(grep -ao '"kpcn.eps":"[^"]*"' "$M" | head -1 | sed 's/.*:"\([^"]*\)"/\1/')
+[ -n "$ME" ] || fail "no kpcn.eps in the shipped model's header"
 "$K" --set-eps "$D/e4.safetensors" "$M" 1e-4 >"$D/log" || fail "set-eps"
 grep -aq '"kpcn.eps":"9.99999975e-05"' "$D/e4.safetensors" || fail "model header lacks eps 1e-4"
-"$K" --set-eps "$D/back.safetensors" "$D/e4.safetensors" 0.00316 >"$D/log" || fail "set-eps back"
+"$K" --set-eps "$D/back.safetensors" "$D/e4.safetensors" "$ME" >"$D/log" || fail "set-eps back"
 "$T" "$N" --denoise:model="$D/e4.safetensors" -o "$D/e4.exr" || fail "denoise eps 1e-4"
 "$T" "$N" --denoise:model="$D/back.safetensors" -o "$D/back.exr" || fail "denoise eps back"
 "$T" "$N" --denoise:model="$M" -o "$D/orig.exr" || fail "denoise original"
@@ -69,6 +71,32 @@ grep -qF -- "$N" "$D/err" || fail "--set-eps error does not name the model: $(ca
 [ ! -e "$D/bad.safetensors" ] || fail "output written for a non-model"
 "$K" --set-eps "$D/bad.safetensors" "$M" 2>"$D/err" && fail "--set-eps without EPS accepted"
 grep -q 'expected' "$D/err" || fail "--set-eps usage error unclear: $(cat "$D/err")"
+# --graft: a specular branch may come from a model of another eps (here the same weights, so
+# the result is the eps-1e-4 model's bit for bit); a diffuse one may not, nor a branch of
+# another architecture or exposure; bad usage is exit 2; never an output file on error
+"$K" --graft "$D/g.safetensors" "$D/e4.safetensors" specular "$M" >"$D/log" || fail "graft"
+grep -q "specular branch from" "$D/log" || fail "graft message: $(cat "$D/log")"
+grep -aq '"train.grafted":"specular branch from' "$D/g.safetensors" || fail "no train.grafted"
+grep -aq '"kpcn.eps":"9.99999975e-05"' "$D/g.safetensors" || fail "grafted model lost its eps"
+"$T" "$N" --denoise:model="$D/g.safetensors" -o "$D/g.exr" || fail "denoise grafted"
+"$T" --json "$D/g.exr" "$D/e4.exr" --l1 >"$D/l1.json" || fail "l1 graft"
+grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/l1.json" || fail "graft changed: $(cat "$D/l1.json")"
+for case in "diffuse $M:eps" "specular $D/t.safetensors:architecture" "specular $D/m.safetensors:exposure"; do
+  spec=${case%:*}; want=${case##*:}
+  # shellcheck disable=SC2086
+  "$K" --graft "$D/bad.safetensors" "$D/e4.safetensors" $spec 2>"$D/err"
+  rc=$?
+  [ $rc -eq 1 ] || fail "--graft $spec: exit $rc (want 1)"
+  grep -q "$want" "$D/err" || fail "--graft $spec does not say '$want': $(cat "$D/err")"
+  [ ! -e "$D/bad.safetensors" ] || fail "output written for --graft $spec"
+done
+for args in "$M spec $M" "$M specular"; do
+  # shellcheck disable=SC2086
+  "$K" --graft "$D/bad.safetensors" $args 2>"$D/err"
+  rc=$?
+  [ $rc -eq 2 ] || fail "--graft $args: exit $rc (want 2)"
+  [ ! -e "$D/bad.safetensors" ] || fail "output written for --graft $args"
+done
 # --firefly: a ratio below 1 or no number is refused naming the option, nothing is written
 for bad in 0.5 abc; do
   if "$K" --store "$D/p.kps" -o "$D/f.safetensors" --iters 1 --firefly $bad 2>"$D/err"; then

@@ -76,7 +76,11 @@ static void usage(FILE *f) {
         "\n"
         "usage: kpcn-train --set-eps OUT.safetensors MODEL EPS\n"
         "  a copy of MODEL (same weights) with the albedo epsilon EPS (0 < EPS < 1) in its\n"
-        "  diffuse demodulation, diffuse / (albedo + EPS)\n",
+        "  diffuse demodulation, diffuse / (albedo + EPS)\n"
+        "\n"
+        "usage: kpcn-train --graft OUT.safetensors MODEL diffuse|specular FROM\n"
+        "  a copy of MODEL whose diffuse or specular branch has FROM's weights (same\n"
+        "  architecture and exposure; a specular branch may come from a model of another eps)\n",
         f);
 }
 
@@ -265,6 +269,39 @@ static int set_eps_main(int argc, char **argv) {
   return 0;
 }
 
+static int graft_main(int argc, char **argv) {
+  if (argc != 6) {
+    fprintf(stderr, "kpcn-train --graft: expected OUT.safetensors MODEL diffuse|specular FROM\n");
+    return 2;
+  }
+  kpcn_branch b;
+  if (!strcmp(argv[4], "diffuse"))
+    b = KPCN_BRANCH_DIFFUSE;
+  else if (!strcmp(argv[4], "specular"))
+    b = KPCN_BRANCH_SPECULAR;
+  else {
+    fprintf(stderr, "kpcn-train --graft: branch '%s' is not diffuse or specular\n", argv[4]);
+    return 2;
+  }
+  kpcn_model *m = NULL, *from = NULL;
+  kpcn_status st = kpcn_model_load(argv[3], &m);
+  if (st == KPCN_OK) st = kpcn_model_load(argv[5], &from);
+  if (st == KPCN_OK) st = kpcn_model_graft_branch(m, from, b);
+  char note[600];
+  const char *base = strrchr(argv[5], '/');
+  snprintf(note, sizeof note, "%s branch from %s", argv[4], base ? base + 1 : argv[5]);
+  if (st == KPCN_OK) st = kpcn_model_set_meta(m, "train.grafted", note);
+  if (st == KPCN_OK) st = kpcn_model_save(m, argv[2]);
+  kpcn_model_destroy(m);
+  kpcn_model_destroy(from);
+  if (st != KPCN_OK) {
+    fprintf(stderr, "kpcn-train --graft: %s\n", kpcn_last_error());
+    return 1;
+  }
+  if (!g_quiet) printf("kpcn-train: %s = %s with the %s\n", argv[2], argv[3], note);
+  return 0;
+}
+
 static int record_exposure_main(int argc, char **argv) {
   if (argc != 5) {
     fprintf(stderr, "kpcn-train --record-exposure: expected OUT.safetensors MODEL STORE.kps\n");
@@ -350,6 +387,7 @@ int main(int argc, char **argv) {
   if (argc >= 2 && !strcmp(argv[1], "--record-exposure")) return record_exposure_main(argc, argv);
   if (argc >= 2 && !strcmp(argv[1], "--average")) return average_main(argc, argv);
   if (argc >= 2 && !strcmp(argv[1], "--set-eps")) return set_eps_main(argc, argv);
+  if (argc >= 2 && !strcmp(argv[1], "--graft")) return graft_main(argc, argv);
   kpcn_train_settings s;
   kpcn_train_settings_defaults(&s);
   const char *preset = "cpu", *dil = NULL, *loss2 = NULL, *best_by = NULL;
@@ -459,7 +497,7 @@ int main(int argc, char **argv) {
     else if (!strcmp(a, "--normalize-exposure")) s.normalize_exposure = 1;
     else if (!strcmp(a, "--quiet")) g_quiet = 1;
     else if (!strcmp(a, "--compare") || !strcmp(a, "--average") ||
-             !strcmp(a, "--record-exposure") || !strcmp(a, "--set-eps")) {
+             !strcmp(a, "--record-exposure") || !strcmp(a, "--set-eps") || !strcmp(a, "--graft")) {
       /* These are modes of their own, not options of a training run. */
       fprintf(stderr,
               "kpcn-train: %s must be the first argument (and takes its own arguments; see "

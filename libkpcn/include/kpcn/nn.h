@@ -165,6 +165,13 @@ kpcn_status kpcn_model_set_exposure(kpcn_model *m, float exposure);
  * w(q) starts equal and the normalised kernels are unchanged (up to rounding); training then
  * moves it. m may already have source weights (a plain copy). Metadata is copied. */
 kpcn_status kpcn_model_add_source_weight(const kpcn_model *m, kpcn_model **out);
+/* Replaces branch b's weights in m by those of `from` (the other branch and the metadata stay
+ * m's). The two branches are separate networks whose results are added (diffuse: albedo-
+ * remodulated, specular: exp(.) - 1), so a model can take one branch from another model of the
+ * same architecture. They must record the same exposure; a specular branch may come from a
+ * model of another eps (eps is the diffuse branch's), a diffuse branch may not. Errors
+ * (KPCN_ERR_FORMAT) name the mismatch; m is unchanged on error. */
+kpcn_status kpcn_model_graft_branch(kpcn_model *m, const kpcn_model *from, kpcn_branch b);
 void kpcn_model_destroy(kpcn_model *m);
 
 const kpcn_arch *kpcn_model_arch(const kpcn_model *m);

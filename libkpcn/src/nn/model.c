@@ -163,6 +163,44 @@ kpcn_status kpcn_model_set_exposure(kpcn_model *m, float exposure) {
   return replace_arch(m, &a);
 }
 
+kpcn_status kpcn_model_graft_branch(kpcn_model *m, const kpcn_model *from, kpcn_branch b) {
+  if (!m || !from)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_graft_branch: NULL model");
+  if (b != KPCN_BRANCH_DIFFUSE && b != KPCN_BRANCH_SPECULAR)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_graft_branch: branch %d", (int)b);
+  const char *name = b == KPCN_BRANCH_DIFFUSE ? "diffuse" : "specular";
+  /* eps enters only the diffuse branch's input and remodulation, so a specular branch may come
+   * from a model of another eps; everything else (shape, inputs, kernel passes) must agree */
+  kpcn_arch same = from->arch; /* eps and exposure are checked below, with their own messages */
+  same.eps = m->arch.eps;
+  same.exposure = m->arch.exposure;
+  char *ja = kpcn_arch_to_json(&m->arch), *jb = kpcn_arch_to_json(&same);
+  int differ = !ja || !jb || strcmp(ja, jb) != 0;
+  free(ja);
+  free(jb);
+  if (differ)
+    return kpcn_fail(KPCN_ERR_FORMAT,
+                     "kpcn_model_graft_branch: the %s branch's model has another architecture",
+                     name);
+  if (b == KPCN_BRANCH_DIFFUSE && from->arch.eps != m->arch.eps)
+    return kpcn_fail(KPCN_ERR_FORMAT,
+                     "kpcn_model_graft_branch: the diffuse branch was trained at eps %.9g, the "
+                     "model demodulates at %.9g (set one eps first: kpcn-train --set-eps)",
+                     (double)from->arch.eps, (double)m->arch.eps);
+  /* a branch expects its inputs at the exposure it was trained around */
+  if (from->arch.exposure != m->arch.exposure)
+    return kpcn_fail(KPCN_ERR_FORMAT,
+                     "kpcn_model_graft_branch: the %s branch's model records exposure %.9g, the "
+                     "model %.9g: the branches would expect inputs at other scales (record one "
+                     "store's exposure in both first: kpcn-train --record-exposure)",
+                     name, (double)from->arch.exposure, (double)m->arch.exposure);
+  for (int l = 0; l <= m->arch.n_hidden; l++) {
+    memcpy(m->w[b][l], from->w[b][l], sizeof(float) * kpcn_model_weight_count(&m->arch, l));
+    memcpy(m->b[b][l], from->b[b][l], sizeof(float) * (size_t)kpcn_arch_layer_out(&m->arch, l));
+  }
+  return KPCN_OK;
+}
+
 kpcn_status kpcn_model_add_source_weight(const kpcn_model *src, kpcn_model **out) {
   if (!src || !out)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_add_source_weight: NULL argument");
