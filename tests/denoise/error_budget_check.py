@@ -18,7 +18,8 @@ model.safetensors; the fixtures below are written there)
 2. The four figures that need no network, recomputed here from the definitions
    (docs/results.md, the script's docstring) on a pair where every buffer differs, at the
    default albedo eps (0.00316, the pipeline's) and another: 1e-9 relative. noisy also equals
-   kpcntool --relmse.
+   kpcntool --relmse. With --model and no --eps, the oracle uses the model's eps (a copy of the
+   fixture model recording 0.05).
 3. With the tiny fixture model, as saved (no exposure recorded: the input is denoised as
    rendered) and with an exposure target written into it (the denoiser then scales both
    branches' inputs by target / exposure(input)):
@@ -165,15 +166,19 @@ MODEL = os.path.join(DIR, "model.safetensors")
 TARGET = 0.5  # exact in float32, as the library keeps it
 
 
-def with_exposure(src, dst, target):
+def with_arch(src, dst, key, value):
+    """A copy of the model at src whose architecture records key = value (eps also in the
+    header's kpcn.eps, which the loader checks against it)."""
     with open(src, "rb") as f:
         n = struct.unpack("<Q", f.read(8))[0]
         head = json.loads(f.read(n))
         data = f.read()
     arch = json.loads(head["__metadata__"]["kpcn.architecture"])
-    if "exposure" in arch:
+    if key == "exposure" and "exposure" in arch:
         fail("the fixture model already records an exposure")
-    arch["exposure"] = target
+    arch[key] = value
+    if key == "eps":
+        head["__metadata__"]["kpcn.eps"] = repr(value)
     head["__metadata__"]["kpcn.architecture"] = json.dumps(arch, separators=(",", ":"))
     h = json.dumps(head, separators=(",", ":")).encode()
     h += b" " * (-len(h) % 8)
@@ -218,7 +223,13 @@ NOSPEC = zeroed(noisy, "specular.", "eb_nospec.exr")
 e_full, e_nodiff, e_nospec = exposure(NOISY), exposure(NODIFF), exposure(NOSPEC)
 if not (e_full > 0 and e_nodiff > 0 and e_nospec > 0):
     fail("fixture exposures %g %g %g" % (e_full, e_nodiff, e_nospec))
-EXPMODEL = with_exposure(MODEL, os.path.join(DIR, "eb_model_exposure.safetensors"), TARGET)
+EXPMODEL = with_arch(MODEL, os.path.join(DIR, "eb_model_exposure.safetensors"), "exposure", TARGET)
+# without --eps the oracle demodulates at the model's own eps (0.05 here), as its pipeline does
+EPSMODEL = with_arch(MODEL, os.path.join(DIR, "eb_model_eps.safetensors"), "eps", 0.05)
+j = budget(NOISY, AOV, "--model", EPSMODEL, "--kpcntool", TOOL)
+e = 0.05
+if not close(j["irradiance_oracle"], relmse((An + e) * Dr / (Ar + e) + Sr, Cr), 1e-9):
+    fail("irradiance_oracle with a model of eps 0.05 and no --eps: %.17g" % j["irradiance_oracle"])
 print("exposures: full %.6g, diffuse zeroed %.6g, specular zeroed %.6g; target %g"
       % (e_full, e_nodiff, e_nospec, TARGET))
 for model, target in ((MODEL, 0.0), (EXPMODEL, TARGET)):
