@@ -228,6 +228,18 @@ static int compare_main(int argc, char **argv) {
   return 0;
 }
 
+/* The end of every mode that writes a model: saves m to out if st is still KPCN_OK, frees
+ * m, and on failure names the mode and the error. Returns the exit code (0 or 1). */
+static int save_model_copy(kpcn_status st, kpcn_model *m, const char *out, const char *mode) {
+  if (st == KPCN_OK) st = kpcn_model_save(m, out);
+  kpcn_model_destroy(m);
+  if (st != KPCN_OK) {
+    fprintf(stderr, "kpcn-train %s: %s\n", mode, kpcn_last_error());
+    return 1;
+  }
+  return 0;
+}
+
 static int average_main(int argc, char **argv) {
   if (argc < 4) {
     fprintf(stderr, "kpcn-train --average: expected OUT.safetensors and at least one input\n");
@@ -235,12 +247,7 @@ static int average_main(int argc, char **argv) {
   }
   kpcn_model *m = NULL;
   kpcn_status st = kpcn_model_average((const char *const *)argv + 3, argc - 3, &m);
-  if (st == KPCN_OK) st = kpcn_model_save(m, argv[2]);
-  kpcn_model_destroy(m);
-  if (st != KPCN_OK) {
-    fprintf(stderr, "kpcn-train --average: %s\n", kpcn_last_error());
-    return 1;
-  }
+  if (save_model_copy(st, m, argv[2], "--average")) return 1;
   if (!g_quiet) printf("kpcn-train: %s = mean of %d snapshots\n", argv[2], argc - 3);
   return 0;
 }
@@ -259,12 +266,7 @@ static int set_eps_main(int argc, char **argv) {
   kpcn_model *m = NULL;
   kpcn_status st = kpcn_model_load(argv[3], &m);
   if (st == KPCN_OK) st = kpcn_model_set_eps(m, (float)e);
-  if (st == KPCN_OK) st = kpcn_model_save(m, argv[2]);
-  kpcn_model_destroy(m);
-  if (st != KPCN_OK) {
-    fprintf(stderr, "kpcn-train --set-eps: %s\n", kpcn_last_error());
-    return 1;
-  }
+  if (save_model_copy(st, m, argv[2], "--set-eps")) return 1;
   if (!g_quiet) printf("kpcn-train: %s = %s with eps %.9g\n", argv[2], argv[3], (double)(float)e);
   return 0;
 }
@@ -291,13 +293,8 @@ static int graft_main(int argc, char **argv) {
   const char *base = strrchr(argv[5], '/');
   snprintf(note, sizeof note, "%s branch from %s", argv[4], base ? base + 1 : argv[5]);
   if (st == KPCN_OK) st = kpcn_model_set_meta(m, "train.grafted", note);
-  if (st == KPCN_OK) st = kpcn_model_save(m, argv[2]);
-  kpcn_model_destroy(m);
   kpcn_model_destroy(from);
-  if (st != KPCN_OK) {
-    fprintf(stderr, "kpcn-train --graft: %s\n", kpcn_last_error());
-    return 1;
-  }
+  if (save_model_copy(st, m, argv[2], "--graft")) return 1;
   if (!g_quiet) printf("kpcn-train: %s = %s with the %s\n", argv[2], argv[3], note);
   return 0;
 }
@@ -324,12 +321,7 @@ static int record_exposure_main(int argc, char **argv) {
     return 1;
   }
   if (st == KPCN_OK) st = kpcn_model_set_exposure(m, (float)e);
-  if (st == KPCN_OK) st = kpcn_model_save(m, argv[2]);
-  kpcn_model_destroy(m);
-  if (st != KPCN_OK) {
-    fprintf(stderr, "kpcn-train --record-exposure: %s\n", kpcn_last_error());
-    return 1;
-  }
+  if (save_model_copy(st, m, argv[2], "--record-exposure")) return 1;
   printf("kpcn-train: %s = %s recording exposure %.9g\n", argv[2], argv[3], (double)(float)e);
   return 0;
 }
