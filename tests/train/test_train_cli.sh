@@ -2,7 +2,8 @@
 # kpcn-train --record-exposure: a copy of a model recording the median exposure of a patch
 # store's training images; same weights; bad inputs named, no output file. --set-eps: the
 # same weights with another demodulation epsilon; set back, the original function bit for bit.
-# --graft: one branch from another model, mismatches named. --firefly: bad ratios named.
+# --graft: one branch from another model, mismatches named. --freeze: usage and provenance.
+# --firefly: bad ratios named.
 # usage: test_train_cli.sh KPCN_TRAIN KPCNTOOL TESTDATA
 set -u
 K=$1; T=$2; TD=$3
@@ -125,6 +126,18 @@ bad_usage "--preset asks for" --init "$M" --preset tiny
 bad_usage "--average must be the first argument" --average "$M"
 bad_usage "--set-eps must be the first argument" --set-eps "$M"
 bad_usage "--eps" --eps 0
+bad_usage "--freeze: 'both' is not diffuse or specular" --init "$M" --freeze both
+bad_usage "--freeze given for both branches" --init "$M" --freeze diffuse --freeze specular
+# --freeze: needs a model to start from (exit 1, nothing written); with one, the model says
+# which branch it kept (test_train_pipeline checks the weights bit for bit)
+if "$K" --store "$D/p.kps" -o "$D/z.safetensors" --iters 1 --freeze specular 2>"$D/err"; then
+  fail "--freeze without --init accepted"
+fi
+grep -q "needs a model to start from" "$D/err" || fail "--freeze error unclear: $(cat "$D/err")"
+[ ! -e "$D/z.safetensors" ] || fail "output written for --freeze without --init"
+"$K" --store "$D/p.kps" -o "$D/z.safetensors" --init "$D/t.safetensors" --iters 1 --batch 2 \
+  --patch 16 --freeze specular --csv '' --plot '' --ckpt '' --quiet || fail "train --freeze"
+grep -aq '"train.frozen":"specular"' "$D/z.safetensors" || fail "model lacks train.frozen"
 # an output that would overwrite the patch store is refused; the store is intact
 if "$K" --store "$D/p.kps" -o "$D/c.safetensors" --iters 1 --csv "$D/p.kps" 2>"$D/err"; then
   fail "--csv over the store accepted"

@@ -2,7 +2,8 @@
  * test_train_resume.c): both stages, full-image validation, the best model, CSV/plot outputs,
  * --init conversions (kernel passes, source weights, widening), and clear errors for a store
  * with the wrong channel list, a garbage store and a model with other inputs; weight averaging
- * (SWA) of checkpoints and model files, and the snapshots kept for it. */
+ * (SWA) of checkpoints and model files, and the snapshots kept for it; fine-tuning one branch
+ * with the other frozen. */
 #include "kpcn/exr.h"
 #include "train/train_internal.h"
 #include "kpcn/train.h"
@@ -461,6 +462,109 @@ static void test_average(void) {
   kpcn_trainer_destroy(t);
 }
 
+/* One branch's weights and biases of a model file, concatenated (malloc'ed); *n the count. */
+static float *branch_weights(const char *path, kpcn_branch b, size_t *n) {
+  kpcn_model *m = NULL;
+  *n = 0;
+  CHECK(kpcn_model_load(path, &m) == KPCN_OK);
+  if (!m) return NULL;
+  const kpcn_arch *a = kpcn_model_arch(m);
+  float *w = malloc(kpcn_arch_param_count(a) * sizeof(float));
+  for (int l = 0; l < kpcn_arch_n_layers(a); l++) {
+    kpcn_layer_view v;
+    kpcn_model_layer(m, b, l, &v);
+    const size_t nw = (size_t)v.out_ch * v.in_ch * v.size * v.size;
+    memcpy(w + *n, v.weight, nw * sizeof(float)), *n += nw;
+    memcpy(w + *n, v.bias, (size_t)v.out_ch * sizeof(float)), *n += (size_t)v.out_ch;
+  }
+  kpcn_model_destroy(m);
+  return w;
+}
+
+/* 1 if branch b of the two model files holds the same bits. */
+static int same_branch(const char *p1, const char *p2, kpcn_branch b) {
+  size_t n1, n2;
+  float *w1 = branch_weights(p1, b, &n1), *w2 = branch_weights(p2, b, &n2);
+  const int same = w1 && w2 && n1 == n2 && memcmp(w1, w2, n1 * sizeof(float)) == 0;
+  free(w1), free(w2);
+  return same;
+}
+
+static int meta_is(const char *path, const char *key, const char *want) {
+  kpcn_model *m = NULL;
+  CHECK(kpcn_model_load(path, &m) == KPCN_OK);
+  const char *v = m ? kpcn_model_get_meta(m, key) : NULL;
+  const int ok = v && !strcmp(v, want);
+  kpcn_model_destroy(m);
+  return ok;
+}
+
+/* --freeze: a run from a trained model through both stages with one branch frozen leaves that
+ * branch bit for bit as it started and moves the other, and the model says which it froze; the
+ * same run stopped in stage 2 and resumed ends with the uninterrupted run's weights; a resume
+ * that freezes otherwise, both branches frozen and a frozen branch with no model to start from
+ * are refused. */
+static void test_freeze(void) {
+  const char *vn[1], *vr[1];
+  kpcn_train_settings s;
+  kpcn_val_result v;
+  const char *base = tf_tmp("f0.safetensors");
+  if (!train_then_init(base, tf_tmp("fd.safetensors"), "f", vn, vr, &v, &s)) return;
+  static const char *const names[2] = {"diffuse", "specular"};
+  const char *outs[2] = {tf_tmp("fd.safetensors"), tf_tmp("fs.safetensors")};
+  kpcn_trainer *t = NULL;
+  for (int fb = 0; fb < 2; fb++) {
+    s.out_path = outs[fb];
+    s.frozen[fb] = 1, s.frozen[!fb] = 0;
+    CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+    if (!t) return;
+    CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
+    kpcn_trainer_destroy(t);
+    t = NULL;
+    const int kept = same_branch(base, outs[fb], (kpcn_branch)fb);
+    const int moved = !same_branch(base, outs[fb], (kpcn_branch)!fb);
+    printf("%s frozen: kept bit for bit %d, the other branch moved %d\n", names[fb], kept, moved);
+    CHECK(kept && moved);
+    CHECK(meta_is(outs[fb], "train.frozen", names[fb]));
+  }
+  CHECK(meta_is(base, "train.frozen", "none"));
+  /* stopped at iteration 4 (stage 2) and resumed: the uninterrupted run's model, bit for bit */
+  const char *res = tf_tmp("fr.safetensors");
+  s.out_path = res;
+  s.frozen[0] = 0, s.frozen[1] = 1;
+  s.progress = tf_stop_cb;
+  tf_stop_at = 4;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (!t) return;
+  int stopped = 0;
+  CHECK(kpcn_trainer_run(t, &stopped) == KPCN_OK && stopped);
+  kpcn_trainer_destroy(t);
+  s.progress = NULL;
+  s.resume = 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (!t) return;
+  CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
+  kpcn_trainer_destroy(t);
+  t = NULL;
+  CHECK(same_branch(res, outs[1], KPCN_BRANCH_DIFFUSE) &&
+        same_branch(res, outs[1], KPCN_BRANCH_SPECULAR));
+  /* its checkpoint, resumed with the other branch frozen or none, is refused by name */
+  s.frozen[0] = 1, s.frozen[1] = 0;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT && !t);
+  CHECK(strstr(kpcn_last_error(), "specular branch frozen") != NULL);
+  s.frozen[0] = 0;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT && !t);
+  CHECK(strstr(kpcn_last_error(), "freezes none") != NULL);
+  s.resume = 0;
+  s.frozen[0] = s.frozen[1] = 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT && !t);
+  CHECK(strstr(kpcn_last_error(), "both branches are frozen") != NULL);
+  s.frozen[0] = 0;
+  s.init_model = NULL;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT && !t);
+  CHECK(strstr(kpcn_last_error(), "freezing the specular branch needs a model") != NULL);
+}
+
 static void test_bad_stores(void) {
   kpcn_train_settings s;
   kpcn_trainer *t = NULL;
@@ -571,5 +675,6 @@ int main(void) {
   test_average();
   test_snapshots();
   test_bad_stores();
+  test_freeze();
   return kt_summary("train_pipeline");
 }

@@ -34,6 +34,8 @@ static void usage(FILE *f) {
         "  --source-weight           predict a per-pixel source weight too (arch.source_weight;\n"
         "                            with --init: added with zero weights, same function)\n"
         "  --source-lr-scale X       the source score's weights learn at X times the rate\n"
+        "  --freeze diffuse|specular with --init: that branch keeps its weights bit for bit\n"
+        "                            (fine-tune the other branch alone)\n"
         "  --loss l1|l2|relmse|rell1|ssim|relmse-sg|rell1-sg   stage-1 loss (default l1)\n"
         "  --loss2 NAME              stage-2 loss (default: same as --loss)\n"
         "  --ssim-window N           SSIM window (odd, default 11), --loss-margin M\n"
@@ -477,6 +479,21 @@ int main(int argc, char **argv) {
         return 2;
       }
       if (!add_val(arg, comma + 1, (size_t)(comma - arg))) return 2;
+    }
+    else if (!strcmp(a, "--freeze")) {
+      NEEDARG;
+      if (!strcmp(arg, "diffuse"))
+        s.frozen[KPCN_BRANCH_DIFFUSE] = 1;
+      else if (!strcmp(arg, "specular"))
+        s.frozen[KPCN_BRANCH_SPECULAR] = 1;
+      else {
+        fprintf(stderr, "kpcn-train: --freeze: '%s' is not diffuse or specular\n", arg);
+        return 2;
+      }
+      if (s.frozen[0] && s.frozen[1]) {
+        fprintf(stderr, "kpcn-train: --freeze given for both branches: nothing would train\n");
+        return 2;
+      }
     }
     else if (!strcmp(a, "--val-from-store")) from_store = 1;
     else if (!strcmp(a, "--staircase")) s.adam.staircase = 1;

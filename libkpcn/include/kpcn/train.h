@@ -255,6 +255,12 @@ typedef struct kpcn_train_settings {
                                before its features, as the denoiser bounds its input
                                (kpcn_aov_bound_fireflies, the floor from the source image's
                                exposure); 0 = patches as rendered */
+  int frozen[2];            /* frozen[KPCN_BRANCH_*] = 1 (needs init_model): that branch keeps
+                               the weights it starts with. In stage 2 it still runs forward
+                               (the loss is on the recombined image) but takes no backward
+                               pass and no Adam step; in stage 1 it does not run. One branch at
+                               most: fine-tuning one branch leaves the other bit for bit as
+                               it was. {0, 0} = both train */
   int batch;                /* 16 */
   int patch;                /* P, 64 (<= store patch size) */
   int64_t iters;            /* total iterations, 1000 */

@@ -121,6 +121,8 @@ kpcn_status kt_checkpoint_save(kpcn_trainer *t, const char *path) {
   meta_i64(meta, "train.stage1_iters", t->s.stage1_iters);
   cJSON_AddStringToObject(meta, "train.precision", t->s.bf16 ? "bf16" : "f32");
   if (t->s.normalize_exposure) cJSON_AddStringToObject(meta, "train.normalize_exposure", "1");
+  if (t->s.frozen[0] || t->s.frozen[1])
+    cJSON_AddStringToObject(meta, "train.frozen", kt_frozen_name(&t->s));
   if (t->s.firefly > 0.0) {
     snprintf(buf, sizeof buf, "%.17g", t->s.firefly);
     cJSON_AddStringToObject(meta, "train.firefly", buf);
@@ -314,6 +316,11 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
   if ((nx && !strcmp(nx, "1")) != (t->s.normalize_exposure != 0))
     BAD("checkpoint '%s' was written %s exposure normalisation, this run %s it", path,
         nx ? "with" : "without", t->s.normalize_exposure ? "uses" : "does not use");
+  /* absent in checkpoints of runs that trained both branches */
+  const char *fz = meta_str(meta, "train.frozen");
+  if (strcmp(fz ? fz : "none", kt_frozen_name(&t->s)))
+    BAD("checkpoint '%s' was written with the %s branch frozen, this run freezes %s (--freeze)",
+        path, fz ? fz : "no", kt_frozen_name(&t->s));
   /* absent in checkpoints of runs that showed patches without the firefly bound */
   const char *ff = meta_str(meta, "train.firefly");
   if ((ff ? strtod(ff, NULL) : 0.0) != t->s.firefly)

@@ -103,6 +103,9 @@ static kpcn_status save_model(kpcn_trainer *t, double elapsed, const char *path)
   KPCN_TRY(kpcn_model_set_meta(t->model, "train.seed", buf));
   snprintf(buf, sizeof buf, "%d x %dx%d", t->N, t->P, t->P);
   KPCN_TRY(kpcn_model_set_meta(t->model, "train.batch", buf));
+  /* always written: a model fine-tuned from one trained with a frozen branch must not
+   * inherit that key */
+  KPCN_TRY(kpcn_model_set_meta(t->model, "train.frozen", kt_frozen_name(&t->s)));
   const char *slash = strrchr(t->store_path, '/');
   KPCN_TRY(kpcn_model_set_meta(t->model, "train.dataset", slash ? slash + 1 : t->store_path));
   return kpcn_model_save(t->model, path);

@@ -82,6 +82,8 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path);
 
 /* trainer.c */
 double kt_now(void);
+/* "none", "diffuse" or "specular": the branch the settings freeze */
+const char *kt_frozen_name(const kpcn_train_settings *s);
 /* Learning rate of the step after `iter` completed steps (stage 2 uses stage2_lr). */
 double kt_lr_at(const kpcn_trainer *t, int64_t iter);
 

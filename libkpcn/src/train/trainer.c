@@ -45,6 +45,12 @@ void kpcn_train_settings_defaults(kpcn_train_settings *s) {
   s->log_every = 10;
 }
 
+const char *kt_frozen_name(const kpcn_train_settings *s) {
+  return s->frozen[KPCN_BRANCH_DIFFUSE]    ? "diffuse"
+         : s->frozen[KPCN_BRANCH_SPECULAR] ? "specular"
+                                           : "none";
+}
+
 static char *dup_or_null(const char *s) {
   if (!s) return NULL;
   size_t n = strlen(s) + 1;
@@ -281,6 +287,14 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   if (s->best_path && *s->best_path && !s->nval)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
                      "keeping the best model needs validation images (--val)");
+  if (s->frozen[0] && s->frozen[1])
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "both branches are frozen: there would be nothing to train");
+  if ((s->frozen[0] || s->frozen[1]) && !s->init_model && !s->resume)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "freezing the %s branch needs a model to start from (init_model) or a "
+                     "checkpoint to resume: a frozen branch of random weights would stay random",
+                     s->frozen[0] ? "diffuse" : "specular");
   if (s->nval < 0 || (s->nval && (!s->val_noisy || !s->val_ref)))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "validation list is inconsistent");
   kpcn_trainer *t = kpcn_calloc(1, sizeof *t, "trainer");
@@ -411,7 +425,11 @@ double kpcn_trainer_flops_per_iter(const kpcn_trainer *t) {
     f += fl;
     if (l == 0) first = fl;
   }
-  return KT_NB * (double)t->N * t->P * t->P * (3 * f - first);
+  /* a frozen branch only runs forward (stage 2) */
+  double per_px = 0;
+  for (int b = 0; b < KT_NB; b++)
+    per_px += t->s.frozen[b] ? f : 3 * f - first;
+  return (double)t->N * t->P * t->P * per_px;
 }
 
 void kpcn_trainer_get_timing(const kpcn_trainer *t, kpcn_train_timing *out) {
@@ -486,6 +504,7 @@ static kpcn_status trainer_step(kpcn_trainer *t, double *loss) {
   if (t->iter < t->s.stage1_iters) {
     for (int b = 0; b < KT_NB; b++) {
       double v;
+      if (t->s.frozen[b]) continue; /* its own target only: nothing to learn, nothing to run */
       KPCN_TRY(branch_forward(t, b));
       tl = kt_now();
       KPCN_TRY(kt_loss(t, t->s.loss1, t->out[b], t->target[b], t->grad[b], &v));
@@ -506,7 +525,7 @@ static kpcn_status trainer_step(kpcn_trainer *t, double *loss) {
     kpcn_recombine_backward(t->gcomb, t->out[1], t->albedo, t->arch.eps, n, t->grad[0], t->grad[1]);
     t->timing.loss_s += kt_now() - tl;
     for (int b = 0; b < KT_NB; b++)
-      KPCN_TRY(branch_backward_step(t, b));
+      if (!t->s.frozen[b]) KPCN_TRY(branch_backward_step(t, b));
   }
   if (!isfinite(total))
     return kpcn_fail(KPCN_ERR_NONFINITE, "training loss is %g at iteration %lld", total,
