@@ -31,13 +31,14 @@
 #   SOURCE_LR_SCALE (its learning-rate multiple, kpcn-train --source-lr-scale), FIREFLY (a
 #   ratio: bound diffuse fireflies in the training patches, kpcn-train --firefly), EPS (the
 #   albedo epsilon of the diffuse demodulation, kpcn-train --eps; with INIT it changes the
-#   model's).
+#   model's), FREEZE (diffuse or specular: with INIT, that branch keeps INIT's weights bit for
+#   bit, kpcn-train --freeze).
 # With a time budget the iteration count is unknown in advance, so the script first measures
 # the speed (20 iterations) and sets --iters to fit MINUTES, --stage1-iters to STAGE1_FRACTION.
 # Resumable: if the run is interrupted, re-running continues from its checkpoint.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/../.." && pwd)
-[ $# -ge 1 ] || { sed -n 2,37p "$0"; exit 2; }
+[ $# -ge 1 ] || { sed -n 2,38p "$0"; exit 2; }
 store=$1
 shift
 bin=${KPCN_TRAIN:-$here/build/tools/kpcn-train/kpcn-train}
@@ -83,6 +84,7 @@ case $BEST_BY in mean) vcol=7 ;; geomean) vcol=10 ;; *) echo "ship_model.sh: BES
 [ -n "${SOURCE_LR_SCALE:-}" ] && args+=(--source-lr-scale "$SOURCE_LR_SCALE")
 [ -n "${FIREFLY:-}" ] && args+=(--firefly "$FIREFLY")
 [ -n "${EPS:-}" ] && args+=(--eps "$EPS")
+[ -n "${FREEZE:-}" ] && args+=(--freeze "$FREEZE")
 [ -n "${TIME_LIMIT:-}" ] && args+=(--time-limit "$TIME_LIMIT")
 snapdir=${SNAPSHOT_DIR:-$work/snapshots}
 [ -n "${SWA_FROM:-}" ] && [ -z "${SNAPSHOT_DIR:-}" ] && args+=(--snapshots "$snapdir")
@@ -170,6 +172,7 @@ cpu=$(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -1)
   [ -n "${KPA_PASSES:-}" ] && echo "| kernel passes | $KPA_PASSES (\`kpcn-train --kpa-passes\`: the predicted kernels applied $KPA_PASSES times, each pass on the previous one's result; docs/nn.md) |"
   [ "${SOURCE_WEIGHT:-0}" = 1 ] && echo "| source weights | yes (\`kpcn-train --source-weight\`: a per-pixel weight the first kernel pass renormalises by; docs/nn.md)${SOURCE_LR_SCALE:+, learning at $SOURCE_LR_SCALE× the rate (\`--source-lr-scale\`)} |"
   [ -n "${EPS:-}" ] && echo "| demodulation epsilon | $EPS (\`kpcn-train --eps\`: diffuse / (albedo + $EPS); docs/denoiser.md) |"
+  [ -n "${FREEZE:-}" ] && echo "| frozen branch | $FREEZE (\`kpcn-train --freeze\`: kept bit for bit from the initial model; only the other branch trained) |"
   [ "${BF16:-0}" = 1 ] && echo "| precision | bf16 mixed precision (\`kpcn-train --bf16\`: bf16 convolutions, f32 weights, gradients and Adam) |"
   echo "| iterations | $done_iters of $iters planned (stage 1: $stage1, stage-2 loss $LOSS2) |"
   echo "| training time | ${secs} s |"
