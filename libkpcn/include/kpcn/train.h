@@ -319,8 +319,9 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped);
 int64_t kpcn_trainer_iteration(const kpcn_trainer *t);
 kpcn_model *kpcn_trainer_model(kpcn_trainer *t);
 /* Conv FLOPs (forward + backward, both branches) of one iteration, for benchmarks:
- * 3 x forward FLOPs (forward, backward-data, backward-weights; the first layer's
- * backward-data is skipped, so this slightly over-counts). */
+ * 3 x forward FLOPs (forward, backward-data, backward-weights) less the first layer's
+ * backward-data, which is never computed. A frozen branch counts its forward only, as in a
+ * stage-2 iteration (in stage 1 it does not run). */
 double kpcn_trainer_flops_per_iter(const kpcn_trainer *t);
 
 /* Cumulative wall time of the trainer's iterations by part (seconds), for benchmarks. */
