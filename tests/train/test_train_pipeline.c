@@ -555,6 +555,11 @@ static void test_freeze(void) {
   s.frozen[0] = 0;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT && !t);
   CHECK(strstr(kpcn_last_error(), "freezes none") != NULL);
+  /* the base run's checkpoint (both branches trained) resumed with one frozen */
+  s.out_path = base;
+  s.frozen[1] = 1;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_FORMAT && !t);
+  CHECK(strstr(kpcn_last_error(), "with no branch frozen, this run freezes specular") != NULL);
   s.resume = 0;
   s.frozen[0] = s.frozen[1] = 1;
   CHECK(kpcn_trainer_create(&t, &s) == KPCN_ERR_INVALID_ARGUMENT && !t);

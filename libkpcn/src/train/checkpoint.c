@@ -319,8 +319,8 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
   /* absent in checkpoints of runs that trained both branches */
   const char *fz = meta_str(meta, "train.frozen");
   if (strcmp(fz ? fz : "none", kt_frozen_name(&t->s)))
-    BAD("checkpoint '%s' was written with the %s branch frozen, this run freezes %s (--freeze)",
-        path, fz ? fz : "no", kt_frozen_name(&t->s));
+    BAD("checkpoint '%s' was written with %s%s branch frozen, this run freezes %s (--freeze)", path,
+        fz ? "the " : "no", fz ? fz : "", kt_frozen_name(&t->s));
   /* absent in checkpoints of runs that showed patches without the firefly bound */
   const char *ff = meta_str(meta, "train.firefly");
   if ((ff ? strtod(ff, NULL) : 0.0) != t->s.firefly)
