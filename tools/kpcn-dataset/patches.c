@@ -84,7 +84,8 @@ static void collect_pairs(const char *dir, int dir_index, const ds_manifest *m, 
 static void usage(void) {
   fprintf(
       stderr,
-      "usage: kpcn-dataset patches DATASET_DIR... -o OUT.kps [--split train] [--spp all|16,32,...]\n"
+      "usage: kpcn-dataset patches DATASET_DIR... -o OUT.kps [--split train] [--spp "
+      "all|16,32,...]\n"
       "         [--size 65] [--per-image 100 | --stride S] [--cull 0.9] [--cull-tol 0.05]\n"
       "         [--cull-abs 0.01] [--importance] [--seed 1] [--dtype f32|f16] [--allow-partial]\n");
 }

@@ -1,6 +1,7 @@
 /* kpcn-render: renders a Tungsten scene.json into an AOV EXR (DESIGN.md §4).
  *   kpcn-render scene.json -o out.exr [--spp N] [--seed S] [--threads N] [--resolution WxH]
- *               [--crop x,y,w,h] [--color-only] [--max-bounces N] [--albedo-spp N] [--half] [--quiet]
+ *               [--crop x,y,w,h] [--color-only] [--max-bounces N] [--albedo-spp N]
+ *               [--half] [--quiet]
  * A progress line (percent, samples/s, time left) is shown only when stderr is a terminal.
  * The output is written atomically; on any error nothing is written and the exit code is 1
  * (2 for usage errors). */

@@ -62,8 +62,7 @@ std::string img_desc(const ImageBuf &b, const char *role = "the top image") {
   return n.empty() ? std::string(role) : "image '" + n + "'";
 }
 
-bool cmd_output(Context &ctx, const Modifiers &, const std::vector<std::string> &a,
-                std::string &) {
+bool cmd_output(Context &ctx, const Modifiers &, const std::vector<std::string> &a, std::string &) {
   const std::string &path = a[0];
   const std::string ext = lower_ext(path); // a writable format: checked when parsed (main.cpp)
   // A deep copy: later commands may change the top.

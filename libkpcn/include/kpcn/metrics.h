@@ -22,8 +22,8 @@
  * Non-finite policy: a pixel where ANY compared channel of x or y is NaN or +-Inf is
  * excluded from the mean and counted in kpcn_metric_result.nonfinite. The library never
  * fails because of them (callers decide; kpcntool fails unless told otherwise). For SSIM every
- * compared channel of an excluded pixel is replaced by 0 in both images before filtering (windows around them
- * then see equal values there) and the pixels themselves are excluded from the mean. In
+ * compared channel of an excluded pixel is replaced by 0 in both images before filtering (windows
+ * around them then see equal values there) and the pixels themselves are excluded from the mean. In
  * error maps, excluded pixels hold NaN. If no pixel is left, the call fails with
  * KPCN_ERR_NONFINITE.
  *

@@ -393,9 +393,10 @@ static kpcn_status check_result(kpcn_status s, const float *out, size_t n) {
 }
 
 /* The exposure scale (measured on the input as given), the KPCN's firefly bound, then
- * run_ensemble, then the result check. The bound runs once, before the ensemble's mirrors and rotations (it commutes
- * with them), on a shallow copy of the input whose only own planes are the three it changes:
- * diffuse, its variance and colour (the other buffers stay the caller's, read only). */
+ * run_ensemble, then the result check. The bound runs once, before the ensemble's mirrors and
+ * rotations (it commutes with them), on a shallow copy of the input whose only own planes are the
+ * three it changes: diffuse, its variance and colour (the other buffers stay the caller's, read
+ * only). */
 static kpcn_status run_denoise(kpcn_denoiser *d, const kpcn_aov_set *aov, float *out) {
   /* A NaN or Inf reaches every softmax window (and baseline weight) that sees it and comes back
    * as a patch of NaN while the call succeeds: refuse it, naming the buffer. */
