@@ -385,6 +385,7 @@ static void trace_path(const kpcn_render_ctx *ctx, kpcn_sampler *smp, kpcn_sampl
     ray_set(&r, P.nee.origin, P.nee.dir, P.nee.tfar);
     rtcOccluded1(scene, &ic, &r);
     P.out->rays++;
+    P.out->vis_traced |= (uint32_t)P.shadow_sets_vis;
     if (r.tfar < 0.0f) continue; /* Embree sets tfar = -inf on a hit */
     P.Ld = kv3_add(P.Ld, P.add_d);
     P.Ls = kv3_add(P.Ls, P.add_s);

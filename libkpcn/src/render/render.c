@@ -49,12 +49,22 @@ static void sample_to_channels(const kpcn_sample_out *so, float *v) {
   v[16] = so->visibility;
 }
 
+/* Per-channel Welford accumulators of one pixel (zeroed by the caller). cnt is the number of
+ * samples a channel has seen: every sample for all but visibility, which is the fraction of the
+ * shadow rays traced from the feature surface that reach their light (DESIGN §4, and what
+ * Tungsten writes): a sample that traces none there (the sampled light faces away, the BSDF is
+ * zero, an environment sample below the horizon, a miss) does not count. */
+typedef struct pixel_acc {
+  double mean[NCH], m2[NCH];
+  int64_t cnt[NCH];
+} pixel_acc;
+
 /* Traces samples [0, n) of pixel (px, py)'s sequence with c — the colour pass, or the albedo
  * pass (c->features_only: the same sequence, so its first spp samples are the colour pass's
- * camera rays) — keeping per-channel Welford accumulators (mean, m2; zeroed by the caller) in
- * sample order. A sample with a NaN/Inf channel (should not happen) counts as black. */
+ * camera rays) — into acc, in sample order. A sample with a NaN/Inf channel (should not
+ * happen) counts as black. */
 static void pixel_samples(const kpcn_render_ctx *c, int px, int py, int n,
-                          kpcn_sampler_cache *cache, double *mean, double *m2, uint64_t *rays,
+                          kpcn_sampler_cache *cache, pixel_acc *acc, uint64_t *rays,
                           uint64_t *nonfinite) {
   kpcn_sampler_cache_reset(cache, kpcn_pixel_seed(c->seed, (uint32_t)px, (uint32_t)py));
   for (int i0 = 0; i0 < n; i0 += 16) {
@@ -75,30 +85,30 @@ static void pixel_samples(const kpcn_render_ctx *c, int px, int py, int n,
         (*nonfinite)++;
         memset(v, 0, sizeof(v));
       }
-      double inv_n = 1.0 / (double)(i0 + k + 1);
-      for (int ch = 0; ch < NCH; ch++) {
-        double delta = (double)v[ch] - mean[ch];
-        mean[ch] += delta * inv_n;
-        m2[ch] += delta * ((double)v[ch] - mean[ch]);
+      int nch = so[k].vis_traced ? NCH : NCH - 1; /* visibility is the last channel */
+      for (int ch = 0; ch < nch; ch++) {
+        double delta = (double)v[ch] - acc->mean[ch];
+        acc->mean[ch] += delta * (1.0 / (double)++acc->cnt[ch]); /* 1/n, then a product */
+        acc->m2[ch] += delta * ((double)v[ch] - acc->mean[ch]);
       }
     }
   }
 }
 
-/* Buffer b of pixel pi from the accumulators of n samples: the means, and the variance of the
- * mean averaged over the buffer's channels (0 for one sample). The means are means of floats,
- * so they fit a float; the variance of samples near the emission limit (1e15, its square
- * 1e30) fits too, but a brighter path (an albedo above 1 multiplies) can overflow it: it is
- * stored saturated at FLT_MAX, never as Inf, which the output must not contain. */
-static void store_buffer(kpcn_aov_set *set, int b, const double *mean, const double *m2, int n,
-                         size_t pi) {
+/* Buffer b of pixel pi from the accumulators: the means, and the variance of the mean
+ * averaged over the buffer's channels (0 for one sample or none; a mean of none is 0). The means
+ * are means of floats, so they fit a float; the variance of samples near the emission limit (1e15,
+ * its square 1e30) fits too, but a brighter path (an albedo above 1 multiplies) can overflow it: it
+ * is stored saturated at FLT_MAX, never as Inf, which the output must not contain. */
+static void store_buffer(kpcn_aov_set *set, int b, const pixel_acc *acc, size_t pi) {
   const size_t plane = (size_t)set->width * (size_t)set->height;
   const int nc = kpcn_buffer_channels((kpcn_buffer)b);
   double var = 0.0;
   for (int c = 0; c < nc; c++) {
     int ch = buf_first[b] + c;
-    set->buf[b][(size_t)c * plane + pi] = (float)mean[ch];
-    if (n > 1) var += m2[ch] / ((double)(n - 1) * (double)n);
+    double n = (double)acc->cnt[ch];
+    set->buf[b][(size_t)c * plane + pi] = (float)acc->mean[ch];
+    if (n > 1) var += acc->m2[ch] / ((n - 1.0) * n);
   }
   var /= nc;
   if (set->var[b]) set->var[b][pi] = var < (double)FLT_MAX ? (float)var : FLT_MAX;
@@ -231,16 +241,17 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
       int py = cy + row;
       for (int col = 0; col < cw; col++) {
         int px = cx + col;
-        double mean[NCH] = {0}, m2[NCH] = {0};
+        pixel_acc acc;
+        memset(&acc, 0, sizeof(acc));
         kpcn_sampler_cache cache;
-        pixel_samples(&ctx, px, py, spp, &cache, mean, m2, &total_rays, &nonfinite);
+        pixel_samples(&ctx, px, py, spp, &cache, &acc, &total_rays, &nonfinite);
         size_t pi = (size_t)row * (size_t)cw + (size_t)col;
         for (int b = 0; b < KPCN_BUF_COUNT; b++)
-          if (set->buf[b]) store_buffer(set, b, mean, m2, spp, pi);
+          if (set->buf[b]) store_buffer(set, b, &acc, pi);
         if (aspp) { /* the albedo pass replaces the albedo buffer */
-          memset(mean, 0, sizeof mean), memset(m2, 0, sizeof m2);
-          pixel_samples(&fctx, px, py, aspp, &cache, mean, m2, &total_rays, &nonfinite);
-          store_buffer(set, KPCN_BUF_ALBEDO, mean, m2, aspp, pi);
+          memset(&acc, 0, sizeof(acc));
+          pixel_samples(&fctx, px, py, aspp, &cache, &acc, &total_rays, &nonfinite);
+          store_buffer(set, KPCN_BUF_ALBEDO, &acc, pi);
         }
       }
 #pragma omp atomic

@@ -38,7 +38,8 @@ typedef struct kpcn_filter_table {
 typedef struct kpcn_sample_out {
   kpcn_vec3 diffuse, specular, albedo, normal;
   float depth, visibility;
-  uint32_t rays; /* Embree queries issued */
+  uint32_t rays;       /* Embree queries issued */
+  uint32_t vis_traced; /* 1 if a shadow ray left the feature surface (visibility is defined) */
 } kpcn_sample_out;
 
 typedef struct kpcn_render_ctx {
