@@ -1,6 +1,6 @@
 /* Furnace tests of the whole integrator against closed-form answers:
  *  1. a lambert sphere (albedo a) under a constant environment L: every sphere pixel is a*L
- *     (convex: one bounce, then the ray escapes), every other pixel L;
+ *     (convex: one bounce, then the ray escapes), every other pixel L; its visibility is 1;
  *  2. a closed box whose inward-facing walls are all lambert (albedo a) and emit E: every
  *     pixel is E / (1 - a) (all bounce orders; tests Russian roulette, NEE and MIS on area
  *     lights, and emission of every surface);
@@ -83,6 +83,18 @@ static void sphere_in_env(void) {
     /* sd of the sphere pixels' mean across seeds at 1024 spp: MIS 3.5e-5, NEE 1.1e-4, BSDF 0
      * (cosine sampling: every sample is a*L); 6e-4 is 0.15 %, 5.4 sd of NEE's */
     check_image(what, a, want, 6.0, 0.4f, 6e-4);
+    /* Visibility is the fraction of the shadow rays traced from the feature surface that reach
+     * their light (DESIGN §4). From a convex sphere every ray traced toward the sky escapes:
+     * exactly 1 with no variance, though about half the environment samples fall below the
+     * horizon and trace none (counting those as 0, as before session 38, gave about 0.5). */
+    int vis_ok = 1;
+    for (size_t i = 0; i < plane; i++)
+      if (a->buf[KPCN_BUF_ALBEDO][i] > 0.499f)
+        vis_ok &= a->buf[KPCN_BUF_VISIBILITY][i] == 1.0f && a->var[KPCN_BUF_VISIBILITY][i] == 0.0f;
+      else if (a->buf[KPCN_BUF_ALBEDO][i] < 1e-6f) /* misses trace no shadow ray: 0 */
+        vis_ok &= a->buf[KPCN_BUF_VISIBILITY][i] == 0.0f;
+    printf("  visibility on the sphere 1, on the environment 0: %s\n", vis_ok ? "yes" : "NO");
+    CHECK(vis_ok);
     kpcn_aov_destroy(a);
   }
   kpcn_scene_destroy(s);
