@@ -95,6 +95,27 @@ static void test_aovs(const kpcn_scene *s) {
     CHECK(a->buf[KPCN_BUF_VISIBILITY][i] > 0.5f); /* upper back wall sees the light */
     CHECK(a->var[KPCN_BUF_DEPTH][i] < 1e-3f);
   }
+  /* Visibility is a mean of 0/1 over the n <= 16 samples that traced a shadow ray from their
+   * feature surface, so each pixel's value is k/n and its variance of the mean the Bernoulli
+   * p(1-p)/(n-1) for the same n (Tungsten's visibility.var follows the same formula). */
+  {
+    int bad = 0, partial = 0;
+    for (size_t i = 0; i < plane; i++) {
+      const double p = a->buf[KPCN_BUF_VISIBILITY][i], v = a->var[KPCN_BUF_VISIBILITY][i];
+      int ok = v == 0.0 && (p == 0.0 || p == 1.0); /* all alike (or one ray, or none) */
+      for (int n = 2; n <= 16 && !ok; n++)
+        ok = fabs(p * n - round(p * n)) < 1e-4 && fabs(v - p * (1.0 - p) / (n - 1)) < 1e-6;
+      for (int n = 2; n < 16 && !partial; n++)
+        partial =
+            v > 0.0 && fabs(p * n - round(p * n)) < 1e-4 && fabs(p * 16 - round(p * 16)) > 1e-4;
+      bad += !ok;
+    }
+    printf(
+        "visibility: %d of %zu pixels not k/n with variance p(1-p)/(n-1); some with n < 16: %s\n",
+        bad, plane, partial ? "yes" : "no");
+    CHECK(bad == 0);
+    CHECK(partial); /* some pixels mix samples that trace one with samples that trace none */
+  }
   /* left wall pixel (16, 32): red wall x = -1 faces +x = camera right */
   {
     int px = 16, py = 32;
