@@ -347,13 +347,29 @@ static void source_rows(int K, int nc, int h, int w, int b, int y, const float *
   last[0] = b, last[1] = y;
 }
 
-/* Per-thread state for source_rows, 64 bytes apart; NULL when out of memory. */
-static int *row_state(int nt) {
-  int *last = kpcn_aligned_alloc((size_t)nt * 16 * sizeof(int), "kpa row state");
-  if (last)
-    for (int i = 0; i < nt; i++)
-      last[16 * i] = -1;
-  return last;
+/* What each of nt threads works in: `per` floats of scratch and the state of source_rows
+ * (64 bytes apart). Both or neither are allocated. */
+typedef struct kpa_workspace {
+  float *buf;
+  int *last;
+} kpa_workspace;
+
+static kpcn_status workspace_alloc(kpa_workspace *ws, int nt, size_t per) {
+  ws->buf = kpcn_aligned_alloc((size_t)nt * per * sizeof(float), "kpa scratch");
+  ws->last = kpcn_aligned_alloc((size_t)nt * 16 * sizeof(int), "kpa row state");
+  if (!ws->buf || !ws->last) {
+    kpcn_aligned_free(ws->buf);
+    kpcn_aligned_free(ws->last);
+    return KPCN_ERR_OUT_OF_MEMORY;
+  }
+  for (int i = 0; i < nt; i++)
+    ws->last[16 * i] = -1;
+  return KPCN_OK;
+}
+
+static void workspace_free(kpa_workspace *ws) {
+  kpcn_aligned_free(ws->buf);
+  kpcn_aligned_free(ws->last);
 }
 
 static inline int *thread_state(int *last) {
@@ -508,13 +524,8 @@ kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const vo
   const int xc_n = planar || w < XC ? w : XC;
   const size_t ws = kpcn_plane_stride((size_t)xc_n);
   const size_t scratch = (size_t)K2 * ws + 2 * (size_t)xc_n + (size_t)nc * K * (w + 2 * r) + 64;
-  float *buf = kpcn_aligned_alloc((size_t)nt * scratch * sizeof(float), "kpa scratch");
-  int *last = row_state(nt);
-  if (!buf || !last) {
-    kpcn_aligned_free(buf);
-    kpcn_aligned_free(last);
-    return KPCN_ERR_OUT_OF_MEMORY;
-  }
+  kpa_workspace wsp;
+  KPCN_TRY(workspace_alloc(&wsp, nt, scratch));
   const int t16 = have_avx512();
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++) {
@@ -522,11 +533,10 @@ kpcn_status kpcn_kpa_forward_layout(int K, int n, int nc, int h, int w, const vo
     fwd_row(K, nc, h, w, xc_n, ws, b, y,
             (const char *)logits + (size_t)b * lay.image_stride * (lay.bf16 ? 2 : 4), &lay,
             noisy + (size_t)b * nc * plane, out + (size_t)b * nc * plane,
-            weights ? weights + (size_t)b * K2 * plane : NULL, thread_scratch(buf, scratch),
-            thread_state(last), t16);
+            weights ? weights + (size_t)b * K2 * plane : NULL, thread_scratch(wsp.buf, scratch),
+            thread_state(wsp.last), t16);
   }
-  kpcn_aligned_free(buf);
-  kpcn_aligned_free(last);
+  workspace_free(&wsp);
   return KPCN_OK;
 }
 
@@ -675,27 +685,21 @@ static kpcn_status kpa_backward(const char *fn, int K, int n, int nc, int h, int
   /* per thread: g [K2][w], dot [w], the ring of nc x K padded source rows (dnoisy: one
    * padded accumulator row) */
   const size_t scratch = (size_t)K2 * w + (size_t)w + (size_t)nc * K * (w + 2 * r) + 64;
-  float *buf = kpcn_aligned_alloc((size_t)nt * scratch * sizeof(float), "kpa scratch");
-  int *last = row_state(nt);
-  if (!buf || !last) {
-    kpcn_aligned_free(buf);
-    kpcn_aligned_free(last);
-    return KPCN_ERR_OUT_OF_MEMORY;
-  }
+  kpa_workspace wsp;
+  KPCN_TRY(workspace_alloc(&wsp, nt, scratch));
   /* dnoisy first: it reads weights, which dlogits may alias. Gather over output rows qy
    * (each thread owns its rows, so the sum order is fixed and thread-count independent);
    * within a row the x-scatter goes to a padded accumulator folded at the edges. */
   if (dnoisy) {
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (long row = 0; row < (long)n * nc * h; row++)
-      bwd_dnoisy_row(K, nc, h, w, row, weights, dout, dnoisy, thread_scratch(buf, scratch));
+      bwd_dnoisy_row(K, nc, h, w, row, weights, dout, dnoisy, thread_scratch(wsp.buf, scratch));
   }
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (long row = 0; row < (long)n * h; row++)
     bwd_dlogits_row(K, nc, h, w, (int)(row / h), (int)(row % h), weights, noisy, dout, dlogits, lay,
-                    thread_scratch(buf, scratch), thread_state(last), t16);
-  kpcn_aligned_free(buf);
-  kpcn_aligned_free(last);
+                    thread_scratch(wsp.buf, scratch), thread_state(wsp.last), t16);
+  workspace_free(&wsp);
   return KPCN_OK;
 }
 
