@@ -406,6 +406,9 @@ def main():
     ap.add_argument("--timeout", type=float, default=120, help="seconds per case")
     ap.add_argument("targets", nargs="+", choices=sorted(TARGETS))
     a = ap.parse_args()
+    # absolute, because WORK/scenes links to the testdata files (a relative testdata path
+    # made every link dangle) and the tools run with other working directories
+    a.bin, a.testdata, a.work = (os.path.abspath(p) for p in (a.bin, a.testdata, a.work))
     fz = Fuzzer(a)
     prepare(fz)
     for i, t in enumerate(a.targets):
