@@ -30,6 +30,15 @@ expect_fail "PNG only supports 1-4 channels" out.png "$NOISY" -o out.png
 expect_fail "PNG only supports 1-4 channels" out.exr "$NOISY" -o out.exr -o out.png
 expect_fail "has no channel 'Q'" p.kps "$NOISY" "$REF" --patches:size=16:count=4:out=p.kps --ch Q
 expect_fail "has no channel 'Q'" pdir "$NOISY" "$REF" --patches:size=16:count=4:out=pdir --ch Q
+expect_fail "has no channel 'Q'" pdir "$NOISY" "$REF" --patches:size=16:count=4:out=pdir/ --ch Q
+# A directory named with a trailing slash (as docs/dataset.md writes it) is made next to its
+# temporary copy, whether it exists yet or not; the second run merges into it.
+for run in new existing; do
+  run_ok "$NOISY" "$REF" --patches:size=16:count=4:seed=1:out=pdir/
+  [ "$(ls pdir | tr '\n' ' ')" = "noisy_0000.exr noisy_0001.exr noisy_0002.exr noisy_0003.exr ref_0000.exr ref_0001.exr ref_0002.exr ref_0003.exr " ] &&
+    pass "--patches:out=pdir/ ($run directory)" || fail "--patches:out=pdir/ ($run): $(ls -a pdir)"
+done
+rm -rf pdir
 run_ok "$REF" -o twice.exr --ch R,G,B,A=1 -o twice.exr
 [ "$(oiiotool --info twice.exr | grep -c '4 channel')" = 1 ] && pass "the later of two -o to one file wins" ||
   fail "two -o to one file: $(oiiotool --info twice.exr)"

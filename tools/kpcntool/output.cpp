@@ -56,11 +56,21 @@ bool write_image(const OIIO::ImageBuf &img, const std::string &file, const std::
   return true;
 }
 
+// The output's path without trailing slashes ("patches/" names the directory "patches"; only
+// "/" itself keeps its slash), so its temporary path lies next to it, never inside it.
+static std::string bare_path(const Context::Output &o) {
+  std::string p = o.path;
+  while (p.size() > 1 && p.back() == '/')
+    p.pop_back();
+  return p;
+}
+
 // Next to the output, unique per output (the same path may be queued twice: the later wins, as
 // if written in turn) and keeping the extension, by which image writers and --patches choose
 // the format.
 static std::string temp_path(const Context::Output &o, size_t index) {
-  std::string t = o.path + ".tmp" + std::to_string((long)getpid()) + "_" + std::to_string(index);
+  std::string t =
+      bare_path(o) + ".tmp" + std::to_string((long)getpid()) + "_" + std::to_string(index);
   std::string e = raw_ext(o.path);
   if (!o.is_dir && !e.empty()) t += "." + e;
   return t;
@@ -69,14 +79,15 @@ static std::string temp_path(const Context::Output &o, size_t index) {
 // A directory output may merge into an existing directory (its files are replaced one by one).
 static bool move_into_place(const Context::Output &o, const std::string &tmp, std::string &err) {
   std::error_code ec;
-  if (o.is_dir && fs::is_directory(o.path, ec)) {
+  const std::string path = bare_path(o);
+  if (o.is_dir && fs::is_directory(path, ec)) {
     for (const fs::directory_entry &e : fs::directory_iterator(tmp, ec)) {
-      fs::rename(e.path(), fs::path(o.path) / e.path().filename(), ec);
+      fs::rename(e.path(), fs::path(path) / e.path().filename(), ec);
       if (ec) break;
     }
     if (!ec) fs::remove(tmp, ec);
   } else {
-    fs::rename(tmp, o.path, ec);
+    fs::rename(tmp, path, ec);
   }
   if (ec) err = "cannot move '" + tmp + "' to '" + o.path + "': " + ec.message();
   return !ec;
