@@ -32,7 +32,8 @@
 #   ratio: bound diffuse fireflies in the training patches, kpcn-train --firefly), EPS (the
 #   albedo epsilon of the diffuse demodulation, kpcn-train --eps; with INIT it changes the
 #   model's), FREEZE (diffuse or specular: with INIT, that branch keeps INIT's weights bit for
-#   bit, kpcn-train --freeze).
+#   bit, kpcn-train --freeze), KPCNTOOL (the kpcntool that scores SWA candidates, default
+#   build/tools/kpcntool/kpcntool).
 # With a time budget the iteration count is unknown in advance, so the script first measures
 # the speed (20 iterations) and sets --iters to fit MINUTES, --stage1-iters to STAGE1_FRACTION.
 # Resumable: if the run is interrupted, re-running continues from its checkpoint.

@@ -118,7 +118,7 @@ bool reg = kpcntool::register_command(
      0,
      {"model", "method", "bf16", "tile", "ensemble", "exposure", "firefly"},
      "denoise the top AOV image (model=m.safetensors | method=bilateral|nlmeans, bf16=1, tile=N, "
-     "ensemble=2|4|8: average over mirrored/rotated copies, exposure=auto|off|E: the exposure "
+     "ensemble=1|2|4|8: average over mirrored/rotated copies, exposure=auto|off|E: the exposure "
      "the network is shown every input at, default the model's; firefly=R|off: bound isolated "
      "diffuse fireflies to R x their brightest neighbour first, default 4)",
      run_denoise});
