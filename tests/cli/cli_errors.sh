@@ -39,6 +39,12 @@ for run in new existing; do
     pass "--patches:out=pdir/ ($run directory)" || fail "--patches:out=pdir/ ($run): $(ls -a pdir)"
 done
 rm -rf pdir
+echo "a file" >pfile
+expect_fail "'pfile/' exists and is not a directory" "" "$REF" -o ok.exr "$NOISY" "$REF" \
+  --patches:size=16:count=4:out=pfile/
+[ ! -e ok.exr ] && [ "$(cat pfile)" = "a file" ] && pass "out=FILE/ leaves every output alone" ||
+  fail "out=pfile/ wrote: $(ls -a)"
+rm -f pfile
 run_ok "$REF" -o twice.exr --ch R,G,B,A=1 -o twice.exr
 [ "$(oiiotool --info twice.exr | grep -c '4 channel')" = 1 ] && pass "the later of two -o to one file wins" ||
   fail "two -o to one file: $(oiiotool --info twice.exr)"
