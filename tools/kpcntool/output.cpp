@@ -104,7 +104,8 @@ bool commit_outputs(const std::vector<Context::Output> &outputs, std::string &fa
   for (size_t i = 0; i < outputs.size(); ++i) {
     const Context::Output &o = outputs[i];
     std::error_code ec;
-    if (o.is_dir && fs::exists(bare_path(o), ec) && !fs::is_directory(bare_path(o), ec)) {
+    const std::string path = bare_path(o);
+    if (o.is_dir && fs::exists(path, ec) && !fs::is_directory(path, ec)) {
       failed = o.what;
       err = "'" + o.path + "' exists and is not a directory";
       clean();
