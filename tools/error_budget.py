@@ -26,6 +26,10 @@ With --model, also the model's own output split by branch (kpcntool --denoise):
   kpcn_diffuse       its diffuse branch with the reference specular (D_kpcn + S_ref)
   kpcn_specular      its specular branch with the reference diffuse (D_ref + S_kpcn)
   kpcn_top1pct       share of kpcn's error in its worst 1 % of pixels
+  kpcn_albedo_exact  the model's output with its diffuse branch remodulated by REF's albedo
+                     instead of the noisy one: D_kpcn * (A_ref + eps) / (A_noisy + eps) +
+                     S_kpcn, the same network's irradiance and specular, no albedo coverage
+                     error (what a perfect albedo buffer would give this model)
 The diffuse branch's part D_kpcn is the denoised result of the same input with the specular
 buffers zeroed: that branch never reads them, and the specular branch then filters zeros
 (exp(0) - 1 = 0), so the split is exact (to float rounding). One coupling is undone by hand:
@@ -169,11 +173,14 @@ def main():
                     opts = ":exposure=%r" % (e_nospec * target / e_full)
             diff = denoise(a.kpcntool, a.model, path, os.path.join(tmp, "diffuse.exr"), opts)
         err = np.sort(relmse_map(full, ref).ravel())[::-1]
+        m_eps = model_eps(a.model)
         out.update({
             "kpcn": float(err.mean()),
             "kpcn_diffuse": relmse(diff + s_r, ref),
             "kpcn_specular": relmse(d_r + (full - diff), ref),
             "kpcn_top1pct": float(err[:max(1, err.size // 100)].sum() / err.sum()),
+            # the pipeline remodulates at the model's eps, whatever --eps gave the oracle
+            "kpcn_albedo_exact": relmse(full + diff * ((a_r + m_eps) / (a_n + m_eps) - 1), ref),
         })
     print(json.dumps(out))
 

@@ -136,18 +136,24 @@ print('*irradiance oracle* is a network that returned the reference\'s own irrad
 print('exactly, remodulated by the noisy albedo as the pipeline does (the albedo\'s sub-pixel coverage')
 print('error at edges and texture detail stays); *noisy specular* is the diffuse part exact and the')
 print('specular left noisy. kpcn\'s error split by branch (the other part taken from the reference; exact,')
-print('see the script) and the share of it in the worst 1 % of pixels. The oracle is built from the')
-print('reference, so it carries none of the reference\'s own noise (about noisy x 16/1024), which')
-print('every kpcn figure does.\n')
-print('| scene | noisy | 20x target | irradiance oracle | noisy specular | kpcn | kpcn diffuse branch | kpcn specular branch | worst 1 % px | kpcn-x8 |')
-print('|---|---|---|---|---|---|---|---|---|---|')
+print('see the script) and the share of it in the worst 1 % of pixels. *kpcn, reference albedo* is')
+print('the same output with its diffuse branch remodulated by the reference\'s albedo instead of the')
+print('noisy one: what this network would reach if the albedo buffer had no coverage error. The')
+print('oracle is built from the reference, so it carries none of the reference\'s own noise (about')
+print('noisy x 16/1024), which every kpcn figure does.\n')
+print('| scene | noisy | 20x target | irradiance oracle | noisy specular | kpcn | kpcn diffuse branch | kpcn specular branch | worst 1 % px | kpcn, reference albedo | kpcn-x8 |')
+print('|---|---|---|---|---|---|---|---|---|---|---|')
+albedo = []
 for l in open(sys.argv[2]):
     scene, js = l.rstrip('\n').split('\t', 1)
     d = json.loads(js)
+    albedo.append('%s %.1fx instead of %.1fx' % (scene, d['noisy'] / d['kpcn_albedo_exact'], d['noisy'] / d['kpcn']))
     kx = [v for (s2, p2, m), v in rows.items() if s2 == scene and p2 == '16' and m.startswith('kpcn-x')]
-    print('| %s | %.3e | %.3e | %.3e | %.3e | %.3e | %.3e | %.3e | %.0f %% | %s |' % (
+    print('| %s | %.3e | %.3e | %.3e | %.3e | %.3e | %.3e | %.3e | %.0f %% | %.3e | %s |' % (
         scene, d['noisy'], d['noisy'] / 20, d['irradiance_oracle'], d['diffuse_exact'], d['kpcn'],
-        d['kpcn_diffuse'], d['kpcn_specular'], 100 * d['kpcn_top1pct'], '%.3e' % kx[0] if kx else '-'))
+        d['kpcn_diffuse'], d['kpcn_specular'], 100 * d['kpcn_top1pct'], d['kpcn_albedo_exact'],
+        '%.3e' % kx[0] if kx else '-'))
+print('\nWith the reference\'s albedo in place of the noisy one, kpcn would be below noisy by: %s (against this reference).' % '; '.join(albedo))
 print('\nHow far the `cpu` preset can go on these two scenes, measured by fine-tuning it on the scenes')
 print('themselves (a bound, never a shipped model): docs/training.md, "Session 22".')
 PY

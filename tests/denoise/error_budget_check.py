@@ -28,7 +28,9 @@ model.safetensors; the fixtures below are written there)
    - every buffer differs: the specular branch's part, computed here the other way round (the
      input with diffuse.* zeroed, denoised at the full input's colour scale; the diffuse branch
      then filters zeros), must give the script's kpcn_specular, and full - it its kpcn_diffuse;
-     and full = (diffuse zeroed) + (specular zeroed) pixelwise, the premise of the split.
+     and full = (diffuse zeroed) + (specular zeroed) pixelwise, the premise of the split;
+     kpcn_albedo_exact from that diffuse part remodulated by REF's albedo at the model's eps
+     (also when --eps moves the oracle's).
 Prints the measured figures."""
 import json
 import os
@@ -187,6 +189,12 @@ def with_arch(src, dst, key, value):
     return dst
 
 
+def model_eps(path):
+    with open(path, "rb") as f:
+        n = struct.unpack("<Q", f.read(8))[0]
+        return float(json.loads(f.read(n))["__metadata__"]["kpcn.eps"])
+
+
 def exposure(path):
     r = subprocess.run([TOOL, path, "--exposure", "--json"], stdout=subprocess.PIPE, text=True)
     if r.returncode != 0:
@@ -248,11 +256,19 @@ for model, target in ((MODEL, 0.0), (EXPMODEL, TARGET)):
         fail("%s: full != diffuse part + specular part pixelwise (max rel %.3g)" % (tag, res))
     j = budget(NOISY, AOV, "--model", model, "--kpcntool", TOOL)
     show("all perturbed, " + tag, j)
+    me = model_eps(model)  # the pipeline remodulates by (albedo + the model's eps)
     want = {"kpcn": relmse(full, Cr), "kpcn_specular": relmse(Dr + spec_part, Cr),
-            "kpcn_diffuse": relmse(full - spec_part + Sr, Cr)}
+            "kpcn_diffuse": relmse(full - spec_part + Sr, Cr),
+            "kpcn_albedo_exact": relmse(spec_part + (full - spec_part) * (Ar + me) / (An + me), Cr)}
     dev = max(abs(j[k] / v - 1) for k, v in want.items())
     print("  split residual %.3g (max |full - parts| / max |full|), figures within %.3g" % (res, dev))
     for k, v in want.items():
         if not (v > 0 and close(j[k], v, 1e-6)):
             fail("%s (%s): script %.9g, via the zeroed-diffuse run %.9g" % (k, tag, j[k], v))
+    # --eps moves the oracle only: the model's output is remodulated at the model's eps
+    j2 = budget(NOISY, AOV, "--model", model, "--kpcntool", TOOL, "--eps", "0.5")
+    if not (j2["kpcn_albedo_exact"] == j["kpcn_albedo_exact"]
+            and j2["irradiance_oracle"] != j["irradiance_oracle"]):
+        fail("--eps 0.5 (%s): kpcn_albedo_exact %.17g (want %.17g), oracle %.17g (want it moved)"
+             % (tag, j2["kpcn_albedo_exact"], j["kpcn_albedo_exact"], j2["irradiance_oracle"]))
 print("error_budget_check: all passed")
