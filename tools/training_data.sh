@@ -16,8 +16,9 @@
 # JOBS (parallel render jobs, default 2; one thread each, as the recipes).
 #
 # The renders are the current renderer's. The shipped model's lineage trained on renders of
-# the same plans made by the renderer of their session (docs/dataset.md), so a rebuild gives
-# this data as it renders now, not those files byte for byte.
+# the same plans made by the renderer of their session, so where the renderer has changed
+# since, the files differ (docs/dataset.md, "The shipped model's data in one command", has
+# what session 40 found reproduced).
 set -euo pipefail
 shopt -s inherit_errexit
 here=$(cd "$(dirname "$0")/.." && pwd)
@@ -26,7 +27,7 @@ while [ $# -gt 0 ]; do
   case $1 in
     --plan-only) plan_only=1; shift ;;
     --no-store) store=0; shift ;;
-    -h | --help) sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h | --help) sed -n '2,21p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     -*) echo "training_data.sh: unknown option '$1'" >&2; exit 2 ;;
     *) break ;;
   esac
