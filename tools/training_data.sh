@@ -10,8 +10,9 @@
 # the scenes and plans and prints "NAME: N jobs, S camera samples" per dataset, rendering
 # nothing (seconds; tests/dataset/test_training_data.sh checks it against the figures in
 # docs/dataset.md). --no-store renders but does not build rooms9v.kps (24 GB).
-# Resumable: a dataset already planned is not planned again, `kpcn-dataset run` renders only
-# what is missing, the store is built only if absent. Rendering all of it is about 3.1e10
+# Resumable: a dataset already planned is checked against this recipe's plan (a dataset planned
+# otherwise is an error), `kpcn-dataset run` renders only what is missing, the store is built
+# only if absent. Rendering all of it is about 3.1e10
 # camera samples, some 4.5 hours on 2 cores. Environment: KPCN_BIN (default build/tools),
 # JOBS (parallel render jobs, default 2; one thread each, as the recipes).
 #
@@ -27,7 +28,7 @@ while [ $# -gt 0 ]; do
   case $1 in
     --plan-only) plan_only=1; shift ;;
     --no-store) store=0; shift ;;
-    -h | --help) sed -n '2,21p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h | --help) sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     -*) echo "training_data.sh: unknown option '$1'" >&2; exit 2 ;;
     *) break ;;
   esac
@@ -110,18 +111,27 @@ spec() {
     rooms9) rooms train9 1414 96 0.5; echo "rooms/train9 --variants 0 --seed 91" ;;
   esac
 }
+# Each dataset is planned afresh (a second or two) into a scratch folder: moved into place the
+# first time; later, compared with the plan in place, so that a resumed rebuild never renders
+# into a dataset planned with other options or by other code.
+scratch="$out/.plan.$$"
+trap 'rm -rf "$scratch"' EXIT
 for d in $names; do
   s=$(spec "$d")
   read -r -a opts <<<"$s"
+  rm -rf "$scratch"
+  mkdir -p "$scratch"
+  line=$("$ds_tool" plan --scenes "${opts[@]:0:1}" -o "$scratch/$d" "${opts[@]:1}" --spp 4,16,64 \
+    --ref-spp 1024 --resolution 160x160 | tail -n 1)
   if [ ! -f "dataset/$d/manifest.jsonl" ]; then
-    line=$("$ds_tool" plan --scenes "${opts[@]:0:1}" -o "dataset/$d" "${opts[@]:1}" --spp 4,16,64 \
-      --ref-spp 1024 --resolution 160x160 | tail -n 1)
-  else # planned by an earlier call: the figures from its manifest
-    line=$(/usr/bin/python3 -c "
-import json, sys
-jobs = [json.loads(l) for l in open(sys.argv[1])]
-print('%d jobs, %.3g camera samples' % (len(jobs), sum(j['spp'] * j['width'] * j['height'] for j in jobs)))" \
-      "dataset/$d/manifest.jsonl")
+    mkdir -p dataset
+    rm -rf "dataset/$d"
+    mv "$scratch/$d" "dataset/$d"
+  elif ! cmp -s "$scratch/$d/manifest.jsonl" "dataset/$d/manifest.jsonl" ||
+    ! diff -r -q "$scratch/$d/scenes" "dataset/$d/scenes" >/dev/null; then
+    echo "training_data.sh: $out/dataset/$d was planned otherwise (its manifest or scene files" \
+      "differ from this recipe's plan): move it away" >&2
+    exit 1
   fi
   echo "$d: $(echo "$line" | sed -E 's/^([0-9]+) jobs.*, ([0-9.e+]+) camera samples.*/\1 jobs, \2 camera samples/')"
   [ $plan_only = 1 ] || "$ds_tool" run "dataset/$d" --jobs "$jobs" --threads-per-job 1

@@ -82,6 +82,11 @@ rooms8 137bf5ba34ae7c1d
 rooms9 6dee73f228e3de7b
 EOF
 diff "$D/fpwant.txt" "$D/fp.txt" >"$D/diff" || fail "plans changed (fingerprints): $(cat "$D/diff")"
+# a dataset planned otherwise (another seed here) is refused, not rendered into
+sed -i 's/"seed":"[0-9]*"/"seed":"1"/' "$D/out/dataset/roomsval/manifest.jsonl"
+if KPCN_BIN=$B bash "$S" --plan-only "$D/out" roomsval >/dev/null 2>"$D/err"; then fail "a changed plan accepted"; fi
+grep -q "dataset/roomsval was planned otherwise" "$D/err" || fail "changed plan message: $(cat "$D/err")"
+[ -z "$(find "$D/out" -name '.plan.*' | head -1)" ] || fail "a scratch plan was left behind"
 # a subset, and bad arguments: an unknown dataset or option is refused before anything is planned
 KPCN_BIN=$B bash "$S" --plan-only "$D/sub" roomsval v1 >"$D/sub.txt" 2>"$D/err" || fail "subset: $(cat "$D/err")"
 [ "$(cut -d: -f1 "$D/sub.txt" | paste -sd' ')" = "roomsval v1" ] || fail "subset lists $(cat "$D/sub.txt")"
