@@ -2,13 +2,19 @@
 """Where KPCN's error comes from, and what a perfect demodulated-domain denoiser would leave.
 
 usage: tools/error_budget.py NOISY.exr REF.exr [--model M.safetensors] [--kpcntool PATH] [--eps E]
+                             [--color-ref C.exr] [--edges]
 
 --eps is the albedo epsilon of the oracle's demodulation: by default the model's (kpcn.eps), or
-0.00316 (Bako 2017's) without --model.
+0.00316 (Bako 2017's) without --model. --color-ref measures every figure against C's R, G, B
+instead of REF's colour (e.g. a 4096-spp colour-only render; REF's buffers still build the
+oracles). --edges adds edge_fraction and, for every figure, its contributions to the image
+mean from "edges" (pixels whose noisy samples saw more than one surface or texel value:
+NOISY's albedo.var > 1e-4, N.var > 1e-4 or Z.var > 1e-6 Z^2) and from the "rest"; the two
+add up to the figure.
 
 Both files are kpcn AOV EXRs (REF with its diffuse / specular / albedo buffers, as the
 dataset's references are). Prints one JSON object of relMSE values (R, G, B; eps 0.01, as
-kpcntool --relmse) against REF's colour:
+kpcntool --relmse) against REF's colour (or C's):
 
   noisy              the noisy colour
   irradiance_oracle  (A_noisy + eps) * D_ref / (A_ref + eps) + S_ref: a network whose diffuse
@@ -76,8 +82,20 @@ def relmse_map(x, y):
     return ((x - y) ** 2 / (y ** 2 + 0.01)).mean(-1)
 
 
-def relmse(x, y):
-    return float(relmse_map(x, y).mean())
+def plane(img, name, path):
+    try:
+        return img[name].astype(np.float64)
+    except KeyError:
+        fail("%s has no channel %s" % (path, name))
+
+
+def edge_mask(img, path):
+    """Pixels whose samples saw more than one surface or texel value: the noisy render's
+    albedo.var > 1e-4, N.var > 1e-4 or Z.var > 1e-6 Z^2 (thresholds chosen, not derived:
+    texture and silhouette edges, where sub-pixel coverage is noisy)."""
+    z = plane(img, "Z", path)
+    return ((plane(img, "albedo.var", path) > 1e-4) | (plane(img, "N.var", path) > 1e-4)
+            | (plane(img, "Z.var", path) > 1e-6 * z * z))
 
 
 def model_meta(path):
@@ -131,6 +149,8 @@ def main():
     here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ap.add_argument("--kpcntool", default=os.path.join(here, "build/tools/kpcntool/kpcntool"))
     ap.add_argument("--eps", type=float)
+    ap.add_argument("--color-ref")
+    ap.add_argument("--edges", action="store_true")
     a = ap.parse_args()
     if a.eps is None:  # the model's own, so the oracle remodulates as its pipeline does
         a.eps = model_eps(a.model) if a.model else 0.00316
@@ -143,11 +163,15 @@ def main():
     ref = rgb(r, "", a.ref)
     if d_n.shape != ref.shape:
         fail("%s and %s differ in size" % (a.noisy, a.ref))
-    out = {
-        "noisy": relmse(rgb(n, "", a.noisy), ref),
-        "irradiance_oracle": relmse((a_n + a.eps) * d_r / (a_r + a.eps) + s_r, ref),
-        "diffuse_exact": relmse(d_r + s_n, ref),
-        "specular_exact": relmse(d_n + s_r, ref),
+    if a.color_ref:  # every figure against this colour; REF's buffers still build the oracles
+        ref = rgb(load(a.color_ref)[1], "", a.color_ref)
+        if ref.shape != d_n.shape:
+            fail("%s and %s differ in size" % (a.noisy, a.color_ref))
+    maps = {
+        "noisy": relmse_map(rgb(n, "", a.noisy), ref),
+        "irradiance_oracle": relmse_map((a_n + a.eps) * d_r / (a_r + a.eps) + s_r, ref),
+        "diffuse_exact": relmse_map(d_r + s_n, ref),
+        "specular_exact": relmse_map(d_n + s_r, ref),
     }
     if a.model:
         with tempfile.TemporaryDirectory() as tmp:
@@ -172,16 +196,23 @@ def main():
                 elif e_nospec > 0:
                     opts = ":exposure=%r" % (e_nospec * target / e_full)
             diff = denoise(a.kpcntool, a.model, path, os.path.join(tmp, "diffuse.exr"), opts)
-        err = np.sort(relmse_map(full, ref).ravel())[::-1]
         m_eps = model_eps(a.model)
-        out.update({
-            "kpcn": float(err.mean()),
-            "kpcn_diffuse": relmse(diff + s_r, ref),
-            "kpcn_specular": relmse(d_r + (full - diff), ref),
-            "kpcn_top1pct": float(err[:max(1, err.size // 100)].sum() / err.sum()),
+        maps.update({
+            "kpcn": relmse_map(full, ref),
+            "kpcn_diffuse": relmse_map(diff + s_r, ref),
+            "kpcn_specular": relmse_map(d_r + (full - diff), ref),
             # the pipeline remodulates at the model's eps, whatever --eps gave the oracle
-            "kpcn_albedo_exact": relmse(full + diff * ((a_r + m_eps) / (a_n + m_eps) - 1), ref),
+            "kpcn_albedo_exact": relmse_map(full + diff * ((a_r + m_eps) / (a_n + m_eps) - 1), ref),
         })
+    out = {k: float(m.mean()) for k, m in maps.items()}
+    if a.model:
+        err = np.sort(maps["kpcn"].ravel())[::-1]
+        out["kpcn_top1pct"] = float(err[:max(1, err.size // 100)].sum() / err.sum())
+    if a.edges:
+        edge = edge_mask(n, a.noisy)
+        out["edge_fraction"] = float(edge.mean())
+        out["edges"] = {k: float(m[edge].sum() / m.size) for k, m in maps.items()}
+        out["rest"] = {k: float(m[~edge].sum() / m.size) for k, m in maps.items()}
     print(json.dumps(out))
 
 

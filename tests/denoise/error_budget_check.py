@@ -31,6 +31,11 @@ model.safetensors; the fixtures below are written there)
      and full = (diffuse zeroed) + (specular zeroed) pixelwise, the premise of the split;
      kpcn_albedo_exact from that diffuse part remodulated by REF's albedo at the model's eps
      (also when --eps moves the oracle's).
+4. --color-ref: REF's own file changes nothing, another colour is what the network-free figures
+   are measured against (recomputed); --edges on a copy of NOISY whose variance buffers mark
+   known rows (each criterion alone, and values just below two thresholds): the edge fraction
+   is their share, the two parts add up to each figure, the figures are those without
+   --edges; a colour reference of another size and a noisy file without N.var are refused.
 Prints the measured figures."""
 import json
 import os
@@ -271,4 +276,71 @@ for model, target in ((MODEL, 0.0), (EXPMODEL, TARGET)):
             and j2["irradiance_oracle"] != j["irradiance_oracle"]):
         fail("--eps 0.5 (%s): kpcn_albedo_exact %.17g (want %.17g), oracle %.17g (want it moved)"
              % (tag, j2["kpcn_albedo_exact"], j["kpcn_albedo_exact"], j2["irradiance_oracle"]))
+
+# 4. --color-ref and --edges
+# --color-ref REF's own file changes nothing; another colour is what every figure is measured
+# against (recomputed here for the network-free ones)
+j0 = budget(NOISY, AOV, "--model", MODEL, "--kpcntool", TOOL)
+if budget(NOISY, AOV, "--model", MODEL, "--kpcntool", TOOL, "--color-ref", AOV) != j0:
+    fail("--color-ref REF changed the figures")
+C2 = f32(Cr * (1 + 0.2 * u()))
+c2 = dict(orig)
+put(c2, "", C2)
+COLOR2 = write(os.path.join(DIR, "eb_color2.exr"), spec, c2)
+j = budget(NOISY, AOV, "--color-ref", COLOR2)
+e = 0.00316
+want = {"noisy": relmse(Cn, C2), "irradiance_oracle": relmse((An + e) * Dr / (Ar + e) + Sr, C2),
+        "diffuse_exact": relmse(Dr + Sn, C2), "specular_exact": relmse(Dn + Sr, C2)}
+show("--color-ref other", j)
+for k, v in want.items():
+    if not (v > 0 and close(j[k], v, 1e-9)):
+        fail("--color-ref %s: script %.17g, recomputed %.17g" % (k, j[k], v))
+# --edges: on a copy of NOISY whose variance buffers mark known pixels (each criterion on its
+# own rows, one just below its threshold), the edge fraction is that count and the two parts
+# add up to each figure, which --edges leaves as it is without it
+ev = dict(noisy)
+H = ev["Z"].shape[0]
+rows = np.arange(H)[:, None] + 0 * ev["Z"]
+for k in ("albedo.var", "N.var", "Z.var"):
+    ev[k] = np.zeros_like(ev[k])
+ev["albedo.var"][rows % 5 == 0] = 2e-4
+ev["N.var"][rows % 5 == 1] = 2e-4
+ev["Z.var"][rows % 5 == 2] = (2e-6 * ev["Z"] ** 2)[rows % 5 == 2]
+ev["Z.var"][rows % 5 == 3] = (0.5e-6 * ev["Z"] ** 2)[rows % 5 == 3]  # below: not an edge
+ev["albedo.var"][rows % 5 == 4] = 0.5e-4  # below: not an edge
+EDGES = write(os.path.join(DIR, "eb_edges.exr"), spec, ev, exact=False)
+want_frac = float(np.mean(rows % 5 < 3))
+plain = budget(EDGES, AOV, "--model", MODEL, "--kpcntool", TOOL)
+j = budget(EDGES, AOV, "--model", MODEL, "--kpcntool", TOOL, "--edges")
+show("--edges", {"edge_fraction": j["edge_fraction"], "want": want_frac})
+if not (j["edge_fraction"] == want_frac and 0 < want_frac < 1):
+    fail("edge_fraction %.17g, want %.17g" % (j["edge_fraction"], want_frac))
+for k, v in plain.items():
+    if k == "kpcn_top1pct":
+        continue
+    parts = j["edges"][k] + j["rest"][k]
+    if not (j[k] == v and close(parts, v, 1e-12) and min(j["edges"][k], j["rest"][k]) > 0):
+        fail("--edges %s: %.17g = edges %.17g + rest %.17g (whole %.17g)"
+             % (k, v, j["edges"][k], j["rest"][k], j[k]))
+# bad input: a colour reference of another size, a noisy file without N.var under --edges
+def refused(args, needle, what):
+    r = subprocess.run([sys.executable, SCRIPT, *args], stdout=subprocess.PIPE,
+                       stderr=subprocess.PIPE, text=True)
+    if r.returncode == 0 or needle not in r.stderr:
+        fail("%s: exit %d, stderr %r (want an error naming %s)" % (what, r.returncode, r.stderr, needle))
+
+
+small = oiio.ImageSpec(8, 8, 3, oiio.FLOAT)
+small.channelnames = ("R", "G", "B")
+SMALL = os.path.join(DIR, "eb_small.exr")
+out = oiio.ImageOutput.create(SMALL)
+if not out or not out.open(SMALL, small) or not out.write_image(np.ones((8, 8, 3), np.float32)):
+    fail("cannot write %s" % SMALL)
+out.close()
+refused([NOISY, AOV, "--color-ref", SMALL], "eb_small.exr", "--color-ref of another size")
+names = [n for n in spec.channelnames if n != "N.var"]
+nov = oiio.ImageSpec(spec.width, spec.height, len(names), oiio.FLOAT)
+nov.channelnames = tuple(names)
+NOVAR = write(os.path.join(DIR, "eb_novar.exr"), nov, {n: noisy[n] for n in names}, exact=False)
+refused([NOVAR, AOV, "--edges"], "N.var", "--edges without N.var")
 print("error_budget_check: all passed")
