@@ -123,10 +123,12 @@ for d in $names; do
   mkdir -p "$scratch"
   line=$("$ds_tool" plan --scenes "${opts[@]:0:1}" -o "$scratch/$d" "${opts[@]:1}" --spp 4,16,64 \
     --ref-spp 1024 --resolution 160x160 | tail -n 1)
-  if [ ! -f "dataset/$d/manifest.jsonl" ]; then
+  if [ ! -e "dataset/$d" ]; then
     mkdir -p dataset
-    rm -rf "dataset/$d"
     mv "$scratch/$d" "dataset/$d"
+  elif [ ! -f "dataset/$d/manifest.jsonl" ]; then
+    echo "training_data.sh: $out/dataset/$d exists but holds no manifest.jsonl: move it away" >&2
+    exit 1
   elif ! cmp -s "$scratch/$d/manifest.jsonl" "dataset/$d/manifest.jsonl" ||
     ! diff -r -q "$scratch/$d/scenes" "dataset/$d/scenes" >/dev/null; then
     echo "training_data.sh: $out/dataset/$d was planned otherwise (its manifest or scene files" \

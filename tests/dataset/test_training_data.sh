@@ -106,6 +106,11 @@ sed -i 's/"seed":"[0-9]*"/"seed":"1"/' "$D/out/dataset/roomsval/manifest.jsonl"
 if KPCN_BIN=$B bash "$S" --plan-only "$D/out" roomsval >/dev/null 2>"$D/err"; then fail "a changed plan accepted"; fi
 grep -q "dataset/roomsval was planned otherwise" "$D/err" || fail "changed plan message: $(cat "$D/err")"
 [ -z "$(find "$D/out" -name '.plan.*' | head -1)" ] || fail "a scratch plan was left behind"
+# a folder in a dataset's place that is no dataset is refused, and left as it was
+mkdir -p "$D/odd/dataset/v1" && echo keep >"$D/odd/dataset/v1/file"
+if KPCN_BIN=$B bash "$S" --plan-only "$D/odd" v1 >/dev/null 2>"$D/err"; then fail "a non-dataset folder accepted"; fi
+grep -q "dataset/v1 exists but holds no manifest.jsonl" "$D/err" || fail "non-dataset message: $(cat "$D/err")"
+[ "$(cat "$D/odd/dataset/v1/file")" = keep ] || fail "the non-dataset folder was changed"
 # a subset, and bad arguments: an unknown dataset or option is refused before anything is planned
 KPCN_BIN=$B bash "$S" --plan-only "$D/sub" roomsval v1 >"$D/sub.txt" 2>"$D/err" || fail "subset: $(cat "$D/err")"
 [ "$(cut -d: -f1 "$D/sub.txt" | paste -sd' ')" = "roomsval v1" ] || fail "subset lists $(cat "$D/sub.txt")"
