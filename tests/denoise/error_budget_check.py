@@ -173,13 +173,17 @@ MODEL = os.path.join(DIR, "model.safetensors")
 TARGET = 0.5  # exact in float32, as the library keeps it
 
 
+def read_model(path):
+    """A safetensors file's JSON header and the bytes after it."""
+    with open(path, "rb") as f:
+        n = struct.unpack("<Q", f.read(8))[0]
+        return json.loads(f.read(n)), f.read()
+
+
 def with_arch(src, dst, key, value):
     """A copy of the model at src whose architecture records key = value (eps also in the
     header's kpcn.eps, which the loader checks against it)."""
-    with open(src, "rb") as f:
-        n = struct.unpack("<Q", f.read(8))[0]
-        head = json.loads(f.read(n))
-        data = f.read()
+    head, data = read_model(src)
     arch = json.loads(head["__metadata__"]["kpcn.architecture"])
     if key == "exposure" and "exposure" in arch:
         fail("the fixture model already records an exposure")
@@ -195,9 +199,7 @@ def with_arch(src, dst, key, value):
 
 
 def model_eps(path):
-    with open(path, "rb") as f:
-        n = struct.unpack("<Q", f.read(8))[0]
-        return float(json.loads(f.read(n))["__metadata__"]["kpcn.eps"])
+    return float(read_model(path)[0]["__metadata__"]["kpcn.eps"])
 
 
 def exposure(path):
