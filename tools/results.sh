@@ -10,7 +10,9 @@
 # against that less noisy reference and add its target table: a 1024-spp reference's own
 # noise is part of every relMSE measured against it), ENSEMBLE (default 8: also measure kpcn
 # with --denoise:ensemble=N, the average over N mirrored/rotated copies, as method kpcn-xN;
-# 1 = not).
+# 1 = not), FOOTPRINT (default 2: also measure kpcn on the same render made again with
+# kpcn-render --albedo-footprint N, the manifest's seed and scene file: method kpcn-fpN, only
+# its albedo differs; 0 = not; docs/renderer.md "Albedo footprint").
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 if [ $# -lt 2 ]; then
@@ -24,6 +26,8 @@ bin=${KPCN_BIN:-$here/build/tools}
 tool="$bin/kpcntool/kpcntool"
 spps=${SPPS:-"4 16 64"}
 ens=${ENSEMBLE:-8}
+fp=${FOOTPRINT:-2}
+[ "$fp" = 1 ] && fp=0
 scenes=("$@")
 scenes_given="$*"
 if [ ${#scenes[@]} -eq 0 ]; then
@@ -33,7 +37,7 @@ if [ ${#scenes[@]} -eq 0 ]; then
 fi
 [ -f "$model" ] || { echo "results.sh: no model '$model'" >&2; exit 1; }
 # The command as it can be run again (the environment that changes the tables included).
-cmdline="${REF2_SPP:+REF2_SPP=$REF2_SPP }${SPPS:+SPPS=\"$SPPS\" }${ENSEMBLE:+ENSEMBLE=$ENSEMBLE }tools/results.sh $ds $model${scenes_given:+ $scenes_given}"
+cmdline="${REF2_SPP:+REF2_SPP=$REF2_SPP }${SPPS:+SPPS=\"$SPPS\" }${ENSEMBLE:+ENSEMBLE=$ENSEMBLE }${FOOTPRINT:+FOOTPRINT=$FOOTPRINT }tools/results.sh $ds $model${scenes_given:+ $scenes_given}"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 mkdir -p "$here/docs/img"
@@ -48,6 +52,11 @@ md="$work/results.md" # moved over docs/results.md only when complete
   if [ "$ens" != 1 ]; then
     echo "kpcn-x$ens: the same model with \`--denoise:ensemble=$ens\` (the mean of its results on $ens"
     echo "mirrored / rotated copies of the input, mapped back; $ens times the cost; docs/denoiser.md)."
+  fi
+  if [ "$fp" != 0 ]; then
+    echo "kpcn-fp$fp: the same model on the same render made again with \`kpcn-render --albedo-footprint"
+    echo "$fp\` (same seed: the colour and every buffer but the albedo are the same bits; each textured"
+    echo "sample's albedo is its pixel's mean over $fp x $fp points; docs/renderer.md, \"Albedo footprint\")."
   fi
   echo
   echo "| scene | spp | method | relMSE | SSIM | PSNR (dB) |"
@@ -65,6 +74,20 @@ for s in "${scenes[@]}"; do
     if [ "$ens" != 1 ]; then
       "$tool" "$noisy" --denoise:model="$model":ensemble="$ens" -o "$work/kpcn-x$ens.exr"
       methods+=("kpcn-x$ens")
+    fi
+    if [ "$fp" != 0 ]; then
+      job=$(grep -F "\"id\":\"$s/v000/${spp}spp\"" "$ds/manifest.jsonl")
+      read -r sf seed res < <(/usr/bin/python3 -c "import json,sys; j=json.loads(sys.argv[1]); print(j['scene_file'], j['seed'], '%dx%d' % (j['width'], j['height']))" "$job")
+      "$bin/kpcn-render/kpcn-render" "$ds/$sf" -o "$work/fp.exr" --spp "$spp" --seed "$seed" \
+        --resolution "$res" --albedo-footprint "$fp" --quiet
+      # the colour must be the dataset render's own bits, or kpcn-fp would measure other samples
+      l1=$("$tool" "$work/fp.exr" --ch R,G,B "$noisy" --ch R,G,B --l1 --json)
+      /usr/bin/python3 -c "import json,sys; sys.exit(json.loads(sys.argv[1])['l1'] != 0)" "$l1" || {
+        echo "results.sh: $noisy rendered again differs in colour (another renderer build?): $l1" >&2
+        exit 1
+      }
+      "$tool" "$work/fp.exr" --denoise:model="$model" -o "$work/kpcn-fp$fp.exr"
+      methods+=("kpcn-fp$fp")
     fi
     for m in "${methods[@]}"; do
       j=$("$tool" "$work/$m.exr" "$ref" --ch R,G,B --relmse --ssim:display=srgb --psnr:display=srgb --json)
@@ -192,7 +215,7 @@ if [ -n "${MODEL_README:-}" ]; then
     echo
     echo "| scene | spp | method | relMSE | SSIM | PSNR (dB) |"
     echo "|---|---|---|---|---|---|"
-    sed -n '1,/^## Against the targets/p' "$here/docs/results.md" | grep -E '^\| [^|]+ \| [0-9]+ \| (noisy|kpcn|kpcn-x[0-9]+) \|'
+    sed -n '1,/^## Against the targets/p' "$here/docs/results.md" | grep -E '^\| [^|]+ \| [0-9]+ \| (noisy|kpcn|kpcn-x[0-9]+|kpcn-fp[0-9]+) \|'
     echo
     sed -n '/^## Against the targets/,/^## Mosaics/p' "$here/docs/results.md" | sed '$d' | sed 's/^## /### /'
   } > "$work/readme.md"

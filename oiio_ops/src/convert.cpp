@@ -215,6 +215,7 @@ AovPtr to_aov_set(const ImageBuf &src, std::string &err) {
   if (!read_planes(src, roi, idx, dst, err)) return nullptr;
   out->spp = spec.get_int_attribute("kpcn:spp", -1);
   out->albedo_spp = std::max(0, spec.get_int_attribute("kpcn:albedoSpp", 0));
+  out->albedo_footprint = std::max(0, spec.get_int_attribute("kpcn:albedoFootprint", 0));
   // The seed may exceed an int: accept int attributes and decimal strings.
   const ParamValue *p = spec.find_attribute("kpcn:seed");
   if (p) {
@@ -243,6 +244,7 @@ bool from_aov_set(ImageBuf &dst, const kpcn_aov_set &set) {
   ImageSpec &spec = dst.specmod();
   if (set.spp >= 0) spec.attribute("kpcn:spp", set.spp);
   if (set.albedo_spp > 0) spec.attribute("kpcn:albedoSpp", set.albedo_spp);
+  if (set.albedo_footprint > 1) spec.attribute("kpcn:albedoFootprint", set.albedo_footprint);
   if (set.seed >= 0) {
     if (set.seed <= std::numeric_limits<int>::max())
       spec.attribute("kpcn:seed", (int)set.seed);

@@ -66,6 +66,8 @@ bad_plan "'-1' for --seed" "negative --seed refused" --seed -1
 bad_plan "'18446744073709551616' for --seed" "--seed past 2^64 refused" --seed 18446744073709551616
 bad_plan "'1.5' for --bsdf-swap (a probability in [0, 1])" "--bsdf-swap above 1 refused" --bsdf-swap 1.5
 bad_plan "'7e3' for --variants" "--variants must be an integer" --variants 7e3
+bad_plan "'17' for --albedo-footprint (an integer in [1, 16])" "--albedo-footprint 17 refused" \
+  --albedo-footprint 17
 bad_plan "sum to 2.5" "split fractions summing past 1 refused" --split train:0.5,val:1,test:1
 bad_plan "'train' is named twice" "duplicate split (fractions)" --split train:0.5,train:0.5
 bad_plan "'train' is named twice" "duplicate split (names)" \
@@ -239,6 +241,31 @@ sed 's/"split":"train"/"split":"tr\\"ain"/' "$T/r/manifest.jsonl" > "$T/q/manife
 rc=$?
 ok '[ $rc -eq 0 ] && grep -a -F -q "\"split\":\"tr\\\"ain\"" "$T/q.kps"' \
   "split name with a quote (rc $rc: $(cat "$T/err"))"
+# --albedo-footprint: recorded in plan.json and on the noisy jobs only (a plan without it has
+# neither), passed to the renderer for those jobs; a manifest value out of range is refused
+"$DS" plan --scenes "$TD/scenes" --variants 1 --seed 3 --spp 2,4 --ref-spp 128 \
+  --split train:cornell-box,val:cornell-teal,test:cornell-wide --albedo-footprint 2 \
+  -o "$T/fp" > /dev/null
+rc=$?
+nfp=$(grep -c '"albedo_footprint":2' "$T/fp/manifest.jsonl")
+nnoisy=$(grep -c '"kind":"noisy"' "$T/fp/manifest.jsonl")
+ok '[ $rc -eq 0 ] && [ "$nfp" -eq "$nnoisy" ] && [ "$nnoisy" -gt 0 ] &&
+    ! grep -v "\"kind\":\"noisy\"" "$T/fp/manifest.jsonl" | grep -q albedo_footprint &&
+    grep -q "\"albedo_footprint\":[[:space:]]*2" "$T/fp/plan.json"' \
+  "footprint on the noisy jobs only ($nfp of $nnoisy)"
+ok '! grep -q albedo_footprint "$T/d/manifest.jsonl" "$T/d/plan.json"' "no footprint field without the option"
+rm -f "$T/fp.log"
+FAKE_LOG="$T/fp.log" "$DS" run "$T/fp" --jobs 2 --renderer "$FAKE" > /dev/null 2>&1
+rc=$?
+nlog=$(grep -c ' fp=2$' "$T/fp.log")
+ok '[ $rc -eq 0 ] && [ "$nlog" -eq "$nnoisy" ] && ! grep " fp=" "$T/fp.log" | grep -q -v "spp.exr fp=2"' \
+  "the renderer gets --albedo-footprint 2 for the noisy jobs ($nlog of $nnoisy)"
+sed '0,/"albedo_footprint":2/s//"albedo_footprint":40/' "$T/fp/manifest.jsonl" > "$T/fp/m.tmp" &&
+  mv "$T/fp/m.tmp" "$T/fp/manifest.jsonl"
+"$DS" run "$T/fp" --renderer "$FAKE" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && grep -q "albedo_footprint.*40 is not an integer in \[2, 16\]" "$T/err"' \
+  "manifest footprint out of range refused (rc $rc: $(cat "$T/err"))"
 "$DS" run "$T/nothing" 2> "$T/err"
 rc=$?
 ok '[ $rc -eq 1 ] && grep -q "manifest.jsonl" "$T/err"' "run without manifest"

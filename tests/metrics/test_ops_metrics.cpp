@@ -119,12 +119,16 @@ int main() {
     CHECK(again.spec().get_int_attribute("kpcn:spp") == 16);
     // no albedo pass: no kpcn:albedoSpp; one: kept both ways
     CHECK(set->albedo_spp == 0 && again.spec().find_attribute("kpcn:albedoSpp") == nullptr);
+    CHECK(set->albedo_footprint == 0 &&
+          again.spec().find_attribute("kpcn:albedoFootprint") == nullptr);
     set->albedo_spp = 64;
+    set->albedo_footprint = 2;
     ImageBuf with_pass;
     CHECK(ops::from_aov_set(with_pass, *set));
     CHECK(with_pass.spec().get_int_attribute("kpcn:albedoSpp") == 64);
+    CHECK(with_pass.spec().get_int_attribute("kpcn:albedoFootprint") == 2);
     kpcn::AovPtr back = ops::to_aov_set(with_pass, err);
-    CHECK(back && back->albedo_spp == 64 && back->spp == 16);
+    CHECK(back && back->albedo_spp == 64 && back->albedo_footprint == 2 && back->spp == 16);
     ops::CompareOptions all;
     all.channels = {"R", "G", "B", "albedo.G", "N.Z", "Z", "visibility.V", "color.var"};
     ops::MetricResult same = ops::compare(again, noisy, ops::Metric::L1, all);

@@ -2,6 +2,8 @@
  * max_bounces 64, 2 threads (the settings of testdata/tungsten-cornell), plus the error per
  * sample against Tungsten's 2048 spp reference (Tungsten's own 16 spp render: relMSE 1.06e-2,
  * 1.42 M samples/s on an idle 2-core machine).
+ * Then the albedo footprint's cost: the textures scene at 160x120, 16 spp, with
+ * albedo_footprint 0 (off), 2 and 4 (docs/renderer.md, "Albedo footprint").
  * Usage: bench_render [spp=16] [threads=2] [repeats=3]. Not a test: figures only. */
 #include "render_testutil.h"
 
@@ -13,6 +15,42 @@ static double cpu_s(void) {
   struct timespec ts;
   clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* best-of-repeats CPU seconds of the textures scene with albedo footprint k */
+static double footprint_cpu_s(const kpcn_scene *s, int k, int threads, int repeats) {
+  double best = 1e30;
+  for (int r = 0; r < repeats; r++) {
+    kpcn_render_settings rs = kpcn_render_settings_defaults();
+    rs.spp = 16, rs.seed = 1 + r, rs.nthreads = threads, rs.albedo_footprint = k;
+    kpcn_aov_set *a = NULL;
+    double c0 = cpu_s();
+    if (kpcn_render(s, &rs, &a) != KPCN_OK) {
+      fprintf(stderr, "%s\n", kpcn_last_error());
+      return -1.0;
+    }
+    double c = cpu_s() - c0;
+    if (c < best) best = c;
+    kpcn_aov_destroy(a);
+  }
+  return best;
+}
+
+static int bench_footprint(int threads, int repeats) {
+  kpcn_scene *s = NULL;
+  if (kpcn_scene_load(KPCN_TESTDATA "/scenes/textures/scene.json", &s) != KPCN_OK) {
+    fprintf(stderr, "%s\n", kpcn_last_error());
+    return 1;
+  }
+  const double off = footprint_cpu_s(s, 0, threads, repeats);
+  for (int k = 2; k <= 4 && off > 0; k += 2) {
+    double c = footprint_cpu_s(s, k, threads, repeats);
+    printf("bench_render textures 160x120 spp 16: albedo footprint %d: CPU %.3f s vs %.3f s off "
+           "(+%.0f %%)\n",
+           k, c, off, 100.0 * (c / off - 1.0));
+  }
+  kpcn_scene_destroy(s);
+  return off > 0 ? 0 : 1;
 }
 
 int main(int argc, char **argv) {
@@ -66,5 +104,5 @@ int main(int argc, char **argv) {
          best * 1e-6);
   kpcn_aov_destroy(ref);
   kpcn_scene_destroy(s);
-  return 0;
+  return bench_footprint(threads, repeats);
 }

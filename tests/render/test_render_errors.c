@@ -133,6 +133,12 @@ static void test_tool(void) {
   expect_cli(exe, cornell, "--spp 2 --albedo-spp 8 --color-only --resolution 16x16", 1,
              "a colour-only render has no albedo buffer");
   expect_cli(exe, cornell, "--albedo-spp many", 2, "--albedo-spp: expected an integer");
+  /* the albedo footprint: 1 .. 16, never on a colour-only render */
+  expect_cli(exe, cornell, "--albedo-footprint 17", 2,
+             "--albedo-footprint: expected an integer in [1, 16], got '17'");
+  expect_cli(exe, cornell, "--albedo-footprint 0", 2, "--albedo-footprint: expected an integer");
+  expect_cli(exe, cornell, "--albedo-footprint 2 --color-only --resolution 16x16", 1,
+             "albedo_footprint: a colour-only render has no albedo buffer");
   /* a good render writes the file, nothing else is left behind */
   snprintf(cmd, sizeof(cmd), "%s %s -o %s --spp 1 --resolution 16x16 --threads 1", exe,
            KPCN_TESTDATA "/scenes/cornell-box/scene.json", out);

@@ -32,6 +32,7 @@ typedef struct ds_job {
   int width, height;
   char out[DS_PATH];
   char preview[DS_PATH]; /* preview render of this variant ("" = no degenerate check) */
+  int albedo_footprint;  /* kpcn-render --albedo-footprint (noisy jobs; 0 = not passed) */
 } ds_job;
 
 typedef struct ds_manifest {

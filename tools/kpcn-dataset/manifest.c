@@ -48,6 +48,9 @@ int ds_manifest_write(const char *dir, const ds_manifest *m) {
     cJSON_AddNumberToObject(o, "height", j->height);
     cJSON_AddStringToObject(o, "out", j->out);
     cJSON_AddStringToObject(o, "preview", j->preview);
+    /* only when set, so manifests planned without it stay byte for byte what they were */
+    if (j->albedo_footprint > 1)
+      cJSON_AddNumberToObject(o, "albedo_footprint", j->albedo_footprint);
     char *line = cJSON_PrintUnformatted(o);
     cJSON_Delete(o);
     size_t l = strlen(line);
@@ -145,7 +148,9 @@ int ds_manifest_read(const char *dir, ds_manifest *m) {
          get_int(o, "width", 1, DS_MAX_DIM, &j.width, lineno, path) &&
          get_int(o, "height", 1, DS_MAX_DIM, &j.height, lineno, path) &&
          get_str(o, "out", j.out, sizeof j.out, lineno, path) &&
-         get_str(o, "preview", j.preview, sizeof j.preview, lineno, path);
+         get_str(o, "preview", j.preview, sizeof j.preview, lineno, path) &&
+         (!cJSON_HasObjectItem(o, "albedo_footprint") ||
+          get_int(o, "albedo_footprint", 2, 16, &j.albedo_footprint, lineno, path));
     cJSON_Delete(o);
     if (!ok) break;
     int k = -1;

@@ -355,6 +355,7 @@ typedef struct plan_ctx {
   const char *outdir;
   uint64_t seed;
   int variants, eval_variants, no_preview, preview_spp, preview_scale, ref_spp, W, H;
+  int albedo_footprint; /* noisy jobs' --albedo-footprint (0 = none) */
   const int *spps;
   int nspp;
   const kpcn_perturb_settings *ps;
@@ -494,6 +495,7 @@ static int plan_scene(plan_ctx *c, const base_scene *sc, int write) {
         snprintf(r.out, sizeof r.out, "renders/%s/v%03d_ref%dspp.exr", sc->name, v, r.spp);
       }
       r.seed = ds_hash(r.id, c->seed) & DS_MAX_SEED; /* fits any renderer's int seed */
+      if (r.kind == DS_NOISY) r.albedo_footprint = c->albedo_footprint;
       c->samples += (double)r.spp * sw * sh;
       oom |= ds_manifest_push(&c->m, &r) != 0;
     }
@@ -519,13 +521,13 @@ static void usage(void) {
           "         [--split train:0.7,val:0.15,test:0.15 | train:a+b,val:c,test:d]\n"
           "         [--eval-variants] [--preview-spp 4] [--preview-scale 4] [--no-preview]\n"
           "         [--camera X] [--fov X] [--material X] [--bsdf-swap P] [--light X] [--env X]\n"
-          "         [--texture-swap P] [--texture-dir DIR] [--force]\n");
+          "         [--texture-swap P] [--texture-dir DIR] [--albedo-footprint K] [--force]\n");
 }
 
 int ds_cmd_plan(int argc, char **argv) {
   const char *scenes = NULL, *outdir = NULL, *split = NULL, *spp_list = "4,8,16,32,64";
   int variants = 10, ref_spp = 1024, W = 0, H = 0, preview_spp = 4, preview_scale = 4;
-  int no_preview = 0, eval_variants = 0, force = 0;
+  int no_preview = 0, eval_variants = 0, force = 0, albedo_footprint = 1;
   uint64_t seed = 1;
   static char texture_dir[DS_PATH]; /* realpath of --texture-dir */
   kpcn_perturb_settings ps;
@@ -566,6 +568,9 @@ int ds_cmd_plan(int argc, char **argv) {
     } else if (!strcmp(a, "--ref-spp")) {
       ok = ds_parse_int(v, 1, DS_MAX_SPP, &ref_spp);
       want = " (an integer in [1, 16777216])";
+    } else if (!strcmp(a, "--albedo-footprint")) {
+      ok = ds_parse_int(v, 1, 16, &albedo_footprint);
+      want = " (an integer in [1, 16])";
     } else if (!strcmp(a, "--preview-spp")) {
       ok = ds_parse_int(v, 1, 1 << 16, &preview_spp);
       want = " (an integer in [1, 65536])";
@@ -677,6 +682,8 @@ int ds_cmd_plan(int argc, char **argv) {
   cJSON_AddNumberToObject(pj, "preview_spp", no_preview ? 0 : preview_spp);
   cJSON_AddNumberToObject(pj, "preview_scale", preview_scale);
   cJSON_AddBoolToObject(pj, "eval_variants", eval_variants);
+  /* only when set: plans made without it keep their plan.json byte for byte */
+  if (albedo_footprint > 1) cJSON_AddNumberToObject(pj, "albedo_footprint", albedo_footprint);
   double pv[6] = {ps.camera, ps.fov, ps.material, ps.bsdf_swap, ps.light, ps.env};
   cJSON_AddItemToObject(pj, "perturb", cJSON_CreateDoubleArray(pv, 6));
   cJSON_AddNumberToObject(pj, "texture_swap", ps.texture_swap);
@@ -713,6 +720,7 @@ int ds_cmd_plan(int argc, char **argv) {
   c.variants = variants, c.eval_variants = eval_variants, c.no_preview = no_preview;
   c.preview_spp = preview_spp, c.preview_scale = preview_scale, c.ref_spp = ref_spp;
   c.W = W, c.H = H;
+  c.albedo_footprint = albedo_footprint > 1 ? albedo_footprint : 0;
   c.spps = spps, c.nspp = nspp;
   c.ps = &ps;
   /* Every scene is checked (and the manifest built) before the first file is written. */

@@ -146,8 +146,11 @@ static pid_t spawn(const run_opts *o, const ds_job *j, char *part, size_t pn) {
   snprintf(seed, sizeof seed, "%llu", (unsigned long long)j->seed);
   snprintf(res, sizeof res, "%dx%d", j->width, j->height);
   snprintf(thr, sizeof thr, "%d", o->threads);
-  char *argv[] = {(char *)o->renderer, scene, "-o",        part, "--spp",   spp, "--seed", seed,
-                  "--resolution",      res,   "--threads", thr,  "--quiet", NULL};
+  char fp[16];
+  snprintf(fp, sizeof fp, "%d", j->albedo_footprint);
+  char *argv[] = {(char *)o->renderer, scene, "-o",        part, "--spp",   spp,  "--seed", seed,
+                  "--resolution",      res,   "--threads", thr,  "--quiet", NULL, NULL,     NULL};
+  if (j->albedo_footprint > 1) argv[13] = "--albedo-footprint", argv[14] = fp;
   pid_t pid = fork();
   if (pid == 0) {
     /* Its own process group, so that stopping the run reaches everything the renderer

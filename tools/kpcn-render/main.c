@@ -20,9 +20,11 @@ static void usage(FILE *f) {
   fprintf(
       f, "usage: kpcn-render scene.json -o out.exr [--spp N] [--seed S] [--threads N (0=all)]\n"
          "                   [--resolution WxH] [--crop x,y,w,h] [--color-only] [--max-bounces N]\n"
-         "                   [--albedo-spp N] [--half] [--quiet]\n"
+         "                   [--albedo-spp N] [--albedo-footprint K] [--half] [--quiet]\n"
          "  --albedo-spp N   the albedo buffer from N >= spp camera samples of a features-only\n"
-         "                   pass (less edge noise for the denoiser's remodulation)\n");
+         "                   pass (less edge noise for the denoiser's remodulation)\n"
+         "  --albedo-footprint K  each sample's textured albedo averaged over K x K points of\n"
+         "                   its pixel's footprint (texture lookups, no rays; 1 = off)\n");
 }
 
 typedef struct progress_state {
@@ -111,6 +113,12 @@ int main(int argc, char **argv) {
     } else if (strcmp(a, "--albedo-spp") == 0) {
       NEED_VALUE if (!parse_int(v, 1, 1 << 24, &rs.albedo_spp)) {
         fprintf(stderr, "kpcn-render: --albedo-spp: expected an integer >= 1, got '%s'\n", v);
+        return 2;
+      }
+    } else if (strcmp(a, "--albedo-footprint") == 0) {
+      NEED_VALUE if (!parse_int(v, 1, 16, &rs.albedo_footprint)) {
+        fprintf(stderr,
+                "kpcn-render: --albedo-footprint: expected an integer in [1, 16], got '%s'\n", v);
         return 2;
       }
     } else if (strcmp(a, "--max-bounces") == 0) {

@@ -88,6 +88,9 @@ typedef struct kpcn_aov_set {
   /* Header metadata (kpcn:spp, kpcn:seed, kpcn:scene, kpcn:version); spp/seed -1 if unknown. */
   int spp;
   int albedo_spp; /* kpcn:albedoSpp: samples of the albedo buffer when not spp; 0 = spp */
+  /* kpcn:albedoFootprint: k when each sample's textured albedo is its pixel footprint's mean
+   * over k x k points (kpcn_render_settings.albedo_footprint); 0 = point samples */
+  int albedo_footprint;
   int64_t seed;
   char scene[256];
   char version[32];

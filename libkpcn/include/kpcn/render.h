@@ -51,6 +51,12 @@ typedef struct kpcn_render_settings {
    * coverage noise at edges is what the denoiser's remodulation multiplies its result by
    * (docs/renderer.md). 0 = the colour's samples. */
   int albedo_spp;
+  /* k >= 2: where a textured surface is seen directly, each sample's albedo is the mean of
+   * k x k texture lookups over its pixel's footprint (its film point shifted by (i/k, j/k),
+   * each point where its camera ray meets the hit's tangent plane; no rays traced), so the
+   * albedo of a pixel inside a textured surface has the texture coverage of k*k times the
+   * samples. Composes with albedo_spp. 0 or 1 = off; at most 16 (docs/renderer.md). */
+  int albedo_footprint;
   kpcn_light_strategy lights;
   kpcn_progress_fn progress; /* called from the calling thread; non-zero return cancels */
   void *progress_user;

@@ -18,12 +18,13 @@ kpcn_status kpcn_exr_read_aov_mt(const char *path, int nthreads, kpcn_aov_set **
   KPCN_TRY(kpcn_exr_open_read(path, &ctx));
   kpcn_image *img = NULL;
   kpcn_status s = kpcn_exr_read_context(ctx, path, nthreads, &img);
-  int spp = -1, albedo_spp = 0;
+  int spp = -1, albedo_spp = 0, albedo_footprint = 0;
   int64_t seed = -1;
   char scene[256], version[32];
   if (s == KPCN_OK) {
     kpcn_exr_read_meta(ctx, &spp, &seed, scene, sizeof scene, version, sizeof version);
-    albedo_spp = kpcn_exr_read_albedo_spp(ctx);
+    albedo_spp = kpcn_exr_read_positive_int(ctx, "kpcn:albedoSpp");
+    albedo_footprint = kpcn_exr_read_positive_int(ctx, "kpcn:albedoFootprint");
   }
   exr_finish(&ctx);
   if (s != KPCN_OK) return s;
@@ -35,6 +36,7 @@ kpcn_status kpcn_exr_read_aov_mt(const char *path, int nthreads, kpcn_aov_set **
   if (s != KPCN_OK) return s;
   (*out)->spp = spp;
   (*out)->albedo_spp = albedo_spp;
+  (*out)->albedo_footprint = albedo_footprint;
   (*out)->seed = seed;
   snprintf((*out)->scene, sizeof(*out)->scene, "%s", scene);
   snprintf((*out)->version, sizeof(*out)->version, "%s", version);
@@ -66,6 +68,8 @@ kpcn_status kpcn_exr_write_aov(const char *path, const kpcn_aov_set *set,
   if (set->spp >= 0) KPCN_TRY(kpcn_exr_options_add_int(&o, "kpcn:spp", set->spp));
   if (set->albedo_spp > 0)
     KPCN_TRY(kpcn_exr_options_add_int(&o, "kpcn:albedoSpp", set->albedo_spp));
+  if (set->albedo_footprint > 1)
+    KPCN_TRY(kpcn_exr_options_add_int(&o, "kpcn:albedoFootprint", set->albedo_footprint));
   if (set->seed >= 0) {
     /* EXR has no 64-bit int attribute: int when it fits, decimal string otherwise. */
     if (set->seed <= INT32_MAX) {

@@ -142,9 +142,9 @@ static void attr_string(exr_context_t ctx, const char *name, char *out, size_t o
   }
 }
 
-int kpcn_exr_read_albedo_spp(exr_context_t ctx) {
+int kpcn_exr_read_positive_int(exr_context_t ctx, const char *name) {
   double v;
-  return attr_number(ctx, "kpcn:albedoSpp", &v) && v > 0 && v < 2147483647.0 ? (int)v : 0;
+  return attr_number(ctx, name, &v) && v > 0 && v < 2147483647.0 ? (int)v : 0;
 }
 
 void kpcn_exr_read_meta(exr_context_t ctx, int *spp, int64_t *seed, char *scene, size_t scenesz,

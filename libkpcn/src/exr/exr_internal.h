@@ -21,8 +21,9 @@ exr_context_initializer_t kpcn_exr_initializer(void);
 /* Reads kpcn:spp/seed/scene/version from part 0 (tolerates int, float, double, string). */
 void kpcn_exr_read_meta(exr_context_t ctx, int *spp, int64_t *seed, char *scene, size_t scenesz,
                         char *version, size_t versionsz);
-/* kpcn:albedoSpp (the albedo pass's samples, kpcn_render_settings.albedo_spp), 0 if absent. */
-int kpcn_exr_read_albedo_spp(exr_context_t ctx);
+/* A positive int attribute such as kpcn:albedoSpp (the albedo pass's samples) or
+ * kpcn:albedoFootprint; 0 if absent or not a positive int. */
+int kpcn_exr_read_positive_int(exr_context_t ctx, const char *name);
 
 /* First error of a parallel chunk loop (reader and writer), kept by lowest chunk index so the
  * message does not depend on thread timing. Messages live in thread-local storage, so

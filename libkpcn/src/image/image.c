@@ -170,6 +170,7 @@ kpcn_status kpcn_aov_clone(kpcn_aov_set **out, const kpcn_aov_set *src) {
   kpcn_aov_set *d = *out;
   d->spp = src->spp;
   d->albedo_spp = src->albedo_spp;
+  d->albedo_footprint = src->albedo_footprint;
   d->seed = src->seed;
   memcpy(d->scene, src->scene, sizeof d->scene);
   memcpy(d->version, src->version, sizeof d->version);

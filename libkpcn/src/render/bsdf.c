@@ -123,6 +123,11 @@ kpcn_vec3 kpcn_bsdf_albedo(const kpcn_bsdf *b, const kpcn_shading_point *sp) {
   return kb_albedo(b, sp);
 }
 
+int kpcn_bsdf_albedo_is_textured(const kpcn_bsdf *b) {
+  if (b->type == KPCN_BSDF_SMOOTH_COAT) return kpcn_bsdf_albedo_is_textured(b->substrate);
+  return !kpcn_texture_is_constant(b->albedo);
+}
+
 /* ---- smooth dielectric (Tungsten DielectricBsdf) ---- */
 static int dielectric_sample(const kpcn_bsdf *b, const kpcn_shading_point *sp, kpcn_vec3 wo,
                              float ulobe, kpcn_bsdf_sample_result *s) {

@@ -127,6 +127,8 @@ float kpcn_bsdf_pdf(const kpcn_bsdf *b, const kpcn_shading_point *sp, kpcn_vec3 
  * base albedo; for a smooth_coat the substrate's). Delta-only BSDFs return their albedo too,
  * but the AOVs are meant to follow them to the next hit. */
 kpcn_vec3 kpcn_bsdf_albedo(const kpcn_bsdf *b, const kpcn_shading_point *sp);
+/* 1 when kpcn_bsdf_albedo depends on sp (a non-constant texture). */
+int kpcn_bsdf_albedo_is_textured(const kpcn_bsdf *b);
 
 /* ---- Tungsten's named conductors (fresnel.c) ---- */
 /* Looks up "Cu", "Au", "Ag", "Al", ... (Tungsten's ComplexIorData names, case-sensitive as

@@ -33,6 +33,33 @@ static inline void sphere_uv(const kpcn_prim *p, kpcn_vec3 n, float *u, float *v
   *v = acosf(kpcn_maxf(kpcn_minf(l.z, 1.0f), -1.0f)) * KPCN_INV_PI;
 }
 
+/* The parametrisations of the analytic shapes, shared by hits (clamped to the surface: clamp 1)
+ * and by points of a hit's tangent plane (kpcn_hit_uv_at: carried on past the edges, clamp 0).
+ * Quad: x on its plane. */
+static inline void quad_uv(const kpcn_prim *p, kpcn_vec3 x, int clamp, float *u, float *v) {
+  kpcn_vec3 r = kv3_sub(x, p->base);
+  *u = kv3_dot(r, p->e0) * p->inv_e0sq;
+  *v = kv3_dot(r, p->e1) * p->inv_e1sq;
+  if (clamp) *u = clamp01(*u), *v = clamp01(*v);
+}
+
+/* Cube face dim (either sign), l the point's coordinates along the cube's axes. */
+static inline void cube_uv(const kpcn_prim *p, const float l[3], int dim, int clamp, float *u,
+                           float *v) {
+  const float hf[3] = {p->half.x, p->half.y, p->half.z};
+  const int a = (dim + 1) % 3, b = (dim + 2) % 3;
+  *u = l[a] / hf[a] * 0.5f + 0.5f;
+  *v = l[b] / hf[b] * 0.5f + 0.5f;
+  if (clamp) *u = clamp01(*u), *v = clamp01(*v);
+}
+
+/* Disk: r the in-plane offset from its centre. */
+static inline void disk_uv(const kpcn_prim *p, kpcn_vec3 r, float *u, float *v) {
+  float a = kv3_dot(r, p->frame.b), b = kv3_dot(r, p->frame.t);
+  *v = kpcn_minf(kv3_length(r) / p->radius, 1.0f);
+  *u = (a == 0.0f && b == 0.0f) ? 0.0f : atan2f(b, a) * KPCN_INV_2PI + 0.5f;
+}
+
 void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_vec3 d, float t,
                    unsigned prim_id, float bu, float bv, kpcn_hit *h) {
   (void)s;
@@ -43,10 +70,8 @@ void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_ve
   case KPCN_PRIM_QUAD: {
     kpcn_vec3 r = kv3_sub(x, p->base);
     x = kv3_sub(x, kv3_scale(p->n, kv3_dot(r, p->n)));
-    r = kv3_sub(x, p->base);
     h->ng = p->n;
-    h->u = clamp01(kv3_dot(r, p->e0) * p->inv_e0sq);
-    h->v = clamp01(kv3_dot(r, p->e1) * p->inv_e1sq);
+    quad_uv(p, x, 1, &h->u, &h->v);
     break;
   }
   case KPCN_PRIM_CUBE: {
@@ -60,11 +85,7 @@ void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_ve
     float sgn = l[dim] < 0.0f ? -1.0f : 1.0f;
     h->ng = kv3_scale(p->axis[dim], sgn);
     x = kv3_madd(x, p->axis[dim], sgn * hf[dim] - l[dim]); /* onto the face plane */
-    float uvw[3];
-    for (int i = 0; i < 3; i++)
-      uvw[i] = clamp01(l[i] / hf[i] * 0.5f + 0.5f);
-    h->u = uvw[(dim + 1) % 3];
-    h->v = uvw[(dim + 2) % 3];
+    cube_uv(p, l, dim, 1, &h->u, &h->v);
     break;
   }
   case KPCN_PRIM_SPHERE: {
@@ -79,9 +100,7 @@ void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_ve
     x = kv3_sub(x, kv3_scale(p->n, kv3_dot(r, p->n)));
     r = kv3_sub(x, p->center);
     h->ng = p->n;
-    float a = kv3_dot(r, p->frame.b), b = kv3_dot(r, p->frame.t);
-    h->v = kpcn_minf(kv3_length(r) / p->radius, 1.0f);
-    h->u = (a == 0.0f && b == 0.0f) ? 0.0f : atan2f(b, a) * KPCN_INV_2PI + 0.5f;
+    disk_uv(p, r, &h->u, &h->v);
     break;
   }
   case KPCN_PRIM_MESH: {
@@ -111,6 +130,49 @@ void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_ve
   }
   h->ns = h->ng;
   h->p = x;
+}
+
+void kpcn_hit_uv_at(const kpcn_prim *p, unsigned prim_id, const kpcn_hit *h, kpcn_vec3 x, float *u,
+                    float *v) {
+  *u = h->u, *v = h->v;
+  switch (p->type) {
+  case KPCN_PRIM_QUAD: quad_uv(p, x, 0, u, v); break;
+  case KPCN_PRIM_CUBE: {
+    /* the hit's face, not the one nearest x: x may lie past the face's edge */
+    kpcn_vec3 r = kv3_sub(x, p->center);
+    float l[3], best = -1.0f;
+    int dim = 0;
+    for (int i = 0; i < 3; i++) {
+      l[i] = kv3_dot(r, p->axis[i]);
+      float c = fabsf(kv3_dot(h->ng, p->axis[i]));
+      if (c > best) best = c, dim = i;
+    }
+    cube_uv(p, l, dim, 0, u, v);
+    break;
+  }
+  case KPCN_PRIM_SPHERE: {
+    kpcn_vec3 r = kv3_sub(x, p->center);
+    if (kv3_length2(r) > 0.0f) sphere_uv(p, kv3_normalize(r), u, v);
+    break;
+  }
+  case KPCN_PRIM_DISK: disk_uv(p, kv3_sub(x, p->center), u, v); break;
+  case KPCN_PRIM_MESH: {
+    /* barycentric weights of x in the triangle's plane, extrapolated past its edges */
+    const kpcn_mesh *m = &p->mesh;
+    const unsigned *id = m->idx + 3 * prim_id;
+    kpcn_vec3 v0 = mesh_vtx(m, id[0]);
+    kpcn_vec3 e1 = kv3_sub(mesh_vtx(m, id[1]), v0), e2 = kv3_sub(mesh_vtx(m, id[2]), v0);
+    kpcn_vec3 w = kv3_sub(x, v0);
+    float d00 = kv3_dot(e1, e1), d01 = kv3_dot(e1, e2), d11 = kv3_dot(e2, e2);
+    float d20 = kv3_dot(w, e1), d21 = kv3_dot(w, e2);
+    float den = d00 * d11 - d01 * d01;
+    if (!(den > 0.0f)) break; /* degenerate triangle: the hit's own uv */
+    float b1 = (d11 * d20 - d01 * d21) / den, b2 = (d00 * d21 - d01 * d20) / den;
+    mesh_uv(m, id, 1.0f - b1 - b2, b1, b2, u, v);
+    break;
+  }
+  case KPCN_PRIM_INFINITE_SPHERE: break;
+  }
 }
 
 kpcn_vec3 kpcn_prim_emission(const kpcn_prim *p, const kpcn_hit *h, kpcn_vec3 d) {

@@ -153,21 +153,27 @@ static int nee_prepare(const kpcn_render_ctx *ctx, const kpcn_hit *h, const kpcn
   return 1;
 }
 
-static void camera_ray(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler *smp, kpcn_vec3 *o,
-                       kpcn_vec3 *d) {
-  const kpcn_camera *c = &ctx->scene->cam;
+/* Where a sample's camera ray starts on the film and the lens: the pixel, the filter's two
+ * uniform numbers and the lens point (camera space; 0 for a pinhole). The albedo footprint
+ * re-uses it for the pixel's other film points. */
+typedef struct camera_sample {
+  int px, py;
   float fu, fv;
-  kpcn_sampler_2d(smp, &fu, &fv);
+  kpcn_vec3 lens;
+} camera_sample;
+
+/* The camera ray of film point (fu, fv) of cs's pixel, through cs's lens point. */
+static inline __attribute__((always_inline)) void camera_ray_at(const kpcn_render_ctx *ctx,
+                                                                const camera_sample *cs, float fu,
+                                                                float fv, kpcn_vec3 *o,
+                                                                kpcn_vec3 *d) {
+  const kpcn_camera *c = &ctx->scene->cam;
   float ox = filter_sample(&ctx->filter, fu), oy = filter_sample(&ctx->filter, fv);
   float pix = 2.0f / (float)ctx->width;
-  kpcn_vec3 l = kv3(-1.0f + ((float)px + 0.5f + ox) * pix,
-                    ctx->ratio - ((float)py + 0.5f + oy) * pix, c->plane_dist);
-  kpcn_vec3 lens = kv3s(0.0f);
+  kpcn_vec3 l = kv3(-1.0f + ((float)cs->px + 0.5f + ox) * pix,
+                    ctx->ratio - ((float)cs->py + 0.5f + oy) * pix, c->plane_dist);
+  kpcn_vec3 lens = cs->lens;
   if (c->thinlens && c->aperture > 0.0f) {
-    float lu, lv, ax, ay;
-    kpcn_sampler_2d(smp, &lu, &lv); /* pair 1 (pinholes leave it unused) */
-    kpcn_warp_concentric_disk(lu, lv, &ax, &ay);
-    lens = kv3(ax * c->aperture, ay * c->aperture, 0.0f);
     l = kv3_scale(l, c->focus_dist / c->plane_dist);
     l = kv3_sub(l, lens);
   }
@@ -175,6 +181,21 @@ static void camera_ray(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler 
   *d = kv3_normalize(
       kv3_add(kv3_add(kv3_scale(c->right, l.x), kv3_scale(c->up, l.y)), kv3_scale(c->fwd, l.z)));
   *o = kv3_add(c->pos, kv3_add(kv3_scale(c->right, lens.x), kv3_scale(c->up, lens.y)));
+}
+
+static void camera_ray(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler *smp,
+                       camera_sample *cs, kpcn_vec3 *o, kpcn_vec3 *d) {
+  const kpcn_camera *c = &ctx->scene->cam;
+  cs->px = px, cs->py = py;
+  kpcn_sampler_2d(smp, &cs->fu, &cs->fv);
+  cs->lens = kv3s(0.0f);
+  if (c->thinlens && c->aperture > 0.0f) {
+    float lu, lv, ax, ay;
+    kpcn_sampler_2d(smp, &lu, &lv); /* pair 1 (pinholes leave it unused) */
+    kpcn_warp_concentric_disk(lu, lv, &ax, &ay);
+    cs->lens = kv3(ax * c->aperture, ay * c->aperture, 0.0f);
+  }
+  camera_ray_at(ctx, cs, cs->fu, cs->fv, o, d);
 }
 
 /* The state of one path between bounces (shade_hit advances it by one bounce). */
@@ -395,6 +416,180 @@ static void trace_path(const kpcn_render_ctx *ctx, kpcn_sampler *smp, kpcn_sampl
   out->specular = P.Ls;
 }
 
+/* A camera sample's feature surface as the albedo footprint sees it. */
+typedef struct footprint_hit {
+  const kpcn_prim *prim; /* NULL: no textured surface seen directly (miss, mirror, constant) */
+  kpcn_vec3 ng;          /* geometric normal */
+  float ox, oy;          /* the sample's film offset from the pixel centre, in pixels */
+  float u, v;            /* texture coordinates at the sample */
+  int clamp;             /* the primitive's uv end at its edges (quads, cubes: kpcn_hit_fill) */
+  /* spheres and disks: uv are far from linear near a pole or the centre, so each point is
+   * looked up through its own ray (h, prim_id); planes use the derivatives above */
+  int exact;
+  unsigned prim_id;
+  kpcn_hit h;
+  float dudx, dvdx, dudy, dvdy; /* their change per pixel along the film's x and y */
+} footprint_hit;
+
+/* The texture coordinates at film point (fu, fv) of pixel (cs's + (dx, dy)), where its camera
+ * ray meets the hit's tangent plane; 0 when it misses the plane. */
+static int footprint_uv_at(const kpcn_render_ctx *ctx, const camera_sample *cs, float fu, float fv,
+                           const kpcn_prim *p, unsigned prim_id, const kpcn_hit *h, int dx, int dy,
+                           float *u, float *v) {
+  camera_sample c = *cs;
+  c.px += dx, c.py += dy; /* film points past the image edge are fine: only the ray is used */
+  kpcn_vec3 o, d;
+  camera_ray_at(ctx, &c, fu, fv, &o, &d);
+  float t = kv3_dot(h->ng, kv3_sub(h->p, o)) / kv3_dot(h->ng, d);
+  if (!(t > 0.0f && t < INFINITY)) return 0; /* parallel to the plane, or behind */
+  kpcn_hit_uv_at(p, prim_id, h, kv3_madd(o, d, t), u, v);
+  return 1;
+}
+
+static inline float clamp01f(float x) { return x < 0.0f ? 0.0f : (x > 1.0f ? 1.0f : x); }
+
+static void footprint_hit_fill(const kpcn_render_ctx *ctx, const camera_sample *cs,
+                               const struct RTCRayHit16 *rh, int k, footprint_hit *f) {
+  const kpcn_scene *s = ctx->scene;
+  f->prim = NULL;
+  f->ox = filter_sample(&ctx->filter, cs->fu), f->oy = filter_sample(&ctx->filter, cs->fv);
+  if (rh->hit.geomID[k] == RTC_INVALID_GEOMETRY_ID) return;
+  const kpcn_prim *p = &s->prims[s->geom_to_prim[rh->hit.geomID[k]]];
+  if (kpcn_bsdf_is_null(p->bsdf) || kpcn_bsdf_is_delta_only(p->bsdf) ||
+      !kpcn_bsdf_albedo_is_textured(p->bsdf))
+    return;
+  const unsigned prim_id = rh->hit.primID[k];
+  kpcn_hit h;
+  kpcn_hit_fill(s, p, kv3(rh->ray.org_x[k], rh->ray.org_y[k], rh->ray.org_z[k]),
+                kv3(rh->ray.dir_x[k], rh->ray.dir_y[k], rh->ray.dir_z[k]), rh->ray.tfar[k], prim_id,
+                rh->hit.u[k], rh->hit.v[k], &h);
+  f->prim = p;
+  f->ng = h.ng;
+  f->u = h.u, f->v = h.v;
+  f->clamp = p->type == KPCN_PRIM_QUAD || p->type == KPCN_PRIM_CUBE;
+  f->exact = p->type == KPCN_PRIM_SPHERE || p->type == KPCN_PRIM_DISK;
+  f->prim_id = prim_id;
+  f->h = h;
+}
+
+/* The texture coordinates' change per pixel at a plane's sample (from two rays one pixel over);
+ * 0 when either misses the plane (grazing). */
+static int footprint_derivatives(const kpcn_render_ctx *ctx, const camera_sample *cs,
+                                 footprint_hit *f) {
+  float ux, vx, uy, vy;
+  if (!footprint_uv_at(ctx, cs, cs->fu, cs->fv, f->prim, f->prim_id, &f->h, 1, 0, &ux, &vx) ||
+      !footprint_uv_at(ctx, cs, cs->fu, cs->fv, f->prim, f->prim_id, &f->h, 0, 1, &uy, &vy))
+    return 0;
+  f->dudx = ux - f->u, f->dvdx = vx - f->v;
+  f->dudy = uy - f->u, f->dvdy = vy - f->v;
+  return 1;
+}
+
+/* One surface: the same primitive, facing the same way (a cube's faces, a mesh's creases). */
+static inline int same_surface(const footprint_hit *a, const footprint_hit *b) {
+  return a->prim && a->prim == b->prim && kv3_dot(a->ng, b->ng) > 0.9f;
+}
+
+/* The generator g of a rank-1 lattice of n points {(i/n, i g/n mod 1)}: the integer nearest to
+ * n/phi that is coprime to n (Korobov's choice; near the Fibonacci lattices where n is a
+ * Fibonacci number). Its projections on either axis are n equally spaced values, which is what
+ * box-filtering edges that run along the image's axes needs most. */
+static uint32_t lattice_generator(uint32_t n) {
+  uint32_t g = (uint32_t)((double)n * 0.6180339887498949 + 0.5);
+  if (g < 1) g = 1;
+  for (;;) {
+    uint32_t a = n, b = g;
+    while (b) {
+      uint32_t t = a % b;
+      a = b, b = t;
+    }
+    if (a == 1) return g;
+    g++;
+  }
+}
+
+/* The albedo over the pixel's footprint, for the n camera samples of one pixel traced
+ * together. Sample s that sees a textured surface directly gets the mean of its own albedo
+ * (already in out[s]) and of the albedo at k*k film points of the pixel's lattice (below), each
+ * looked up where that point's camera ray meets s's tangent plane. No ray is traced: a lookup
+ * costs a fraction of a ray. The pixel's n*k*k points form a rank-1 lattice, so together they
+ * cover the pixel as evenly as n*k*k camera rays would (shifting each sample by a k x k grid
+ * instead left 4x the error on test_render_footprint's checker). Where the pixel's samples see
+ * more than one surface, a point counts only when the sample nearest to it on the film saw
+ * s's surface too: each sample then averages its own surface's part of the pixel, and the
+ * samples' coverage still weighs the surfaces (extending every surface over the whole pixel
+ * doubled the point-sampled albedo's error at silhouettes). docs/renderer.md, "Albedo
+ * footprint". Runs after the packet's paths, never inlined into them: the colour's arithmetic
+ * must compile as it did without it (the same bits with the option off). */
+__attribute__((noinline)) static void footprint_albedo(const kpcn_render_ctx *ctx,
+                                                       const camera_sample *cs,
+                                                       const struct RTCRayHit16 *rh, int n,
+                                                       kpcn_sample_out *out) {
+  footprint_hit fh[16];
+  int uniform = 1;
+  if (n < 1) return;
+  for (int q = 0; q < n; q++) {
+    footprint_hit_fill(ctx, &cs[q], rh, q, &fh[q]);
+    uniform &= same_surface(&fh[q], &fh[0]);
+  }
+  /* a plane's uv derivatives: once per pixel where all its samples see the same plane (they
+   * change by far less than a pixel's worth across it), else per sample; grazing: the point
+   * samples stand */
+  if (uniform && fh[0].prim && !fh[0].exact) {
+    if (!footprint_derivatives(ctx, &cs[0], &fh[0])) return;
+    for (int q = 1; q < n; q++) {
+      fh[q].dudx = fh[0].dudx, fh[q].dvdx = fh[0].dvdx;
+      fh[q].dudy = fh[0].dudy, fh[q].dvdy = fh[0].dvdy;
+    }
+  } else {
+    for (int q = 0; q < n; q++)
+      if (fh[q].prim && !fh[q].exact && !footprint_derivatives(ctx, &cs[q], &fh[q]))
+        fh[q].prim = NULL;
+  }
+  /* the pixel's n * k * k footprint points: a rank-1 lattice, rotated by sample 0's film
+   * point (Cranley-Patterson); sample s takes points s, s + n, s + 2n, ... */
+  const int k2 = ctx->albedo_footprint * ctx->albedo_footprint, npts = n * k2;
+  const uint32_t gen = lattice_generator((uint32_t)npts);
+  const float inv = 1.0f / (float)npts;
+  for (int s = 0; s < n; s++) {
+    const footprint_hit *f = &fh[s];
+    if (!f->prim) continue;
+    kpcn_vec3 sum = out[s].albedo;
+    int count = 1;
+    /* point m = s + n j: (m / npts, (m gen mod npts) / npts), the second kept incrementally */
+    const uint32_t N = (uint32_t)npts, step = ((uint32_t)n * gen) % N;
+    uint32_t mg = ((uint32_t)s * gen) % N;
+    for (int j = 0; j < k2; j++, mg = mg + step >= N ? mg + step - N : mg + step) {
+      float fu = cs[0].fu + (float)(s + n * j) * inv, fv = cs[0].fv + (float)mg * inv;
+      if (fu >= 1.0f) fu -= 1.0f;
+      if (fv >= 1.0f) fv -= 1.0f;
+      float ox = filter_sample(&ctx->filter, fu), oy = filter_sample(&ctx->filter, fv);
+      if (!uniform) {
+        int best = s;
+        float bd = INFINITY;
+        for (int q = 0; q < n; q++) {
+          float dx = fh[q].ox - ox, dy = fh[q].oy - oy, d2 = dx * dx + dy * dy;
+          if (d2 < bd) bd = d2, best = q;
+        }
+        if (!same_surface(&fh[best], f)) continue;
+      }
+      kpcn_shading_point sp;
+      if (f->exact) {
+        if (!footprint_uv_at(ctx, &cs[s], fu, fv, f->prim, f->prim_id, &f->h, 0, 0, &sp.u, &sp.v))
+          continue;
+      } else {
+        const float ex = ox - f->ox, ey = oy - f->oy;
+        sp.u = f->u + ex * f->dudx + ey * f->dudy;
+        sp.v = f->v + ex * f->dvdx + ey * f->dvdy;
+      }
+      if (f->clamp) sp.u = clamp01f(sp.u), sp.v = clamp01f(sp.v);
+      sum = kv3_add(sum, kpcn_bsdf_albedo(f->prim->bsdf, &sp));
+      count++;
+    }
+    out[s].albedo = kv3_scale(sum, 1.0f / (float)count);
+  }
+}
+
 void KPCN_TRACE_PIXEL(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler *smp, int n,
                       kpcn_sample_out *out) {
   /* The camera rays of a pixel's samples differ only by sub-pixel (and lens) offsets, so
@@ -407,13 +602,14 @@ void KPCN_TRACE_PIXEL(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler *
   const kpcn_scene *s = ctx->scene;
   struct RTCRayHit16 rh __attribute__((aligned(64)));
   int valid[16] __attribute__((aligned(64)));
+  camera_sample cs[16];
   if (n > 16) n = 16;
   for (int k = 0; k < 16; k++) {
     valid[k] = k < n ? -1 : 0;
     if (k >= n) continue;
     memset(&out[k], 0, sizeof(out[k]));
     kpcn_vec3 o, d;
-    camera_ray(ctx, px, py, &smp[k], &o, &d);
+    camera_ray(ctx, px, py, &smp[k], &cs[k], &o, &d);
     rh.ray.org_x[k] = o.x, rh.ray.org_y[k] = o.y, rh.ray.org_z[k] = o.z;
     rh.ray.dir_x[k] = d.x, rh.ray.dir_y[k] = d.y, rh.ray.dir_z[k] = d.z;
     rh.ray.tnear[k] = 0.0f;
@@ -439,4 +635,5 @@ void KPCN_TRACE_PIXEL(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler *
     trace_path(ctx, &smp[k], &out[k], kv3(rh.ray.org_x[k], rh.ray.org_y[k], rh.ray.org_z[k]),
                kv3(rh.ray.dir_x[k], rh.ray.dir_y[k], rh.ray.dir_z[k]), &first);
   }
+  if (ctx->albedo_footprint > 1) footprint_albedo(ctx, cs, &rh, n, out);
 }

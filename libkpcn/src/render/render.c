@@ -191,6 +191,14 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   if (st.albedo_spp > 0 && st.color_only)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
                      "albedo_spp: a colour-only render has no albedo buffer");
+  if (st.albedo_footprint < 0 || st.albedo_footprint > 16)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "albedo_footprint: %d is out of range (0 or 1 = off, 2 .. 16)",
+                     st.albedo_footprint);
+  if (st.albedo_footprint > 1 && st.color_only)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "albedo_footprint: a colour-only render has no albedo buffer");
+  ctx.albedo_footprint = st.albedo_footprint > 1 ? st.albedo_footprint : 0;
   const int aspp = st.albedo_spp > spp ? st.albedo_spp : 0; /* 0: no albedo pass */
   kpcn_render_ctx fctx = ctx;                               /* the albedo pass: features only */
   fctx.features_only = 1;
@@ -222,6 +230,7 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   }
   set->spp = spp;
   set->albedo_spp = aspp;
+  set->albedo_footprint = ctx.albedo_footprint;
   set->seed = st.seed;
   snprintf(set->scene, sizeof(set->scene), "%s", scene->name);
   snprintf(set->version, sizeof(set->version), "%s", KPCN_VERSION_STRING);

@@ -51,6 +51,9 @@ typedef struct kpcn_render_ctx {
   int mis;                /* power-heuristic weights (both estimators on) */
   int color_only;
   int features_only; /* 1: a path ends once it has recorded its features (albedo pass) */
+  /* > 1: a textured albedo seen directly is the mean of k x k lookups over the pixel's
+   * footprint (kpcn_render_settings.albedo_footprint) */
+  int albedo_footprint;
   uint64_t seed;
   kpcn_filter_table filter;
   /* kpcn_trace_pixel or its GFNI build, whichever this CPU runs (kpcn_render_ctx_init) */
@@ -65,6 +68,13 @@ kpcn_status kpcn_render_check_memory(int width, int height, int planes, uint64_t
 /* geometry.c */
 void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_vec3 d, float t,
                    unsigned prim_id, float bu, float bv, kpcn_hit *h);
+/* Texture coordinates at x, a point of hit h's tangent plane (h on primitive p; prim_id its
+ * triangle for meshes), from p's own parametrisation carried past the hit: the plane of the
+ * quad, cube face, disk or triangle (not clamped to the surface's edges, as kpcn_hit_fill's
+ * quads and cubes are), the direction from a sphere's centre. For texture lookups over a pixel's
+ * footprint (the albedo footprint, integrator.c). */
+void kpcn_hit_uv_at(const kpcn_prim *p, unsigned prim_id, const kpcn_hit *h, kpcn_vec3 x, float *u,
+                    float *v);
 /* Emitted radiance leaving the hit towards -d (one-sided: front face only). */
 kpcn_vec3 kpcn_prim_emission(const kpcn_prim *p, const kpcn_hit *h, kpcn_vec3 d);
 /* Uniform-area sample of a point on an emissive primitive. */

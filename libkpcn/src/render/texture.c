@@ -296,7 +296,8 @@ static inline kpcn_vec3 texel(const kpcn_texture *t, int x, int y) {
 }
 
 static inline int wrap_index(int i, int n, int clamp) {
-  if (clamp) return i < 0 ? 0 : (i >= n ? n - 1 : i);
+  if ((unsigned)i < (unsigned)n) return i; /* inside: no division (most lookups) */
+  if (clamp) return i < 0 ? 0 : n - 1;
   i %= n;
   return i < 0 ? i + n : i;
 }

@@ -14,8 +14,8 @@
 //    (channel, size) in `err`; the ImageBuf-returning forms set dst.errorfmt(...) instead,
 //    as ImageBufAlgo does.
 //  - AOV metadata travels as ImageSpec attributes "kpcn:spp" (int), "kpcn:seed" (int64 stored
-//    as string when it does not fit an int), "kpcn:albedoSpp" (int), "kpcn:scene" and
-//    "kpcn:version" (strings).
+//    as string when it does not fit an int), "kpcn:albedoSpp" and "kpcn:albedoFootprint" (int),
+//    "kpcn:scene" and "kpcn:version" (strings).
 //  - A ROI must lie inside the source's data window (an error otherwise: OIIO would fill the
 //    outside with zeros).
 #pragma once

@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# The albedo footprint's effect on a dataset's 16-spp pairs: each noisy render is made again
+# with kpcn-render --albedo-footprint K (its manifest seed, scene file and size), both are
+# denoised with MODEL and measured (relMSE, RGB) against the pair's reference.
+#   tools/footprint_pairs.sh MODEL DATASET_DIR[:VARIANTS] ...
+# VARIANTS: the variants to take, comma-separated (e.g. v001,v002; default all). Prints one
+# TSV line per pair: dataset, scene, variant, relMSE plain, relMSE with the footprint.
+# Environment: K (default 2), SPP (default 16), KPCN_BIN (default build/tools), THREADS (2).
+set -euo pipefail
+here=$(cd "$(dirname "$0")/.." && pwd)
+[ $# -ge 2 ] || { echo "usage: tools/footprint_pairs.sh MODEL DATASET_DIR[:VARIANTS] ..." >&2; exit 2; }
+model=$1
+shift
+k=${K:-2}
+spp=${SPP:-16}
+bin=${KPCN_BIN:-$here/build/tools}
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+rel() { # DENOISE-INPUT REFERENCE
+  "$bin/kpcntool/kpcntool" "$1" --denoise:model="$model" "$2" --ch R,G,B --relmse --json |
+    /usr/bin/python3 -c "import json,sys; print(json.load(sys.stdin)['relmse'])"
+}
+for arg in "$@"; do
+  ds=${arg%%:*}
+  want=""
+  [ "$arg" != "$ds" ] && want=",${arg#*:},"
+  [ -f "$ds/manifest.jsonl" ] || { echo "footprint_pairs.sh: no '$ds/manifest.jsonl'" >&2; exit 1; }
+  grep '"kind":"noisy"' "$ds/manifest.jsonl" | grep "\"spp\":$spp," |
+    /usr/bin/python3 -c "
+import json, sys
+for l in sys.stdin:
+    j = json.loads(l)
+    print('v%03d' % j['variant'], j['scene'], j['scene_file'], j['seed'], '%dx%d' % (j['width'], j['height']), j['out'])" |
+    while read -r v scene sf seed res out; do
+      [ -z "$want" ] || [[ $want == *",$v,"* ]] || continue
+      noisy=$ds/$out
+      ref=${noisy%_${spp}spp.exr}_ref1024spp.exr
+      [ -f "$noisy" ] && [ -f "$ref" ] || continue
+      "$bin/kpcn-render/kpcn-render" "$ds/$sf" -o "$tmp/fp.exr" --spp "$spp" --seed "$seed" \
+        --resolution "$res" --threads "${THREADS:-2}" --albedo-footprint "$k" --quiet
+      printf '%s\t%s\t%s\t%s\t%s\n' "$(basename "$ds")" "$scene" "$v" "$(rel "$noisy" "$ref")" \
+        "$(rel "$tmp/fp.exr" "$ref")"
+    done
+done
