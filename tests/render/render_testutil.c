@@ -95,3 +95,12 @@ double rt_mean(const float *p, size_t n) {
     acc += p[i];
   return acc / (double)n;
 }
+
+kpcn_aov_set *rt_exr_roundtrip(const kpcn_aov_set *a, const char *path) {
+  kpcn_aov_set *rd = NULL;
+  if (kpcn_exr_write_aov(path, a, NULL) != KPCN_OK || kpcn_exr_read_aov(path, &rd) != KPCN_OK) {
+    fprintf(stderr, "%s\n", kpcn_last_error());
+    return NULL;
+  }
+  return rd;
+}

@@ -16,6 +16,9 @@ void rt_set_camera_string(cJSON *doc, const char *key, const char *v);
 /* Renders with spp/seed/threads/resolution; NULL on failure (message printed). */
 kpcn_aov_set *rt_render(const kpcn_scene *s, int spp, long long seed, int threads, int w, int h,
                         kpcn_light_strategy lights, int max_bounces);
+/* Writes a to the EXR at path and reads it back (header attributes included); NULL on failure
+ * (message printed). */
+kpcn_aov_set *rt_exr_roundtrip(const kpcn_aov_set *a, const char *path);
 /* mean over pixels and channels of (a-b)^2/(b^2+0.01) for a 3-channel buffer */
 double rt_relmse(const float *a, const float *b, size_t plane);
 /* mean over pixels and channels of var/(ref^2+0.01) where var is the per-pixel

@@ -333,10 +333,7 @@ static void test_albedo_pass(const char *path) {
            path, e8 / (3 * plane), e48 / (3 * plane));
     CHECK(e8 > 0 && e48 < 0.5 * e8); /* edges exist, and more samples resolve them */
     /* the header keeps it */
-    const char *f = kt_tmpfile("albedo_pass.exr");
-    kpcn_aov_set *rd = NULL;
-    CHECK(kpcn_exr_write_aov(f, both, NULL) == KPCN_OK);
-    CHECK(kpcn_exr_read_aov(f, &rd) == KPCN_OK);
+    kpcn_aov_set *rd = rt_exr_roundtrip(both, kt_tmpfile("albedo_pass.exr"));
     CHECK(rd && rd->albedo_spp == 48 && rd->spp == 8);
     kpcn_aov_destroy(rd);
   }

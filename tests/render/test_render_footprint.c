@@ -155,10 +155,7 @@ static void test_textures_scene(void) {
     CHECK(fe <= pe);      /* silhouettes: never worse than point samples */
     CHECK(fr < 0.4 * pr); /* inside surfaces: the texture's coverage noise mostly gone */
     /* and the header keeps k */
-    const char *f = kt_tmpfile("footprint.exr");
-    kpcn_aov_set *rd = NULL;
-    CHECK(kpcn_exr_write_aov(f, fp, NULL) == KPCN_OK);
-    CHECK(kpcn_exr_read_aov(f, &rd) == KPCN_OK);
+    kpcn_aov_set *rd = rt_exr_roundtrip(fp, kt_tmpfile("footprint.exr"));
     CHECK(rd && rd->albedo_footprint == 4 && rd->albedo_spp == 0);
     kpcn_aov_destroy(rd);
     free(edge), free(rest);
