@@ -5,7 +5,8 @@
 #   tools/footprint_pairs.sh MODEL DATASET_DIR[:VARIANTS] ...
 # VARIANTS: the variants to take, comma-separated (e.g. v001,v002; default all). Prints one
 # TSV line per pair: dataset, scene, variant, relMSE plain, relMSE with the footprint.
-# Environment: K (default 2), SPP (default 16), KPCN_BIN (default build/tools), THREADS (2).
+# Environment: K (default 2), SPP (default 16), KPCN_BIN (default build/tools), THREADS (2),
+# DENOISE_OPTS (appended to --denoise:model=MODEL, e.g. ":exposure=0.146227151").
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 [ $# -ge 2 ] || { echo "usage: tools/footprint_pairs.sh MODEL DATASET_DIR[:VARIANTS] ..." >&2; exit 2; }
@@ -17,7 +18,7 @@ bin=${KPCN_BIN:-$here/build/tools}
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 rel() { # DENOISE-INPUT REFERENCE
-  "$bin/kpcntool/kpcntool" "$1" --denoise:model="$model" "$2" --ch R,G,B --relmse --json |
+  "$bin/kpcntool/kpcntool" "$1" --denoise:model="$model${DENOISE_OPTS:-}" "$2" --ch R,G,B --relmse --json |
     /usr/bin/python3 -c "import json,sys; print(json.load(sys.stdin)['relmse'])"
 }
 for arg in "$@"; do
