@@ -532,9 +532,9 @@ __attribute__((noinline)) static void footprint_albedo(const kpcn_render_ctx *ct
     footprint_hit_fill(ctx, &cs[q], rh, q, &fh[q]);
     uniform &= same_surface(&fh[q], &fh[0]);
   }
-  /* a plane's uv derivatives: once per pixel where all its samples see the same plane (they
-   * change by far less than a pixel's worth across it), else per sample; grazing: the point
-   * samples stand */
+  /* a plane's uv derivatives: once per pixel where all its samples see the same surface (they
+   * change by far less than a pixel's worth across it; for a mesh, sample 0's triangle stands
+   * for its neighbours), else per sample; grazing: the point samples stand */
   if (uniform && fh[0].prim && !fh[0].exact) {
     if (!footprint_derivatives(ctx, &cs[0], &fh[0])) return;
     for (int q = 1; q < n; q++) {
