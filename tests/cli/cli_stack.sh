@@ -18,6 +18,17 @@ $PY -c 'import json,sys; d=json.load(open(sys.argv[1]))["info"]
 assert d["width"]==256 and d["height"]==256 and d["kpcn:spp"]==16, d
 assert set(d["buffers"])=={"color","albedo","normal","depth","visibility"}, d["buffers"]' out.txt \
   && pass "--info json" || fail "--info json: $(cat out.txt)"
+# the albedo's provenance (kpcn-render --albedo-spp / --albedo-footprint) is shown when present
+$PY -c 'import OpenImageIO as oiio, sys
+b = oiio.ImageBuf(sys.argv[1]); s = b.spec()
+s.attribute("kpcn:albedoSpp", 64); s.attribute("kpcn:albedoFootprint", 2)
+b.write("attrs.exr")' "$NOISY"
+run_ok attrs.exr --info
+grep -qF "kpcn:albedoSpp: 64" out.txt && grep -qF "kpcn:albedoFootprint: 2" out.txt &&
+  pass "--info shows the albedo attributes" || fail "--info albedo attributes: $(cat out.txt)"
+run_ok "$NOISY" --info
+! grep -q "kpcn:albedo" out.txt && pass "--info: no albedo attributes when absent" ||
+  fail "--info shows absent attributes: $(cat out.txt)"
 # --ch selects (and renames) channels; -o writes float EXR; reading it back gives the same metric.
 run_ok "$NOISY" --ch R,G,B -o rgb.exr
 run_ok rgb.exr --info

@@ -184,7 +184,8 @@ bool cmd_info(Context &ctx, const Modifiers &, const std::vector<std::string> &,
     txt << "  AOV buffers: " << aov_error << "\n";
     js << ", \"aov_error\": " << quote(aov_error);
   }
-  for (const char *attr : {"kpcn:spp", "kpcn:seed", "kpcn:scene", "kpcn:version"}) {
+  for (const char *attr : {"kpcn:spp", "kpcn:albedoSpp", "kpcn:albedoFootprint", "kpcn:seed",
+                           "kpcn:scene", "kpcn:version"}) {
     const OIIO::ParamValue *p = sp.find_attribute(attr);
     if (!p) continue;
     txt << "  " << attr << ": " << p->get_string() << "\n";
