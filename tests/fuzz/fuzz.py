@@ -12,7 +12,8 @@ command line and stderr, and the exit status is 1.
 
 Targets (each draws its own mutations from --seed, so a run is reproducible):
   scene  kpcn-render on Tungsten scene JSON with values replaced, deleted, duplicated,
-         retyped or truncated (structure-aware)
+         retyped or truncated (structure-aware); some cases with --albedo-footprint or
+         --albedo-spp
   model  kpcntool --denoise:model= on the shipped model with header, architecture,
          metadata, offsets and data damaged, or truncated
   kps    kpcn-train on a small patch store with header words, index records, metadata or
@@ -194,8 +195,12 @@ def fuzz_scene(fz, rng, n):
         case = os.path.join(os.path.dirname(src), "fuzz_case.json")
         with open(case, "w") as f:
             f.write(text)
+        # the albedo passes read the scene's textures and geometry on their own paths (uv
+        # derivatives, per-point camera rays), so damaged scenes go through them too
+        extra = rng.choice([[], [], ["--albedo-footprint", str(rng.choice([2, 3, 16]))],
+                            ["--albedo-spp", "4"], ["--albedo-footprint", "2", "--albedo-spp", "2"]])
         fz.run("scene", [fz.bin("kpcn-render"), case, "-o", out, "--spp", "1",
-                         "--resolution", "24x16", "--threads", "1"], [out], keep=[case],
+                         "--resolution", "24x16", "--threads", "1"] + extra, [out], keep=[case],
                finite=[out])
         os.remove(case)
 
