@@ -1,7 +1,8 @@
 // The ImageBuf ops keep where the pixels are and what the header says: a data window away from
 // 0,0 stays where it was through mirror / colorswap / shift (also in place, dst == src, which
 // must not lose the kpcn:* attributes), through errormap and through a denoise with a ROI; a
-// ROI outside the data window is an error, not a comparison against zeros.
+// ROI outside the data window is an error, not a comparison against zeros. The same for the
+// kernel export (denoise_kernels).
 #include "kpcn/ops_augment.h"
 #include "kpcn/ops_denoise.h"
 #include "kpcn/ops_metrics.h"
@@ -63,5 +64,23 @@ int main() {
   CHECK(OIIO::ImageBufAlgo::compare(part, d, 0.0f, 0.0f, win).nfail == 0);
   ImageBuf bad = ops::denoise(aov, o, ROI(0, 10, 0, 10));
   CHECK(bad.has_error() && bad.geterror().find("not inside") != std::string::npos);
+
+  // denoise_kernels (the shipped model): the same placement rules; all 3 + K² channels of a
+  // ROI's part are the whole result's there; a baseline has no kernels
+  ops::DenoiseOptions k;
+  k.model = std::string(KPCN_TESTDATA) + "/models/kpcn-cpu.safetensors";
+  ImageBuf kf, kp;
+  CHECK(ops::denoise_kernels(kf, aov, k, "specular"));
+  CHECK(ops::denoise_kernels(kp, aov, k, "specular", win));
+  CHECK(placed_like(kf, aov) && kf.nchannels() == 3 + 11 * 11);
+  CHECK(kf.spec().get_int_attribute("kpcn:kernelSize") == 11);
+  CHECK(kf.spec().get_string_attribute("kpcn:branch") == "specular");
+  CHECK(kp.spec().x == 10 && kp.spec().y == 12 && kp.nchannels() == kf.nchannels());
+  CHECK(OIIO::ImageBufAlgo::compare(kp, kf, 0.0f, 0.0f, win).nfail == 0);
+  ImageBuf kb;
+  CHECK(!ops::denoise_kernels(kb, aov, o, "diffuse"));
+  CHECK(kb.geterror().find("only the KPCN") != std::string::npos);
+  CHECK(!ops::denoise_kernels(kb, aov, k, "albedo"));
+  CHECK(kb.geterror().find("albedo") != std::string::npos);
   return kt_summary("test_ops_places");
 }

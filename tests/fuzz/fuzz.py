@@ -311,7 +311,8 @@ CLI_CMDS = {
     "--colorswap": ["perm", "all"],
     "--denoise": ["model", "method", "bf16", "tile", "ensemble", "exposure"],
     "--errormap": ["channels", "display", "range", "eps", "allow_nonfinite", "metric"],
-    "--info": [], "--l1": ["channels", "display", "range", "eps", "allow_nonfinite"],
+    "--info": [], "--kernels": ["model", "branch", "bf16", "tile", "exposure", "firefly"],
+    "--l1": ["channels", "display", "range", "eps", "allow_nonfinite"],
     "--mirror": ["dir", "all"], "--mosaic": ["n", "labels", "font", "fontsize"],
     "--mse": ["channels", "eps"], "--ociodisplay": ["display", "view", "config", "from", "looks"],
     "--patches": ["size", "count", "stride", "seed", "cull", "tol", "abs", "importance", "out"],
@@ -330,7 +331,7 @@ def fuzz_cli(fz, rng, n):
     vals = ["0", "1", "-1", "2", "3", "4", "8", "16", "90", "45", "180", "1e9", "-1e9",
             "2147483648", "nan", "inf", "0.5", "", "x", "R,G,B", "color.R", "BRG", "RRR", "h", "v",
             "nlmeans", "bilateral", "foo", model, "/nonexistent.safetensors", "relmse", "ssim",
-            "inferno", "sRGB", "ACES", outs[5], outs[6], "a,b,c", "90"]
+            "inferno", "sRGB", "ACES", outs[5], outs[6], "a,b,c", "90", "diffuse", "specular"]
     for _ in range(n):
         argv = [fz.bin("kpcntool")]
         for _ in range(rng.randint(1, 6)):

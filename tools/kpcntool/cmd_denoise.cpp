@@ -2,6 +2,9 @@
 //   --denoise:model=m.safetensors[:bf16=1][:tile=N][:ensemble=N][:exposure=auto|off|E]
 //            [:firefly=R|off]
 //   --denoise:method=bilateral|nlmeans
+// kpcntool --kernels: pops an AOV image, pushes the KPCN's kernels of one branch.
+//   --kernels:model=m.safetensors[:branch=diffuse|specular][:bf16=1][:tile=N][:exposure=..]
+//            [:firefly=..]
 #include "kpcn/oiio_convert.h"
 #include "kpcn/ops_denoise.h"
 #include "kpcntool.h"
@@ -44,6 +47,20 @@ bool parse_firefly(const std::string &v, kpcn::ops::DenoiseOptions &opt, std::st
   return true;
 }
 
+// The KPCN's modifiers that --denoise and --kernels share: bf16, tile, exposure, firefly.
+bool parse_kpcn_options(const kpcntool::Modifiers &m, kpcn::ops::DenoiseOptions &opt,
+                        std::string &err) {
+  opt.bf16 = m.flag("bf16", false);
+  long tile = m.integer("tile", 0);
+  if (tile < 0 || tile > 65536) {
+    err = "tile must be in [0, 65536] (got " + std::to_string(tile) + ")";
+    return false;
+  }
+  opt.tile = (int)tile;
+  return parse_exposure(m.str("exposure", "auto"), opt, err) &&
+         parse_firefly(m.str("firefly", ""), opt, err);
+}
+
 bool run_denoise(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
                  const std::vector<std::string> &, std::string &err) {
   kpcn::ops::DenoiseOptions opt;
@@ -64,24 +81,42 @@ bool run_denoise(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
             "modifier '" + std::string(k) + "' applies only to the KPCN, not method=" + opt.method;
         return false;
       }
-  opt.bf16 = m.flag("bf16", false);
-  long tile = m.integer("tile", 0);
-  if (tile < 0 || tile > 65536) {
-    err = "tile must be in [0, 65536] (got " + std::to_string(tile) + ")";
-    return false;
-  }
-  opt.tile = (int)tile;
+  if (!parse_kpcn_options(m, opt, err)) return false;
   long ensemble = m.integer("ensemble", 1);
   if (ensemble != 1 && ensemble != 2 && ensemble != 4 && ensemble != 8) {
     err = "ensemble must be 1, 2, 4 or 8 (got " + std::to_string(ensemble) + ")";
     return false;
   }
   opt.ensemble = (int)ensemble;
-  if (!parse_exposure(m.str("exposure", "auto"), opt, err)) return false;
-  if (!parse_firefly(m.str("firefly", ""), opt, err)) return false;
   OIIO::ImageBuf src = ctx.pop();
   OIIO::ImageBuf dst;
   if (!kpcn::ops::denoise(dst, src, opt, {}, ctx.nthreads)) {
+    err = dst.geterror();
+    ctx.push(std::move(src)); // leave the stack as it was
+    return false;
+  }
+  ctx.push(std::move(dst));
+  return true;
+}
+
+// --kernels: pops an AOV image, pushes the KPCN's predicted kernels of one branch.
+bool run_kernels(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
+                 const std::vector<std::string> &, std::string &err) {
+  kpcn::ops::DenoiseOptions opt;
+  opt.model = m.str("model");
+  if (opt.model.empty()) {
+    err = "give model=<file.safetensors> (only the KPCN predicts kernels)";
+    return false;
+  }
+  const std::string branch = m.str("branch", "diffuse");
+  if (branch != "diffuse" && branch != "specular") {
+    err = "branch must be diffuse or specular (got '" + branch + "')";
+    return false;
+  }
+  if (!parse_kpcn_options(m, opt, err)) return false;
+  OIIO::ImageBuf src = ctx.pop();
+  OIIO::ImageBuf dst;
+  if (!kpcn::ops::denoise_kernels(dst, src, opt, branch, {}, ctx.nthreads)) {
     err = dst.geterror();
     ctx.push(std::move(src)); // leave the stack as it was
     return false;
@@ -112,6 +147,16 @@ bool reg_exposure = kpcntool::register_command(
      "exposure of the top AOV image: median 8x8-block mean luminance of diffuse + specular "
      "(--denoise scales it to the model's exposure)",
      run_exposure});
+
+bool reg_kernels = kpcntool::register_command(
+    {"kernels",
+     0,
+     {"model", "branch", "bf16", "tile", "exposure", "firefly"},
+     "the KPCN's predicted kernels of the top AOV image (model=m.safetensors, "
+     "branch=diffuse|specular, default diffuse; bf16, tile, exposure, firefly as --denoise): "
+     "channels pre.R/G/B (the preprocessed noisy colour) and kernel.000 .. kernel.K*K-1 (tap "
+     "dy*K + dx)",
+     run_kernels});
 
 bool reg = kpcntool::register_command(
     {"denoise",

@@ -291,6 +291,28 @@ kpcn_status kpcn_denoiser_execute(kpcn_denoiser *d, float *out, int width, int h
 /* Denoises a planar AOV set directly (no strided input buffers): out_planar is [3][H][W]. */
 kpcn_status kpcn_denoiser_execute_aov(kpcn_denoiser *d, const kpcn_aov_set *aov, float *out_planar);
 
+/* The predicted kernels (method KPCN): what the network decided for each pixel, for reading
+ * and visualising the denoiser. kpcn_denoiser_kernel_info gives the model's kernel size K,
+ * how many times the kernels are applied (arch kpa_passes) and the demodulation eps (either
+ * of the last two may be NULL).
+ * kpcn_denoiser_kernels_aov runs `branch` (KPCN_BRANCH_DIFFUSE / _SPECULAR) of the network
+ * on `aov` exactly as an execute does (the same exposure scale, firefly bound and tiles; the
+ * other branch is not run) and writes
+ *   weights   [K*K][H][W]: pixel p's softmax weights; tap t = dy*K + dx reads the pixel
+ *             p + (dx - K/2, dy - K/2), clamped to the image; each weight >= 0, the K*K
+ *             sum to 1;
+ *   noisy_pre [3][H][W] (may be NULL): the branch's preprocessed noisy colour (section 2
+ *             above, at kpcn_denoise_stats.exposure_scale), what the first pass filters.
+ * The branch's result is P passes of f <- sum_t weights[t] * f(p + offset(t)) from
+ * f = noisy_pre, and the denoised colour is (diffuse_result * (albedo + eps) +
+ * exp(specular_result) - 1) / exposure_scale. Refused for a self-ensemble (ensemble > 1: its
+ * members have their own kernels) and for a model with source weights (its first pass is
+ * weighted differently). */
+kpcn_status kpcn_denoiser_kernel_info(const kpcn_denoiser *d, int *kernel_size, int *passes,
+                                      float *eps);
+kpcn_status kpcn_denoiser_kernels_aov(kpcn_denoiser *d, const kpcn_aov_set *aov, int branch,
+                                      float *weights, float *noisy_pre);
+
 /* Timing of the last execute (seconds), for benchmarks. */
 typedef struct kpcn_denoise_stats {
   double total_s;        /* whole execute, including input assembly */

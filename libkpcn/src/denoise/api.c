@@ -22,6 +22,7 @@ struct kpcn_denoiser {
   kpcn_progress prog;
   kpcn_denoise_stats stats;
   kpcn_pipeline_cache cache;
+  const kpcn_kernel_sink *sink; /* set only during kpcn_denoiser_kernels_aov */
 };
 
 void kpcn_denoiser_options_defaults(kpcn_denoiser_options *o) {
@@ -270,7 +271,8 @@ static kpcn_status run_method(kpcn_denoiser *d, const kpcn_aov_set *aov, float s
     s = kpcn_baseline_nlmeans(aov, &d->opt.nlmeans, out, d->opt.nthreads, &d->prog);
     break;
   default:
-    s = kpcn_pipeline_run(d->model, aov, &d->opt, scale, &d->prog, out, &d->stats, &d->cache);
+    s = kpcn_pipeline_run(d->model, aov, &d->opt, scale, &d->prog, out, &d->stats, &d->cache,
+                          d->sink);
   }
   kpcn_fast_fp_end(csr, d->opt.nthreads);
   return s;
@@ -471,6 +473,54 @@ kpcn_status kpcn_denoiser_execute_aov(kpcn_denoiser *d, const kpcn_aov_set *aov,
   double t0 = now_s();
   memset(&d->stats, 0, sizeof d->stats);
   kpcn_status s = run_denoise(d, aov, out_planar);
+  d->stats.total_s = now_s() - t0;
+  return s;
+}
+
+kpcn_status kpcn_denoiser_kernel_info(const kpcn_denoiser *d, int *kernel_size, int *passes,
+                                      float *eps) {
+  if (!d || !kernel_size)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_kernel_info: NULL argument");
+  if (d->opt.method != KPCN_DENOISE_KPCN)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "denoiser_kernel_info: only the KPCN predicts kernels, not the %s baseline",
+                     d->opt.method == KPCN_DENOISE_BILATERAL ? "bilateral" : "nlmeans");
+  const kpcn_arch *a = kpcn_model_arch(d->model);
+  *kernel_size = a->kernel_size;
+  if (passes) *passes = kpcn_arch_kpa_passes(a);
+  if (eps) *eps = a->eps;
+  return KPCN_OK;
+}
+
+kpcn_status kpcn_denoiser_kernels_aov(kpcn_denoiser *d, const kpcn_aov_set *aov, int branch,
+                                      float *weights, float *noisy_pre) {
+  int K;
+  if (!d || !aov || !weights)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_kernels: NULL argument");
+  KPCN_TRY(kpcn_denoiser_kernel_info(d, &K, NULL, NULL));
+  if (branch != KPCN_BRANCH_DIFFUSE && branch != KPCN_BRANCH_SPECULAR)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "denoiser_kernels: branch %d is neither diffuse (0) nor specular (1)", branch);
+  if (d->opt.ensemble > 1)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "denoiser_kernels: a self-ensemble (ensemble = %d) averages %d results, "
+                     "each with its own kernels; export them with ensemble = 1",
+                     d->opt.ensemble, d->opt.ensemble);
+  if (kpcn_model_arch(d->model)->source_weight)
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                     "denoiser_kernels: the model weights its sources (source_weight), so its "
+                     "first kernel pass is not the plain weighted sum the export describes");
+  KPCN_TRY(kpcn_check_size(aov->width, aov->height, "denoiser_kernels"));
+  double t0 = now_s();
+  memset(&d->stats, 0, sizeof d->stats);
+  /* the run's image: only the branch's part is computed, onto zeros */
+  float *out = kpcn_calloc(3 * kpcn_aov_plane_size(aov), sizeof(float), "denoiser output");
+  if (!out) return KPCN_ERR_OUT_OF_MEMORY;
+  const kpcn_kernel_sink sink = {branch, weights, noisy_pre};
+  d->sink = &sink;
+  kpcn_status s = run_denoise(d, aov, out);
+  d->sink = NULL;
+  free(out);
   d->stats.total_s = now_s() - t0;
   return s;
 }

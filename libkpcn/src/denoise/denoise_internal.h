@@ -55,13 +55,23 @@ void kpcn_pipeline_cache_release(kpcn_pipeline_cache *c);
 /* Fails naming the first buffer or variance the KPCN needs that `aov` lacks. */
 kpcn_status kpcn_pipeline_require(const kpcn_aov_set *aov);
 
+/* Where kpcn_pipeline_run also writes one branch's predicted kernels (kpcn_denoiser_kernels_aov):
+ * weights [K²][H][W], the softmax weights of every pixel, and noisy_pre [3][H][W] (may be
+ * NULL), the preprocessed colour they filter. The other branch is then not run at all. */
+typedef struct kpcn_kernel_sink {
+  int branch;
+  float *weights;
+  float *noisy_pre;
+} kpcn_kernel_sink;
+
 /* Runs the two-branch KPCN on `aov` into out (planar RGB [3][H][W]) with o's tile, bf16,
  * nthreads and direct_conv; the network sees the colour buffers times color_scale (> 0,
  * kpcn_features_norm) and the result is divided by it. Accumulates timings into *st.
- * cache: kept between calls, or NULL for a run that frees everything it allocates. */
+ * cache: kept between calls, or NULL for a run that frees everything it allocates.
+ * sink: NULL, or where one branch's kernels go (out then holds that branch's part only). */
 kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
                               const kpcn_denoiser_options *o, float color_scale,
                               kpcn_progress *prog, float *out, kpcn_denoise_stats *st,
-                              kpcn_pipeline_cache *cache);
+                              kpcn_pipeline_cache *cache, const kpcn_kernel_sink *sink);
 
 #endif

@@ -212,10 +212,29 @@ static kpcn_status cache_net(kpcn_pipeline_cache *c, kpcn_model *model, kpcn_bra
   return KPCN_OK;
 }
 
+/* Copies a tile's core from its padded planes (weights [K²][ph][pw], the preprocessed colour
+ * [3][ph][pw]) into the sink's full-image planes. */
+static void sink_tile(const kpcn_kernel_sink *sink, int K, int W, int H, const tile_t *t,
+                      const float *weights, const float *noisy) {
+  const size_t P = (size_t)W * H, Q = (size_t)t->pw * t->ph;
+  const int cw = t->x1 - t->x0;
+  for (int y = t->y0; y < t->y1; y++) {
+    const size_t src = (size_t)(y - t->py0) * t->pw + (size_t)(t->x0 - t->px0);
+    const size_t dst = (size_t)y * W + (size_t)t->x0;
+    for (int k = 0; k < K * K; k++)
+      memcpy(sink->weights + (size_t)k * P + dst, weights + (size_t)k * Q + src,
+             sizeof(float) * (size_t)cw);
+    if (sink->noisy_pre)
+      for (int c = 0; c < 3; c++)
+        memcpy(sink->noisy_pre + (size_t)c * P + dst, noisy + (size_t)c * Q + src,
+               sizeof(float) * (size_t)cw);
+  }
+}
+
 kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
                               const kpcn_denoiser_options *o, float color_scale,
                               kpcn_progress *prog, float *out, kpcn_denoise_stats *st,
-                              kpcn_pipeline_cache *cache) {
+                              kpcn_pipeline_cache *cache, const kpcn_kernel_sink *sink) {
   const int tile = o->tile, nthreads = o->nthreads;
   const kpcn_arch *arch = kpcn_model_arch(model);
   KPCN_TRY(kpcn_features_check_arch(arch));
@@ -257,9 +276,17 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
 
   kpcn_pipeline_cache local = {0};
   kpcn_pipeline_cache *pc = cache ? cache : &local;
+  float *tile_weights = NULL; /* a sink's: one tile's K² weight planes */
   kpcn_status s = cache_buffers(pc, (size_t)maxp);
   if (s != KPCN_OK) goto done;
   float *feat = pc->feat, *noisy = pc->noisy, *filt = pc->filt;
+  if (sink) {
+    tile_weights = kpcn_alloc(sizeof(float) * (size_t)K * K * (size_t)maxp, "kernel weights");
+    if (!tile_weights) {
+      s = KPCN_ERR_OUT_OF_MEMORY;
+      goto done;
+    }
+  }
   const int nthr = kpcn_resolve_threads(nthreads);
   const float *alb = aov->buf[KPCN_BUF_ALBEDO];
   /* Branch-major order: only one network (activations of one padded tile) is alive at a
@@ -267,6 +294,7 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
    * `out`, the specular pass adds exp(s) - 1. This keeps a 4K frame with the paper preset
    * under 4 GiB. */
   for (int b = 0; b < 2; b++) {
+    if (sink && b != sink->branch) continue;
     for (int i = 0; i < nt; i++) {
       /* the specular pass walks the tiles backwards, so it starts with the size the diffuse
        * pass ended with and ends with the size the next execute starts with: with the cache,
@@ -306,6 +334,12 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
       double tc = now_s();
       /* every pass filters the previous one's result with the same kernels; the noisy
        * colour is not needed after the first, so the passes ping-pong between the two */
+      if (sink) { /* the weights materialized once more (the passes below fuse them away) */
+        s = kpcn_kpa_forward_layout(K, 1, 3, t->ph, t->pw, logits, &lay, noisy, filt, tile_weights,
+                                    nthreads);
+        if (s != KPCN_OK) goto done;
+        sink_tile(sink, K, W, H, t, tile_weights, noisy);
+      }
       float *src = noisy, *res = filt;
       for (int pass = 0; pass < passes; pass++) {
         if (pass == 0 && arch->source_weight) /* in place: w·noisy over noisy, the quotient
@@ -345,6 +379,7 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
   }
   kpcn_progress_report(prog, 1.0);
 done:
+  free(tile_weights);
   take_conv_time(pc, st);
   if (!cache || s != KPCN_OK) kpcn_pipeline_cache_release(pc); /* no half-built state kept */
   free(tiles);

@@ -40,5 +40,16 @@ bool denoise(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptio
 OIIO::ImageBuf denoise(const OIIO::ImageBuf &aovs, const DenoiseOptions &opt, OIIO::ROI roi = {},
                        int nthreads = 0);
 
+// The KPCN's predicted kernels of one branch ("diffuse" or "specular") for every pixel of
+// `aovs` (kpcn_denoiser_kernels_aov: the same exposure, firefly bound and tiles as denoise;
+// opt.ensemble must be 1). dst (float) holds channels pre.R pre.G pre.B, the branch's
+// preprocessed noisy colour, then kernel.000 ... kernel.(K*K-1), the softmax weights (tap t =
+// dy*K + dx reads the pixel (x + dx - K/2, y + dy - K/2), clamped to the image), and the
+// attributes kpcn:branch (string), kpcn:kernelSize and kpcn:kernelPasses (int), kpcn:eps and
+// kpcn:exposureScale (float): everything needed to redo the branch's filtering and
+// recombination (kpcn/denoise.h). roi and errors as for denoise.
+bool denoise_kernels(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptions &opt,
+                     const std::string &branch, OIIO::ROI roi = {}, int nthreads = 0);
+
 } // namespace ops
 } // namespace kpcn
