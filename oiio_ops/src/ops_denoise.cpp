@@ -55,10 +55,11 @@ bool place_result(OIIO::ImageBuf &dst, OIIO::ImageBuf &full, const OIIO::ImageBu
   return OIIO::ImageBufAlgo::crop(dst, full, roi, nthreads);
 }
 
-// The C library's last error for dst, prefixed with `what` unless it already starts so.
+// The C library's last error for dst, prefixed with `what` unless it already names the
+// denoiser ("denoise: ...", "denoiser_kernels: ...", as most of libkpcn's denoiser messages do).
 void c_error(OIIO::ImageBuf &dst, const char *what) {
   const std::string e = kpcn_last_error();
-  dst.errorfmt("{}{}", e.rfind(what, 0) == 0 ? "" : std::string(what) + ": ", e);
+  dst.errorfmt("{}{}", e.rfind("denoise", 0) == 0 ? "" : std::string(what) + ": ", e);
 }
 
 } // namespace
@@ -84,7 +85,7 @@ bool denoise(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptio
   kpcn_image *rgb = nullptr;
   kpcn_denoise_stats st{};
   if (kpcn_denoise_aov_stats(set.get(), &o, &rgb, &st) != KPCN_OK) {
-    c_error(dst, "denoise"); // libkpcn's denoiser messages already say "denoise: ..."
+    c_error(dst, "denoise");
     return false;
   }
   ImagePtr out(rgb);
