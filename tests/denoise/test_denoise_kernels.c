@@ -157,7 +157,8 @@ static void test_refusals(void) {
   CHECK(kpcn_denoiser_create(&dn, &o) == KPCN_OK);
   int k = 0;
   expect_error(kpcn_denoiser_kernel_info(dn, &k, NULL, NULL), KPCN_ERR_INVALID_ARGUMENT, "nlmeans");
-  expect_error(kpcn_denoiser_kernels_aov(dn, a, 0, w, NULL), KPCN_ERR_INVALID_ARGUMENT, "nlmeans");
+  expect_error(kpcn_denoiser_kernels_aov(dn, a, 0, w, NULL), KPCN_ERR_INVALID_ARGUMENT,
+               "denoiser_kernels: only the KPCN predicts kernels, not the nlmeans");
   /* a missing buffer is named as an execute names it */
   kpcn_aov_set *b = synth_aov(12, 10, 2);
   free(b->var[KPCN_BUF_SPECULAR]);

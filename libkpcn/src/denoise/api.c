@@ -477,14 +477,19 @@ kpcn_status kpcn_denoiser_execute_aov(kpcn_denoiser *d, const kpcn_aov_set *aov,
   return s;
 }
 
+/* Fails unless d is a KPCN denoiser; `what` names the caller. */
+static kpcn_status require_kpcn(const kpcn_denoiser *d, const char *what) {
+  if (d->opt.method == KPCN_DENOISE_KPCN) return KPCN_OK;
+  return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                   "%s: only the KPCN predicts kernels, not the %s baseline", what,
+                   d->opt.method == KPCN_DENOISE_BILATERAL ? "bilateral" : "nlmeans");
+}
+
 kpcn_status kpcn_denoiser_kernel_info(const kpcn_denoiser *d, int *kernel_size, int *passes,
                                       float *eps) {
   if (!d || !kernel_size)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_kernel_info: NULL argument");
-  if (d->opt.method != KPCN_DENOISE_KPCN)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "denoiser_kernel_info: only the KPCN predicts kernels, not the %s baseline",
-                     d->opt.method == KPCN_DENOISE_BILATERAL ? "bilateral" : "nlmeans");
+  KPCN_TRY(require_kpcn(d, "denoiser_kernel_info"));
   const kpcn_arch *a = kpcn_model_arch(d->model);
   *kernel_size = a->kernel_size;
   if (passes) *passes = kpcn_arch_kpa_passes(a);
@@ -494,10 +499,9 @@ kpcn_status kpcn_denoiser_kernel_info(const kpcn_denoiser *d, int *kernel_size, 
 
 kpcn_status kpcn_denoiser_kernels_aov(kpcn_denoiser *d, const kpcn_aov_set *aov, int branch,
                                       float *weights, float *noisy_pre) {
-  int K;
   if (!d || !aov || !weights)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_kernels: NULL argument");
-  KPCN_TRY(kpcn_denoiser_kernel_info(d, &K, NULL, NULL));
+  KPCN_TRY(require_kpcn(d, "denoiser_kernels"));
   if (branch != KPCN_BRANCH_DIFFUSE && branch != KPCN_BRANCH_SPECULAR)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
                      "denoiser_kernels: branch %d is neither diffuse (0) nor specular (1)", branch);
