@@ -1,0 +1,85 @@
+#!/bin/sh
+# tools/texture_pool.py (the procedural bitmap pool of docs/training.md, session 44): a pure
+# function of (seed, count), every file a square 8-bit RGB bitmap that tiles where its family
+# says so, --exclude keeps a bitmap (and its shifts and flips) out, checked by brute force
+# against np.roll instead of the tool's FFT; bad arguments are a clear error with nothing written.
+# usage: test_texture_pool.sh TEXTURE_POOL_PY
+set -u
+S=$1
+D=$(mktemp -d /tmp/kpcn_pool_XXXXXX)
+trap 'rm -rf "$D"' EXIT
+fail() { echo "FAIL: $*"; exit 1; }
+/usr/bin/python3 "$S" "$D/a" --count 30 --seed 3 >/dev/null || fail "write seed 3"
+/usr/bin/python3 "$S" "$D/b" --count 30 --seed 3 >/dev/null || fail "write seed 3 again"
+/usr/bin/python3 "$S" "$D/c" --count 30 --seed 4 >/dev/null || fail "write seed 4"
+[ "$(ls "$D/a"/*.png | wc -l)" -eq 30 ] || fail "30 bitmaps expected"
+for f in "$D"/a/*.png; do
+  cmp -s "$f" "$D/b/$(basename "$f")" || fail "$(basename "$f") differs between runs"
+done
+same=0
+for f in "$D"/a/*.png; do
+  g=$(ls "$D"/c/"$(basename "$f" | cut -c1-9)"* 2>/dev/null) && cmp -s "$f" "$g" && same=$((same + 1))
+done
+[ $same -eq 0 ] || fail "seeds 3 and 4 made $same identical bitmaps"
+# The first pool's bitmap 0 and a checker of the held-out recipe's kind, excluded: neither (nor
+# any shift or flip of them) may come back, and the tool reports the nearest distance.
+cp "$D/a/pool_0000_"*.png "$D/x0.png"
+oiiotool --pattern checker:width=8:height=4:color1=0.55,0.2,0.12:color2=0.85,0.75,0.6 64x64 3 \
+  -d uint8 -o "$D/x1.png" || fail "oiiotool checker"
+/usr/bin/python3 "$S" "$D/e" --count 30 --seed 3 --exclude "$D/x0.png" "$D/x1.png" >"$D/e.log" ||
+  fail "write with --exclude"
+grep -q "excluded $D/x0.png: nearest pool bitmap" "$D/e.log" || fail "no nearest-bitmap report"
+/usr/bin/python3 - "$D" <<'PY' || fail "exclusion / format check"
+import json, os, sys
+import numpy as np
+import OpenImageIO as oiio
+d = sys.argv[1]
+def read(p):
+    b = oiio.ImageBuf(p)
+    s = b.spec()
+    assert s.nchannels == 3 and s.format == oiio.UINT8 and s.width == s.height, p
+    assert s.width in (32, 64, 128), p
+    return b.get_pixels(oiio.FLOAT).astype(np.float64)
+def to64(a):
+    n = a.shape[0]
+    if n >= 64:
+        f = n // 64
+        return a.reshape(64, f, 64, f, 3).mean(axis=(1, 3))
+    return np.repeat(np.repeat(a, 64 // n, 0), 64 // n, 1)
+def dist(a, b):  # brute force: every cyclic shift of every flip/rotation
+    best = 1e9
+    for k in range(4):
+        for fl in (False, True):
+            r = np.rot90(b, k)
+            r = r[:, ::-1] if fl else r
+            for dy in range(64):
+                rr = np.roll(r, dy, 0)
+                for dx in range(64):
+                    best = min(best, np.sqrt(np.mean((a - np.roll(rr, dx, 1)) ** 2)))
+    return best
+m = json.load(open(os.path.join(d, "e", "pool.json")))
+assert m["count"] == 30 and len(m["bitmaps"]) == 30
+assert m["rejected_draws"] >= 1, "bitmap 0 itself must have been drawn and rejected"
+x0, x1 = to64(read(os.path.join(d, "x0.png"))), to64(read(os.path.join(d, "x1.png")))
+for e in m["bitmaps"]:
+    a = to64(read(os.path.join(d, "e", e["file"])))
+    assert dist(a, x0) >= 0.1, e["file"]
+    if e["family"] == "checker" and e["params"]["cell"] == [8, 4]:
+        c = np.array(e["params"]["colours"])
+        ref = np.array([[0.55, 0.2, 0.12], [0.85, 0.75, 0.6]])
+        assert min(np.abs(c - ref).max(), np.abs(c[::-1] - ref).max()) >= 0.15, e["file"]
+# tileable families: the last column continues into the first as inside the bitmap
+for e in json.load(open(os.path.join(d, "a", "pool.json")))["bitmaps"]:
+    if e["family"] in ("bricks", "tiles", "stripes", "dots", "plaid"):
+        a = read(os.path.join(d, "a", e["file"]))
+        wrap = np.abs(a[:, 0] - a[:, -1]).mean()
+        inner = max(np.abs(a[:, i] - a[:, i + 1]).mean() for i in range(a.shape[1] - 1))
+        assert wrap <= inner + 1e-6, (e["file"], wrap, inner)
+PY
+# bad input: a clear error, a non-zero exit, no output directory
+/usr/bin/python3 "$S" "$D/bad1" --exclude "$D/none.png" 2>"$D/err1" && fail "missing --exclude file accepted"
+grep -q "none.png" "$D/err1" || fail "missing file not named: $(cat "$D/err1")"
+/usr/bin/python3 "$S" "$D/bad2" --count 0 2>"$D/err2" && fail "--count 0 accepted"
+grep -q "count" "$D/err2" || fail "--count error unclear"
+[ ! -e "$D/bad1" ] && [ ! -e "$D/bad2" ] || fail "output written on bad input"
+echo "test_texture_pool: all passed"
