@@ -107,7 +107,7 @@ static void test_scene(const char *file) {
   CHECK(distinct == 11);
   CHECK(changed_fov >= 10);
   /* Strength 0 everywhere = unchanged. */
-  kpcn_perturb_settings off = {0, 0, 0, 0, 0, 0, 0, NULL};
+  kpcn_perturb_settings off = {0, 0, 0, 0, 0, 0, 0, NULL, 0};
   char *z = NULL;
   CHECK(kpcn_perturb_scene(&z, base, 42, 5, &off, NULL, 0) == KPCN_OK);
   cJSON *jz = cJSON_Parse(z);
@@ -213,6 +213,8 @@ static const char *k_tex_scene =
     "\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"lambert\",\"albedo\":[0.5,0.5,0.5]}},"
     "{\"type\":\"quad\",\"bsdf\":\"light\",\"emission\":1}],"
     "\"camera\":{\"fov\":40,\"transform\":{\"position\":[0,1,5],\"look_at\":[0,1,0]}}}";
+
+static void check_texture_bitmap(const kpcn_perturb_settings *base, const char *rd);
 
 static void test_texture_swaps(void) {
   cJSON *orig = cJSON_Parse(k_tex_scene);
@@ -346,6 +348,66 @@ static void touch(const char *dir, const char *name) {
   if (f) fclose(f);
 }
 
+/* texture_bitmap: a swapped constant albedo becomes an image of the pool (s's texture_dir,
+ * realpath rd, or the scene's own images when rd is NULL) with that probability; every
+ * other albedo, and every other field, is what texture_bitmap 0 gives. */
+static void check_texture_bitmap(const kpcn_perturb_settings *base, const char *rd) {
+  kpcn_perturb_settings s0 = *base, s1 = *base, sh = *base;
+  s0.texture_bitmap = 0, s1.texture_bitmap = 1, sh.texture_bitmap = 0.5;
+  int files = 0, checkers = 0, ok = 1;
+  for (int v = 1; v <= 10; v++) {
+    char *o0 = NULL, *o1 = NULL, *oh = NULL;
+    CHECK(kpcn_perturb_scene(&o0, k_tex_scene, 3, v, &s0, NULL, 0) == KPCN_OK);
+    CHECK(kpcn_perturb_scene(&o1, k_tex_scene, 3, v, &s1, NULL, 0) == KPCN_OK);
+    CHECK(kpcn_perturb_scene(&oh, k_tex_scene, 3, v, &sh, NULL, 0) == KPCN_OK);
+    cJSON *orig = cJSON_Parse(k_tex_scene), *j0 = cJSON_Parse(o0), *j1 = cJSON_Parse(o1),
+          *jh = cJSON_Parse(oh);
+    const cJSON *bo[16], *b0[16], *b1[16], *bh[16];
+    int n = collect(orig, bo, 16);
+    CHECK(collect(j0, b0, 16) == n && collect(j1, b1, 16) == n && collect(jh, bh, 16) == n);
+    for (int i = 0; i < n; i++) {
+      const char *f, *f0;
+      const cJSON *a0 = cJSON_GetObjectItemCaseSensitive(b0[i], "albedo");
+      const cJSON *a1 = cJSON_GetObjectItemCaseSensitive(b1[i], "albedo");
+      const cJSON *ah = cJSON_GetObjectItemCaseSensitive(bh[i], "albedo");
+      int k0 = kind(a0, &f0), k1 = kind(a1, &f), kh = kind(ah, &f);
+      int was_const = kind(cJSON_GetObjectItemCaseSensitive(bo[i], "albedo"), &f0) == 'C';
+      if (was_const && k0 == 'K') { /* swapped: an image at 1, either at 0.5 */
+        kind(a1, &f);
+        ok &= k1 == 'F';
+        if (k1 == 'F' && rd) ok &= !strncmp(f, rd, strlen(rd));
+        if (k1 == 'F' && !rd) ok &= strstr(f, "tex/a.png") || strstr(f, "tex/b.png");
+        ok &= kh == 'F' || cJSON_Compare(ah, a0, 1);
+        files += kh == 'F', checkers += kh == 'K';
+      } else {
+        ok &= (!a0 && !a1 && !ah) || (cJSON_Compare(a0, a1, 1) && cJSON_Compare(a0, ah, 1));
+      }
+    }
+    cJSON *s0j = strip_albedos(j0), *s1j = strip_albedos(j1);
+    ok &= cJSON_Compare(s0j, s1j, 1);
+    cJSON_Delete(s0j), cJSON_Delete(s1j);
+    cJSON_Delete(orig), cJSON_Delete(j0), cJSON_Delete(j1), cJSON_Delete(jh);
+    free(o0), free(o1), free(oh);
+  }
+  CHECK(ok);
+  CHECK(files > 5 && checkers > 5); /* about half of 50 swapped constants each */
+}
+
+/* Without texture_dir the pool is the scene's own images; a scene without any keeps
+ * checkers at texture_bitmap 1. */
+static void test_texture_bitmap(void) {
+  kpcn_perturb_settings s;
+  memset(&s, 0, sizeof s);
+  s.texture_swap = 1;
+  check_texture_bitmap(&s, NULL);
+  s.texture_bitmap = 1;
+  const char *plain = "{\"bsdfs\":[{\"type\":\"lambert\",\"albedo\":0.5}]}";
+  char *out = NULL, sm[256];
+  CHECK(kpcn_perturb_scene(&out, plain, 3, 1, &s, sm, sizeof sm) == KPCN_OK);
+  CHECK(out && strstr(out, "checker") != NULL && strstr(sm, "const>checker") != NULL);
+  free(out);
+}
+
 /* texture_dir: images of the directory (absolute, by extension, regular files only)
  * replace the scene's own pool; a missing or image-less directory is an error. */
 static void test_texture_dir(void) {
@@ -387,6 +449,7 @@ static void test_texture_dir(void) {
   }
   CHECK(ok);
   CHECK(seen_z > 0 && seen_m > 0 && seen_z + seen_m == 30);
+  check_texture_bitmap(&s, rd);
   s.texture_dir = "/nonexistent/kpcn-textures";
   CHECK(kpcn_perturb_scene(&out, k_tex_scene, 3, 1, &s, NULL, 0) == KPCN_ERR_IO);
   CHECK(out == NULL && strstr(kpcn_last_error(), "/nonexistent/kpcn-textures") != NULL);
@@ -489,6 +552,7 @@ int main(void) {
   CHECK(kpcn_perturb_scene(&o, "{}", 1, -1, NULL, NULL, 0) == KPCN_ERR_INVALID_ARGUMENT);
   test_texture_swaps();
   test_texture_dir();
+  test_texture_bitmap();
   test_render_swapped();
   return kt_summary("perturb");
 }

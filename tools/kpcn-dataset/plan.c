@@ -521,7 +521,8 @@ static void usage(void) {
           "         [--split train:0.7,val:0.15,test:0.15 | train:a+b,val:c,test:d]\n"
           "         [--eval-variants] [--preview-spp 4] [--preview-scale 4] [--no-preview]\n"
           "         [--camera X] [--fov X] [--material X] [--bsdf-swap P] [--light X] [--env X]\n"
-          "         [--texture-swap P] [--texture-dir DIR] [--albedo-footprint K] [--force]\n");
+          "         [--texture-swap P] [--texture-dir DIR] [--texture-bitmap P]\n"
+          "         [--albedo-footprint K] [--force]\n");
 }
 
 int ds_cmd_plan(int argc, char **argv) {
@@ -600,6 +601,10 @@ int ds_cmd_plan(int argc, char **argv) {
       dst = &ps.env;
     else if (!strcmp(a, "--texture-swap")) {
       ok = ds_parse_double(v, &ps.texture_swap) && ps.texture_swap >= 0 && ps.texture_swap <= 1;
+      want = " (a probability in [0, 1])";
+    } else if (!strcmp(a, "--texture-bitmap")) {
+      ok = ds_parse_double(v, &ps.texture_bitmap) && ps.texture_bitmap >= 0 &&
+           ps.texture_bitmap <= 1;
       want = " (a probability in [0, 1])";
     } else if (!strcmp(a, "--texture-dir")) {
       /* Absolute, so plan.json names the same images from any working directory. */
@@ -691,6 +696,8 @@ int ds_cmd_plan(int argc, char **argv) {
     cJSON_AddStringToObject(pj, "texture_dir", texture_dir);
   else
     cJSON_AddNullToObject(pj, "texture_dir");
+  /* only when set, as albedo_footprint */
+  if (ps.texture_bitmap > 0) cJSON_AddNumberToObject(pj, "texture_bitmap", ps.texture_bitmap);
   cJSON *sj = cJSON_AddObjectToObject(pj, "scenes");
   for (int i = 0; i < nsc; i++) {
     cJSON *o = cJSON_AddObjectToObject(sj, sc[i].name);

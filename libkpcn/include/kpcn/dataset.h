@@ -175,6 +175,10 @@ typedef struct kpcn_perturb_settings {
   /* Image pool for those swaps: a directory (its .png/.jpg/.jpeg/.tga/.bmp/.hdr/.exr files,
    * made absolute) or NULL = the albedo images the scene itself uses. Default NULL. */
   const char *texture_dir;
+  /* Probability that a swapped constant albedo becomes an image of that pool instead of a
+   * two-colour checker, default 0 (a pool of many bitmaps then reaches every surface, not
+   * only those that had an image; without images in the pool it stays a checker). */
+  double texture_bitmap;
 } kpcn_perturb_settings;
 
 void kpcn_perturb_settings_defaults(kpcn_perturb_settings *s);

@@ -29,6 +29,7 @@ void kpcn_perturb_settings_defaults(kpcn_perturb_settings *s) {
   s->env = 1.0;
   s->texture_swap = 0.2;
   s->texture_dir = NULL;
+  s->texture_bitmap = 0;
 }
 
 typedef struct rng {
@@ -492,6 +493,12 @@ static void swap_texture(cJSON *b, rng *r, const kpcn_perturb_settings *s, const
         else
           cJSON_ReplaceItemInObjectCaseSensitive(a, "file", cJSON_CreateString(nf));
       }
+    } else if (albedo_constant(a, c) && pool->n > 0 && u[1] < s->texture_bitmap) {
+      /* An image of the pool instead (u[1] is the draw a constant leaves unused, so at
+       * texture_bitmap 0 every variant is what it was before this option existed). */
+      const char *nf = pool->files[(int)(u[2] * pool->n) % pool->n];
+      tex_log_add(lg, "const>%s", base_name(nf));
+      cJSON_ReplaceItemInObjectCaseSensitive(b, "albedo", cJSON_CreateString(nf));
     } else if (albedo_constant(a, c)) {
       /* Two colours around the constant: a brighter and a darker hue-shifted one. */
       double on[3] = {c[0], c[1], c[2]}, off[3] = {c[0], c[1], c[2]};
