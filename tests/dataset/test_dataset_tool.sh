@@ -65,6 +65,7 @@ bad_plan "'nan' for --env" "--env nan refused" --env nan
 bad_plan "'-1' for --seed" "negative --seed refused" --seed -1
 bad_plan "'18446744073709551616' for --seed" "--seed past 2^64 refused" --seed 18446744073709551616
 bad_plan "'1.5' for --bsdf-swap (a probability in [0, 1])" "--bsdf-swap above 1 refused" --bsdf-swap 1.5
+bad_plan "'-0.5' for --texture-bitmap (a probability in [0, 1])" "--texture-bitmap below 0 refused" --texture-bitmap -0.5
 bad_plan "'7e3' for --variants" "--variants must be an integer" --variants 7e3
 bad_plan "'17' for --albedo-footprint (an integer in [1, 16])" "--albedo-footprint 17 refused" \
   --albedo-footprint 17
@@ -75,6 +76,13 @@ bad_plan "'train' is named twice" "duplicate split (names)" \
 "$DS" plan --scenes "$TD/scenes" --variants 0 --seed 18446744073709551615 -o "$T/bigseed" > /dev/null
 rc=$?
 ok '[ $rc -eq 0 ]' "--seed 2^64-1 accepted"
+# --texture-bitmap 1 with a pool: the constant albedos swapped become pool images, recorded
+"$DS" plan --scenes "$TD/scenes" --variants 1 --texture-swap 1 --texture-bitmap 1 \
+  --texture-dir "$TD/../scenes/train-textures" --no-preview -o "$T/tb" > /dev/null
+rc=$?
+ok '[ $rc -eq 0 ] && grep -q "\"texture_bitmap\":	*1" "$T/tb/plan.json" &&
+  grep -q "train-textures/" "$T/tb/scenes/cornell-box/v001.json" &&
+  ! grep -q "checker" "$T/tb/scenes/cornell-box/v001.json"' "--texture-bitmap 1 puts pool images on constants"
 # a finite strength so large that a perturbed value overflows: refused, naming the field
 rm -rf "$T/bp"
 "$DS" plan --scenes "$TD/scenes" --variants 2 --light 1e4 -o "$T/bp" > /dev/null 2> "$T/err"
