@@ -6,7 +6,8 @@
 # VARIANTS: the variants to take, comma-separated (e.g. v001,v002; default all). Prints one
 # TSV line per pair: dataset, scene, variant, relMSE plain, relMSE with the footprint.
 # Environment: K (default 2), SPP (default 16), KPCN_BIN (default build/tools), THREADS (2),
-# DENOISE_OPTS (appended to --denoise:model=MODEL, e.g. ":exposure=0.146227151").
+# DENOISE_OPTS (appended to --denoise:model=MODEL, e.g. ":exposure=0.146227151"), PLAIN (1; 0
+# skips the plain render's denoise and prints '-' for it: half the time, tools/judge_textures.py).
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 [ $# -ge 2 ] || { echo "usage: tools/footprint_pairs.sh MODEL DATASET_DIR[:VARIANTS] ..." >&2; exit 2; }
@@ -39,7 +40,9 @@ for l in sys.stdin:
       [ -f "$noisy" ] && [ -f "$ref" ] || continue
       "$bin/kpcn-render/kpcn-render" "$ds/$sf" -o "$tmp/fp.exr" --spp "$spp" --seed "$seed" \
         --resolution "$res" --threads "${THREADS:-2}" --albedo-footprint "$k" --quiet
-      printf '%s\t%s\t%s\t%s\t%s\n' "$(basename "$ds")" "$scene" "$v" "$(rel "$noisy" "$ref")" \
+      plain=-
+      [ "${PLAIN:-1}" = 0 ] || plain=$(rel "$noisy" "$ref")
+      printf '%s\t%s\t%s\t%s\t%s\n' "$(basename "$ds")" "$scene" "$v" "$plain" \
         "$(rel "$tmp/fp.exr" "$ref")"
     done
 done
