@@ -111,6 +111,15 @@ spec() {
     rooms9) rooms train9 1414 96 0.5; echo "rooms/train9 --variants 0 --seed 91" ;;
   esac
 }
+# the held-out scenes' 4096-spp references (docs/dataset.md; tools/results.sh REF2_SPP=4096),
+# made as soon as v1 is rendered: the judging of models needs them before the training sets
+refs4096() {
+  for s in diffuse-interreflection:40961 textures:40962; do
+    f="dataset/v1/renders/${s%%:*}/v000_ref4096spp.exr"
+    [ -f "$f" ] || (cd dataset/v1 && "$render" "scenes/${s%%:*}/v000.json" -o "${f#dataset/v1/}" \
+      --spp 4096 --seed "${s##*:}" --threads 1 --resolution 160x160 --color-only --quiet)
+  done
+}
 # Each dataset is planned afresh (a second or two) into a scratch folder: moved into place the
 # first time; later, compared with the plan in place, so that a resumed rebuild never renders
 # into a dataset planned with other options or by other code.
@@ -137,17 +146,10 @@ for d in $names; do
   fi
   echo "$d: $(echo "$line" | sed -E 's/^([0-9]+) jobs.*, ([0-9.e+]+) camera samples.*/\1 jobs, \2 camera samples/')"
   [ $plan_only = 1 ] || "$ds_tool" run "dataset/$d" --jobs "$jobs" --threads-per-job 1
+  [ $plan_only = 1 ] || [ "$d" != v1 ] || refs4096
 done
 [ $plan_only = 0 ] || exit 0
 
-# the held-out scenes' 4096-spp references (docs/dataset.md; tools/results.sh REF2_SPP=4096)
-if [[ " $names " == *" v1 "* ]]; then
-  for s in diffuse-interreflection:40961 textures:40962; do
-    f="dataset/v1/renders/${s%%:*}/v000_ref4096spp.exr"
-    [ -f "$f" ] || (cd dataset/v1 && "$render" "scenes/${s%%:*}/v000.json" -o "${f#dataset/v1/}" \
-      --spp 4096 --seed "${s##*:}" --threads 1 --resolution 160x160 --color-only --quiet)
-  done
-fi
 if [ $store = 1 ] && [ ! -f rooms9v.kps ]; then
   src=()
   for d in $store_sources; do
