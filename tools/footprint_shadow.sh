@@ -20,8 +20,7 @@ render=${KPCN_BIN:-$here/build/tools}/kpcn-render/kpcn-render
 [ -x "$render" ] || die "no kpcn-render at '$render' (build first, or set KPCN_BIN)"
 [ -f "$1/manifest.jsonl" ] && [ -d "$1/renders" ] || die "'$1' is not a rendered kpcn-dataset folder"
 src=$(cd "$1" && pwd)
-mkdir -p "$2"
-dst=$(cd "$2" && pwd)
+dst=$(realpath -m "$2")
 [ "$src" != "$dst" ] || die "SRC and DST are the same folder"
 # the noisy renders to make again: "out seed scene_file WxH" per manifest line
 list=$(grep '"kind":"noisy"' "$src/manifest.jsonl" | { grep "\"spp\":$spp," || true; } |
@@ -31,6 +30,7 @@ for l in sys.stdin:
     j = json.loads(l)
     print(j['out'], j['seed'], j['scene_file'], '%dx%d' % (j['width'], j['height']))")
 [ -n "$list" ] || die "'$src' has no ${spp}-spp noisy render in its manifest"
+mkdir -p "$dst" # only now: a refused call leaves nothing behind
 # everything but renders/ is a link; renders/ is rebuilt file by file
 for e in "$src"/*; do
   [ "$(basename "$e")" = renders ] || ln -sfn "$e" "$dst/$(basename "$e")"
