@@ -2,7 +2,8 @@
 """The figures the textures-target rules judge a model by (docs/training.md, rules 54 and 55).
 
 usage: tools/judge_textures.py MODEL.safetensors TD_DIR [--bin DIR] [--denoise-opts OPTS]
-                               [--threads N] [--pairs OUT.tsv]
+                               [--threads N] [--pairs OUT.tsv] [--baseline BASE.tsv]
+       tools/judge_textures.py --compare NEW.tsv BASE.tsv
 
 TD_DIR is a folder tools/training_data.sh built with at least the datasets v1, v2val, v3val,
 roomsval, roomsval2 and roomsval3 and v1's 4096-spp references. Prints one JSON object:
@@ -20,7 +21,10 @@ roomsval, roomsval2 and roomsval3 and v1's 4096-spp references. Prints one JSON 
 Every relMSE is kpcntool's on linear R, G, B. --denoise-opts is appended to
 --denoise:model=MODEL (e.g. ':exposure=0.146227151'); by default the model's own recorded
 exposure is used. --pairs writes footprint_pairs.sh's line for each of the 68 pairs (its plain
-column '-': only the footprint renders are measured).
+column '-': only the footprint renders are measured). --baseline compares the 68 pairs with
+another model's --pairs file and adds "vs_baseline" to the object; --compare does only that, for
+two --pairs files (no rendering): how many pairs are better and worse, the ratio of each
+group's geometric mean, and the five pairs that lost most and gained most (relMSE ratios).
 """
 import argparse
 import json
@@ -80,7 +84,50 @@ def geomean(xs):
     return math.exp(sum(math.log(x) for x in xs) / len(xs))
 
 
+def read_pairs(path):
+    """{(dataset, scene, variant): footprint relMSE} of a --pairs file."""
+    out = {}
+    try:
+        with open(path) as f:
+            for n, line in enumerate(f, 1):
+                r = line.rstrip("\n").split("\t")
+                try:
+                    v = float(r[4])
+                except (IndexError, ValueError):
+                    fail("%s:%d is not a --pairs line (dataset, scene, variant, plain, footprint)"
+                         % (path, n))
+                if not v > 0 or math.isinf(v):
+                    fail("%s:%d: relMSE %s is not positive and finite" % (path, n, r[4]))
+                out[tuple(r[:3])] = v
+    except OSError as e:
+        fail("cannot read '%s': %s" % (path, e.strerror))
+    if not out:
+        fail("'%s' holds no pairs" % path)
+    return out
+
+
+def compare(new, base):
+    """NEW's pairs against BASE's (both from read_pairs; the same pairs)."""
+    for k in set(new) ^ set(base):
+        fail("pair %s is in only one of the two files" % "/".join(k))
+    ratio = {"/".join(k): new[k] / base[k] for k in sorted(new)}
+    order = sorted(ratio.items(), key=lambda kv: kv[1])
+
+    def group(names):
+        ks = [k for k in new if k[0] in names]
+        return geomean([new[k] for k in ks]) / geomean([base[k] for k in ks]) if ks else None
+
+    return {"pairs": len(ratio), "better": sum(r < 1 for r in ratio.values()),
+            "worse": sum(r > 1 for r in ratio.values()), "dprime_ratio": group(ROOMS),
+            "val32_ratio": group(VAL), "worst": order[::-1][:5], "best": order[:5]}
+
+
 def main():
+    if len(sys.argv) > 1 and sys.argv[1] == "--compare":
+        if len(sys.argv) != 4:
+            fail("usage: judge_textures.py --compare NEW.tsv BASE.tsv")
+        print(json.dumps(compare(read_pairs(sys.argv[2]), read_pairs(sys.argv[3]))))
+        return
     ap = argparse.ArgumentParser(usage=__doc__.split("\n\n")[1])
     ap.add_argument("model")
     ap.add_argument("td")
@@ -88,7 +135,9 @@ def main():
     ap.add_argument("--denoise-opts", default="")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--pairs")
+    ap.add_argument("--baseline")
     a = ap.parse_args()
+    base = read_pairs(a.baseline) if a.baseline else None
     tool = os.path.join(a.bin, "kpcntool/kpcntool")
     render = os.path.join(a.bin, "kpcn-render/kpcn-render")
     for exe in (tool, render):
@@ -151,6 +200,8 @@ def main():
     if a.pairs:
         with open(a.pairs, "w") as f:
             f.write("".join("\t".join(r) + "\n" for r in rows))
+    if base is not None:
+        out["vs_baseline"] = compare({tuple(r[:3]): float(r[4]) for r in rows}, base)
     print(json.dumps(out))
 
 

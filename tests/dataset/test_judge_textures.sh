@@ -15,7 +15,10 @@ R=$B/kpcn-render/kpcn-render
 T=$B/kpcntool/kpcntool
 bad() {
   pat=$1; shift
-  if /usr/bin/python3 "$S" "$@" --bin "$B" >"$D/out" 2>"$D/err"; then fail "accepted: $*"; fi
+  bin="--bin $B"
+  [ "$1" != --compare ] || bin="" # --compare takes exactly its two files
+  # shellcheck disable=SC2086 # bin is two words or none
+  if /usr/bin/python3 "$S" "$@" $bin >"$D/out" 2>"$D/err"; then fail "accepted: $*"; fi
   grep -qF -- "$pat" "$D/err" || fail "message lacks '$pat': $(cat "$D/err")"
   [ ! -s "$D/out" ] || fail "printed a result for: $*"
 }
@@ -44,10 +47,16 @@ for ds in v2val v3val roomsval roomsval2 roomsval3 v1; do
       mkdir -p "$(dirname "$TD/dataset/$ds/$out")"
       cp "$D/n.exr" "$TD/dataset/$ds/$out"
       cp "$D/ref.exr" "$TD/dataset/$ds/${out%_16spp.exr}_ref1024spp.exr"
+      # a baseline of relMSE 1 for every judged pair: vs_baseline's ratios are the figures
+      v=$(basename "$out" _16spp.exr)
+      case $ds:$v in v1:* | v[23]val:v000) ;; *)
+        printf '%s\t%s\t%s\t-\t1\n' "$ds" "$(basename "$(dirname "$out")")" "$v" >>"$D/one.tsv" ;;
+      esac
     done
 done
 for s in textures diffuse-interreflection; do cp "$D/ref2.exr" "$V1/renders/$s/v000_ref4096spp.exr"; done
-j=$(/usr/bin/python3 "$S" "$M" "$TD" --bin "$B" --pairs "$D/pairs.tsv") || fail "run"
+j=$(/usr/bin/python3 "$S" "$M" "$TD" --bin "$B" --pairs "$D/pairs.tsv" --baseline "$D/one.tsv") ||
+  fail "run"
 # independent figures: the footprint render, denoised, and the plain render for DI
 "$R" "$V1/scenes/textures/v000.json" -o "$D/fp.exr" --spp 16 --seed "$seed" --resolution 160x160 \
   --threads 2 --albedo-footprint 2 --quiet || fail "footprint render"
@@ -80,7 +89,36 @@ first = [float(r[4]) for r in rows if r[0] == "roomsval2"][0]
 assert close(first, rp), (first, rp)
 assert len(set(rooms)) > 1, "every room pair has the same figure"
 assert all(r[3] == "-" for r in rows), "the plain column was measured"
+vb = d["vs_baseline"]
+assert vb["pairs"] == 68 and close(vb["dprime_ratio"], d["dprime"]), vb
+assert close(vb["val32_ratio"], d["val32"]), vb
+assert vb["worse"] == sum(float(r[4]) > 1 for r in rows), vb
+assert vb["better"] == sum(float(r[4]) < 1 for r in rows), vb
+top = max(rows, key=lambda r: float(r[4]))
+assert vb["worst"][0][0] == "/".join(top[:3]) and close(vb["worst"][0][1], float(top[4])), vb
 PY
+# --compare, no rendering: one room twice as bad, one v2val pair half, the rest equal
+awk -F'\t' 'BEGIN{OFS="\t"} $1=="roomsval2" && !a {$5=$5*2; a=1} $1=="v2val" && !b {$5=$5/2; b=1} 1' \
+  "$D/pairs.tsv" >"$D/new.tsv"
+c=$(/usr/bin/python3 "$S" --compare "$D/new.tsv" "$D/pairs.tsv") || fail "compare"
+/usr/bin/python3 - "$c" "$D/pairs.tsv" <<'PY' || fail "compare figures: $c"
+import json, sys
+c = json.loads(sys.argv[1])
+rows = [l.rstrip("\n").split("\t") for l in open(sys.argv[2])]
+room = "/".join([r for r in rows if r[0] == "roomsval2"][0][:3])
+val = "/".join([r for r in rows if r[0] == "v2val"][0][:3])
+close = lambda x, y: abs(x - y) <= 1e-6 * abs(y)
+assert c["pairs"] == 68 and c["better"] == 1 and c["worse"] == 1, c
+assert c["worst"][0][0] == room and close(c["worst"][0][1], 2.0), c
+assert c["best"][0][0] == val and close(c["best"][0][1], 0.5), c
+assert close(c["dprime_ratio"], 2 ** (1 / 36)) and close(c["val32_ratio"], 0.5 ** (1 / 32)), c
+PY
+head -n 67 "$D/pairs.tsv" >"$D/short.tsv"
+bad "is in only one of the two files" --compare "$D/short.tsv" "$D/pairs.tsv"
+printf 'x\ty\n' >"$D/junk.tsv"
+bad "is not a --pairs line" --compare "$D/junk.tsv" "$D/pairs.tsv"
+bad "cannot read" --compare "$D/nope.tsv" "$D/pairs.tsv"
+bad "is not a --pairs line" "$M" "$TD" --baseline "$D/junk.tsv"
 # a pair missing: the count is checked, not assumed
 rm "$TD/dataset/roomsval3/$(grep '"kind":"noisy"' "$TD/dataset/roomsval3/manifest.jsonl" |
   grep '"spp":16,' | head -n 1 | sed -E 's/.*"out":"([^"]+)".*/\1/')"
