@@ -98,7 +98,9 @@ top = max(rows, key=lambda r: float(r[4]))
 assert vb["worst"][0][0] == "/".join(top[:3]) and close(vb["worst"][0][1], float(top[4])), vb
 PY
 # --compare, no rendering: one room twice as bad, one v2val pair half, the rest equal
-awk -F'\t' 'BEGIN{OFS="\t"} $1=="roomsval2" && !a {$5=$5*2; a=1} $1=="v2val" && !b {$5=$5/2; b=1} 1' \
+# (sprintf: awk would print the products to 6 digits)
+awk -F'\t' 'BEGIN{OFS="\t"} $1=="roomsval2" && !a {$5=sprintf("%.17g", $5*2); a=1}
+  $1=="v2val" && !b {$5=sprintf("%.17g", $5/2); b=1} 1' \
   "$D/pairs.tsv" >"$D/new.tsv"
 c=$(/usr/bin/python3 "$S" --compare "$D/new.tsv" "$D/pairs.tsv") || fail "compare"
 /usr/bin/python3 - "$c" "$D/pairs.tsv" <<'PY' || fail "compare figures: $c"
@@ -107,7 +109,7 @@ c = json.loads(sys.argv[1])
 rows = [l.rstrip("\n").split("\t") for l in open(sys.argv[2])]
 room = "/".join([r for r in rows if r[0] == "roomsval2"][0][:3])
 val = "/".join([r for r in rows if r[0] == "v2val"][0][:3])
-close = lambda x, y: abs(x - y) <= 1e-6 * abs(y)
+close = lambda x, y: abs(x - y) <= 1e-9 * abs(y)
 assert c["pairs"] == 68 and c["better"] == 1 and c["worse"] == 1, c
 assert c["worst"][0][0] == room and close(c["worst"][0][1], 2.0), c
 assert c["best"][0][0] == val and close(c["best"][0][1], 0.5), c
