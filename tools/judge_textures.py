@@ -50,31 +50,33 @@ def run(cmd, env=None):
     return r.stdout
 
 
-def noisy_entry(ds, scene, spp):
-    """v000's noisy render of SCENE at SPP in dataset DS's manifest (its seed and size)."""
+def noisy_jobs(ds, spp):
+    """The noisy renders at SPP in dataset DS's manifest (its lines, parsed)."""
     with open(os.path.join(ds, "manifest.jsonl")) as f:
         for line in f:
             j = json.loads(line)
-            if (j.get("kind") == "noisy" and j.get("scene") == scene and j.get("variant") == 0
-                    and j.get("spp") == spp):
-                return j
-    fail("%s/manifest.jsonl has no 16-spp render of %s v000" % (ds, scene))
+            if j.get("kind") == "noisy" and j.get("spp") == spp:
+                yield j
+
+
+def noisy_entry(ds, scene, spp):
+    """v000's noisy render of SCENE at SPP in dataset DS's manifest (its seed and size)."""
+    for j in noisy_jobs(ds, spp):
+        if j.get("scene") == scene and j.get("variant") == 0:
+            return j
+    fail("%s/manifest.jsonl has no %d-spp render of %s v000" % (ds, spp, scene))
 
 
 def pairs_present(ds, variants):
     """How many of dataset DS's 16-spp pairs (of VARIANTS, or all) have both files rendered:
     the pairs tools/footprint_pairs.sh measures."""
     n = 0
-    with open(os.path.join(ds, "manifest.jsonl")) as f:
-        for line in f:
-            j = json.loads(line)
-            if j.get("kind") != "noisy" or j.get("spp") != 16:
-                continue
-            if variants and j.get("variant") not in variants:
-                continue
-            noisy = os.path.join(ds, j["out"])
-            if os.path.isfile(noisy) and os.path.isfile(noisy[:-len("_16spp.exr")] + "_ref1024spp.exr"):
-                n += 1
+    for j in noisy_jobs(ds, 16):
+        if variants and j.get("variant") not in variants:
+            continue
+        noisy = os.path.join(ds, j["out"])
+        if os.path.isfile(noisy) and os.path.isfile(noisy[:-len("_16spp.exr")] + "_ref1024spp.exr"):
+            n += 1
     return n
 
 
