@@ -605,15 +605,21 @@ void KPCN_TRACE_PIXEL(const kpcn_render_ctx *ctx, int px, int py, kpcn_sampler *
   camera_sample cs[16];
   if (n > 16) n = 16;
   for (int k = 0; k < 16; k++) {
+    /* Lanes past n must hold a well-formed, empty ray (tnear 0 > tfar -inf), not stack
+     * garbage: where the CPU has no native 16-wide traversal (AVX2), Embree 3.13 splits the
+     * packet through its ray-stream path, which ignores `valid` and marks lanes inactive by
+     * tnear > tfar; Debian's Embree then aborted on a garbage lane's assertions
+     * (`ray.valid()`, `tnear >= 0`) whenever fewer than 16 samples were traced. */
     valid[k] = k < n ? -1 : 0;
-    if (k >= n) continue;
-    memset(&out[k], 0, sizeof(out[k]));
-    kpcn_vec3 o, d;
-    camera_ray(ctx, px, py, &smp[k], &cs[k], &o, &d);
+    kpcn_vec3 o = kv3(0.0f, 0.0f, 0.0f), d = kv3(0.0f, 0.0f, 1.0f);
+    if (k < n) {
+      memset(&out[k], 0, sizeof(out[k]));
+      camera_ray(ctx, px, py, &smp[k], &cs[k], &o, &d);
+    }
     rh.ray.org_x[k] = o.x, rh.ray.org_y[k] = o.y, rh.ray.org_z[k] = o.z;
     rh.ray.dir_x[k] = d.x, rh.ray.dir_y[k] = d.y, rh.ray.dir_z[k] = d.z;
     rh.ray.tnear[k] = 0.0f;
-    rh.ray.tfar[k] = INFINITY;
+    rh.ray.tfar[k] = k < n ? INFINITY : -INFINITY;
     rh.ray.mask[k] = 0xffffffffU;
     rh.ray.flags[k] = 0;
     rh.ray.time[k] = 0.0f;

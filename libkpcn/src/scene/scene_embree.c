@@ -140,7 +140,10 @@ static kpcn_status check_extent(const kpcn_scene *s) {
 
 kpcn_status kpcn_scene_build_embree(kpcn_scene *s) {
   KPCN_TRY(check_extent(s));
-  RTCDevice dev = rtcNewDevice(NULL);
+  /* Under the AVX2 cap (ONEDNN_MAX_CPU_ISA, core/cpu.c) Embree is capped too, so that an
+   * AVX-512 host runs the traversal a CPU without it runs: no native 16-wide packets, which
+   * Embree then splits through its ray-stream path (test_render_packets_avx2). */
+  RTCDevice dev = rtcNewDevice(kpcn_cpu_allows_avx512() ? NULL : "max_isa=avx2");
   if (!dev)
     return kpcn_fail(KPCN_ERR_INTERNAL, "cannot create the Embree device (error %d)",
                      (int)rtcGetDeviceError(NULL));
