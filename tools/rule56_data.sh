@@ -4,8 +4,10 @@
 # pools (tools/texture_pool.py), the planned sets tp, tq and roomsb, the sources' footprint
 # shadows (tools/footprint_shadow.sh) and the store pool2.kps.
 #
-#   tools/rule56_data.sh DIR
+#   tools/rule56_data.sh [--plan-only] DIR
 #
+# --plan-only plans everything and renders nothing (a minute): training_data.sh's lines, then
+# "NAME: N jobs, S camera samples, B distinct pool bitmaps in F scene files" for tp, tq, roomsb.
 # Every step resumes where it stopped (renders on disk are kept, a pool or plan that exists is
 # not made again), so the same command continues after an interruption. About 4e10 camera
 # samples: 4.5 h of rendering on a 2-core Zen 4, 7 h on a 2-core Zen 3. Prints a line per step
@@ -13,7 +15,9 @@
 # nice 19. A dataset folder planned from another checkout path is refused by
 # training_data.sh: continue a rebuild from the checkout that started it.
 set -euo pipefail
-[ $# -eq 1 ] || { echo "usage: tools/rule56_data.sh DIR" >&2; exit 2; }
+plan_only=0
+[ "${1:-}" != --plan-only ] || { plan_only=1; shift; }
+[ $# -eq 1 ] || { echo "usage: tools/rule56_data.sh [--plan-only] DIR" >&2; exit 2; }
 R=$(cd "$(dirname "$0")/.." && pwd)
 B=${KPCN_BIN:-$R/build/tools}
 DS=$B/kpcn-dataset/kpcn-dataset
@@ -22,7 +26,9 @@ mkdir -p "$1"
 T=$(cd "$1" && pwd)
 cd "$T"
 export KPCN_BIN=$B
-nice -n 19 "$R/tools/training_data.sh" --no-store "$T/td" v1 v2val v3val roomsval roomsval2 \
+opt=--no-store
+[ $plan_only = 0 ] || opt=--plan-only
+nice -n 19 "$R/tools/training_data.sh" $opt "$T/td" v1 v2val v3val roomsval roomsval2 \
   roomsval3 v2 v3 rooms rooms2 rooms9 rooms3 rooms4 v4a v4b rooms5 v4c v4d rooms6 rooms7 rooms8
 echo "TD_DONE $(date)"
 X="$R/testdata/scenes/textures/bricks.png $R/testdata/scenes/textures/gradient.png"
@@ -35,8 +41,17 @@ plan() { # NAME SCENE_FOLDER OPTIONS...: plans NAME once, then renders what is m
   local name=$1 scenes=$2
   shift 2
   [ -d "$name" ] || "$DS" plan --scenes "$scenes" -o "$name" --spp 16 --ref-spp 1024 \
-    --resolution 160x160 --albedo-footprint 2 --no-preview "$@"
-  nice -n 19 "$DS" run "$name" --jobs 2 --threads-per-job 1
+    --resolution 160x160 --albedo-footprint 2 --no-preview "$@" >"$name.plan.txt"
+  if [ $plan_only = 1 ]; then
+    # the pool bitmaps the plan's scene files name (session 45 recorded these counts)
+    local bitmaps files
+    bitmaps=$(grep -rhoE 'pool_[0-9]+_[a-z]+\.png' "$name/scenes" | sort -u | wc -l)
+    files=$(grep -rlE 'pool_[0-9]+_[a-z]+\.png' "$name/scenes" | wc -l)
+    echo "$(basename "$name"): $(tail -n 1 "$name.plan.txt" | sed -E \
+      's/^([0-9]+) jobs.*, ([0-9.e+]+) camera samples.*/\1 jobs, \2 camera samples/'), $bitmaps distinct pool bitmaps in $files scene files"
+  else
+    nice -n 19 "$DS" run "$name" --jobs 2 --threads-per-job 1
+  fi
 }
 links() { # FOLDER SCENE...: FOLDER/SCENE -> testdata/scenes/SCENE
   local dir=$1
@@ -69,6 +84,7 @@ echo "TQ_DONE $(date)"
 plan roomsb rooms_b --variants 1 --seed 5603 --camera 0.5 --texture-swap 0.8 --texture-bitmap 0.8 \
   --texture-dir "$T/pool2"
 echo "ROOMSB_DONE $(date)"
+[ $plan_only = 0 ] || exit 0
 src=()
 for d in v2 v3 rooms rooms2 rooms3 rooms4 v4a v4b rooms5 v4c v4d rooms6 rooms7 rooms8 rooms9; do
   nice -n 19 "$R/tools/footprint_shadow.sh" "$T/td/dataset/$d" "$T/fpds/$d"
