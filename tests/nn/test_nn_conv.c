@@ -19,6 +19,15 @@ typedef struct cfg {
   int size[4], dil[4];
 } cfg;
 
+/* n inputs by placeholder names (the denoiser's feature set has 36) */
+static void set_inputs(kpcn_arch *a, int n) {
+  char nm[KPCN_NN_MAX_INPUTS][16];
+  const char *names[KPCN_NN_MAX_INPUTS];
+  for (int i = 0; i < n; i++)
+    snprintf(nm[i], sizeof nm[i], "in%d", i), names[i] = nm[i];
+  CHECK(kpcn_arch_set_inputs(a, n, names) == KPCN_OK);
+}
+
 static void make_arch(const cfg *c, kpcn_arch *a) {
   kpcn_arch_preset("tiny", a);
   a->n_hidden = c->n_hidden;
@@ -26,11 +35,7 @@ static void make_arch(const cfg *c, kpcn_arch *a) {
   a->kernel_size = c->K;
   for (int l = 0; l <= c->n_hidden; l++)
     a->conv_size[l] = c->size[l], a->dilation[l] = c->dil[l];
-  char nm[KPCN_NN_MAX_INPUTS][16];
-  const char *names[KPCN_NN_MAX_INPUTS];
-  for (int i = 0; i < c->n_in; i++)
-    snprintf(nm[i], sizeof nm[i], "in%d", i), names[i] = nm[i];
-  kpcn_arch_set_inputs(a, c->n_in, names);
+  set_inputs(a, c->n_in);
 }
 
 /* random biases (Xavier init leaves them at zero) so the ReLU mask is non-trivial */
@@ -392,11 +397,7 @@ static void bf16_vs_f32(void) {
   if (!kt_have_bf16("bf16 vs f32 nets")) return;
   kpcn_arch a;
   kpcn_arch_preset("cpu", &a);
-  char nm[27][16];
-  const char *names[27];
-  for (int i = 0; i < 27; i++)
-    snprintf(nm[i], 16, "f%d", i), names[i] = nm[i];
-  kpcn_arch_set_inputs(&a, 27, names);
+  set_inputs(&a, 27);
   kpcn_model *m = NULL;
   kpcn_model_create(&a, 3, &m);
   const int H = 40, W = 48, K2 = a.kernel_size * a.kernel_size;
@@ -568,14 +569,10 @@ static void bf16_training(void) {
  * sent a dilated layer to oneDNN's reference kernel, 100x slower). Creation only. */
 static void presets_fast(void) {
   const char *ps[2] = {"cpu", "paper"};
-  char nm[36][16];
-  const char *names[36];
-  for (int i = 0; i < 36; i++)
-    snprintf(nm[i], 16, "f%d", i), names[i] = nm[i];
   for (int p = 0; p < 2; p++) {
     kpcn_arch a;
     kpcn_arch_preset(ps[p], &a);
-    kpcn_arch_set_inputs(&a, 36, names);
+    set_inputs(&a, 36);
     kpcn_model *m = NULL;
     kpcn_model_create(&a, 1, &m);
     for (int mode = 0; mode < (kpcn_cpu_allows_avx512() ? 4 : 2); mode++) { /* 2, 3: bf16 */
@@ -603,18 +600,48 @@ static void presets_fast(void) {
   }
 }
 
+/* The fp32 inference nets' layouts: without AVX-512 the cpu preset runs channel-blocked
+ * (nChw8c, its logits read in place with block 8), the paper preset, whose first layer would
+ * pad by 16 %, pixel-major throughout; with AVX-512 both pixel-major. Never mixed: a relayout
+ * buffer costs an activation's memory (net_layer.c, kpcn_net_choose_tags). */
+static void inference_layouts(void) {
+  const char *ps[2] = {"cpu", "paper"};
+  for (int p = 0; p < 2; p++) {
+    kpcn_arch a;
+    kpcn_arch_preset(ps[p], &a);
+    set_inputs(&a, 36);
+    kpcn_model *m = NULL;
+    kpcn_net *n = NULL;
+    kpcn_net_options o;
+    kpcn_net_options_defaults(&o);
+    o.height = 24, o.width = 32;
+    float *x = calloc((size_t)36 * 24 * 32, sizeof *x);
+    const void *lg = NULL;
+    kpcn_logits_layout lay = {0};
+    kpcn_net_stats st = {0};
+    CHECK(x && kpcn_model_create(&a, 1, &m) == KPCN_OK &&
+          kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &n) == KPCN_OK &&
+          kpcn_net_forward_logits(n, x, &lg, &lay) == KPCN_OK);
+    if (n) kpcn_net_get_stats(n, &st);
+    const int blocked = p == 0 && !kpcn_cpu_allows_avx512(), K2 = a.kernel_size * a.kernel_size;
+    printf("preset %-5s inference layout: block %d, pixel stride %d, %d relayouts\n", ps[p],
+           lay.block, lay.pixel_stride, st.n_relayout);
+    CHECK(st.n_relayout == 0);
+    CHECK(blocked ? lay.block == 8 : lay.block == K2 && lay.pixel_stride >= K2);
+    kpcn_net_destroy(n);
+    kpcn_model_destroy(m);
+    free(x);
+  }
+}
+
 /* The cpu preset's fp32 inference net on a 1024x540 tile: oneDNN 2.6's Winograd logits layer
  * would schedule its transform over the whole tile there (a scratchpad of ~3x the logits);
  * the net must take the direct convolution instead and hold little more than its
  * activations. The 1024x536 tile keeps Winograd with a small scratchpad. */
 static void winograd_scratch_bounded(void) {
-  char nm[36][16];
-  const char *names[36];
-  for (int i = 0; i < 36; i++)
-    snprintf(nm[i], 16, "f%d", i), names[i] = nm[i];
   kpcn_arch a;
   kpcn_arch_preset("cpu", &a);
-  kpcn_arch_set_inputs(&a, 36, names);
+  set_inputs(&a, 36);
   kpcn_model *m = NULL;
   CHECK(kpcn_model_create(&a, 1, &m) == KPCN_OK);
   const int heights[2] = {536, 540};
@@ -723,6 +750,7 @@ static void widen(void) {
 
 int main(void) {
   presets_fast();
+  inference_layouts();
   winograd_scratch_bounded();
   widen();
   const cfg cs[] = {

@@ -201,12 +201,13 @@ const char *kpcn_model_meta_key(const kpcn_model *m, int i);
 
 typedef enum kpcn_precision { KPCN_PREC_F32 = 0, KPCN_PREC_BF16 = 1 } kpcn_precision;
 
-/* Activation layout between layers. AUTO: for f32 training nets, per layer nChw16c where
- * oneDNN has a jit kernel for the layer there (its f32 backward-weights is faster on it) and
- * nhwc elsewhere, reordered between layers (kpcn_net_stats.n_relayout); for other nets nhwc
- * (brgconv / AMX kernels), or nChw16c when oneDNN has no optimized nhwc kernel for some layer
- * (kpcn_net_stats.n_slow). The others exist for benchmarking; all give the same results up
- * to summation order. */
+/* Activation layout between layers. AUTO: for f32 training nets, per layer nChw16c (nChw8c
+ * on CPUs without AVX-512) where oneDNN has a jit kernel for the layer there (its f32
+ * backward-weights is faster on it) and nhwc elsewhere, reordered between layers
+ * (kpcn_net_stats.n_relayout); the same for f32 inference nets on CPUs without AVX-512 (the
+ * AVX2 forward is 1.5-2x faster on nChw8c); for other nets nhwc (brgconv / AMX kernels), or
+ * nChw16c when oneDNN has no optimized nhwc kernel for some layer (kpcn_net_stats.n_slow).
+ * The others exist for benchmarking; all give the same results up to summation order. */
 typedef enum kpcn_layout {
   KPCN_LAYOUT_AUTO = 0,
   KPCN_LAYOUT_NCHW16C = 1,

@@ -1,8 +1,9 @@
 /* kpcn_net: one KPCN branch executed with oneDNN (C API, OpenMP runtime).
  *
  * Layout strategy: every conv primitive is created with format "any" for weights and a fixed
- * activation layout per layer (net_layer.c, kpcn_net_choose_tag: nhwc for inference and bf16,
- * nChw16c where oneDNN has a jit kernel for f32 training), so activations stay in a layout
+ * activation layout per layer (net_layer.c, kpcn_net_choose_tags: nhwc for inference and bf16
+ * with AVX-512, nChw16c where oneDNN has a jit kernel for f32 training, nChw8c for f32 without
+ * AVX-512), so activations stay in a layout
  * oneDNN's fast kernels take from layer to layer. Reorders happen at the ends (user NCHW
  * input -> layer 0, last layer -> user NCHW logits, and the weights from the model's OIHW
  * arrays, which are re-read each forward so an optimizer can update them in place) and
@@ -286,8 +287,7 @@ static kpcn_status build(kpcn_net *n) {
   const dnnl_data_type_t adt = n->o.precision == KPCN_PREC_BF16 ? dnnl_bf16 : dnnl_f32;
   dnnl_dims_t xd = {N, a->n_inputs, H, W};
   dnnl_memory_desc_t xany, user_in;
-  for (int l = 0; l < n->nl; l++)
-    KPCN_TRY(kpcn_net_choose_tag(n, l));
+  KPCN_TRY(kpcn_net_choose_tags(n));
   DN(dnnl_memory_desc_init_by_tag(&xany, 4, xd, adt, n->L[0].tag));
   const dnnl_dim_t ps = n->o.input_plane_stride ? (dnnl_dim_t)n->o.input_plane_stride : H * W;
   dnnl_dims_t xstrides = {a->n_inputs * ps, ps, W, 1};
@@ -364,9 +364,11 @@ kpcn_status kpcn_net_create(kpcn_model *m, kpcn_branch b, const kpcn_net_options
   if ((int)o->layout < 0 || (int)o->layout > KPCN_LAYOUT_NHWC)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_net_create: unknown layout %d",
                      (int)o->layout);
-  if (o->layout == KPCN_LAYOUT_AUTO && !(o->training && o->precision == KPCN_PREC_F32)) {
+  if (o->layout == KPCN_LAYOUT_AUTO &&
+      !(o->precision == KPCN_PREC_F32 && (o->training || !kpcn_cpu_allows_avx512()))) {
     /* nhwc first (brgconv / AMX kernels); if oneDNN falls back to its slow reference kernel
-     * for some layer (e.g. f32 jit with large dilation), try nChw16c and keep the better. */
+     * for some layer (e.g. f32 jit with large dilation), try nChw16c and keep the better.
+     * f32 nets without AVX-512 choose per layer instead (kpcn_net_choose_tags). */
     kpcn_net_options oo = *o;
     oo.layout = KPCN_LAYOUT_NHWC;
     KPCN_TRY(kpcn_net_create(m, b, &oo, out));

@@ -113,7 +113,8 @@ void kpcn_net_flip_weights(const layer *y, const float *w);
  * (which depends on the CPU: Zen 4 falls back for dilation 8, an AVX-512 Xeon does not), so
  * the path is checked on every CPU. Not thread-safe; 0 restores the default. */
 void kpcn_net_set_bwdd_as_forward_always(int on);
-kpcn_status kpcn_net_choose_tag(kpcn_net *n, int l);
+/* Chooses every layer's activation layout (n->L[l].tag; net_layer.c says how). */
+kpcn_status kpcn_net_choose_tags(kpcn_net *n);
 kpcn_status kpcn_net_build_layer(kpcn_net *n, int l, const dnnl_memory_desc_t *src_md,
                                  size_t *scratch);
 #endif

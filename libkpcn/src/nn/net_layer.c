@@ -265,8 +265,9 @@ static kpcn_status try_space_to_batch(kpcn_net *n, int l, const dnnl_memory_desc
   return make_s2b_side(n, y, 1, tr, 1, scratch);
 }
 
-/* *out = 1 if oneDNN has direct (not fallback) f32 training forward and backward-weights
- * kernels for a cin -> cout k x k conv of dilation d on N x H x W activations in layout tag. */
+/* *out = 1 if oneDNN has direct (not fallback) f32 kernels for a cin -> cout k x k conv of
+ * dilation d on N x H x W activations in layout tag: the forward, and for training nets the
+ * backward-weights too. */
 static kpcn_status kernels_are_direct(kpcn_net *n, int cin, int cout, int k, int d, int N, int H,
                                       int W, dnnl_format_tag_t tag, int *out) {
   const int pad = d * (k - 1) / 2;
@@ -278,13 +279,17 @@ static kpcn_status kernels_are_direct(kpcn_net *n, int cin, int cout, int k, int
   DN(dnnl_memory_desc_init_by_tag(&wmd, 4, wd, dnnl_f32, dnnl_format_tag_any));
   DN(dnnl_memory_desc_init_by_tag(&bmd, 1, bd, dnnl_f32, dnnl_x));
   dnnl_convolution_desc_t cd;
-  DN(dnnl_dilated_convolution_forward_desc_init(&cd, dnnl_forward_training, dnnl_convolution_direct,
-                                                &smd, &wmd, &bmd, &dmd, strides, dil, pads, pads));
+  const int tr = n->o.training;
+  DN(dnnl_dilated_convolution_forward_desc_init(
+      &cd, tr ? dnnl_forward_training : dnnl_forward_inference, dnnl_convolution_direct, &smd, &wmd,
+      &bmd, &dmd, strides, dil, pads, pads));
   dnnl_primitive_desc_t fwd, bwdw;
   *out = 0;
   if (dnnl_primitive_desc_create(&fwd, &cd, n->attr, n->eng, NULL) != dnnl_success) return KPCN_OK;
   dnnl_status_t st = dnnl_success;
-  if (!is_fallback(fwd)) {
+  if (!tr)
+    *out = !is_fallback(fwd);
+  else if (!is_fallback(fwd)) {
     st = dnnl_dilated_convolution_backward_weights_desc_init(
         &cd, dnnl_convolution_direct, &smd, &wmd, &bmd, &dmd, strides, dil, pads, pads);
     if (st == dnnl_success &&
@@ -299,19 +304,23 @@ static kpcn_status kernels_are_direct(kpcn_net *n, int cin, int cout, int k, int
 }
 
 /* The activation layout of layer l. Explicit layouts apply to every layer. AUTO: nhwc, except
- * for f32 training nets, where a layer runs channel-blocked (nChw16c; nChw8c where the CPU
- * lacks AVX-512) when oneDNN has jit forward and backward-weights kernels for it there, or
- * for the undilated conv space-to-batch runs it as, and padding its channels to multiples of
- * the block adds at most 15 % to its work, with reorders between layers of different
- * layouts. Why: oneDNN 2.6's f32 backward-weights kernel is ~1.4x
- * faster on nChw16c than on nhwc (cpu preset, batch 16 of 64 x 64: 8.5 vs 12 ms per
- * 48-channel layer; 121 logits pad to 128), while the padding ate the gain where channels are
- * far from a multiple of 16 (paper preset, 100 -> 112: 288-315 vs 321 GFLOP/s in nhwc); the
- * inference forward is best in nhwc (brgconv) and bf16 has its brgconv kernels only there. */
-kpcn_status kpcn_net_choose_tag(kpcn_net *n, int l) {
+ * for f32 training nets, and f32 inference nets on CPUs without AVX-512, where a layer runs
+ * channel-blocked (nChw16c; nChw8c where the CPU lacks AVX-512) when oneDNN has jit kernels
+ * for it there (the forward; for training also backward-weights), or for the undilated conv
+ * space-to-batch runs it as, and padding its channels to multiples of the block adds at most
+ * 15 % to its work, with reorders between layers of different layouts. Why: oneDNN 2.6's f32
+ * backward-weights kernel is ~1.4x faster on nChw16c than on nhwc (cpu preset, batch 16 of
+ * 64 x 64: 8.5 vs 12 ms per 48-channel layer; 121 logits pad to 128), while the padding ate
+ * the gain where channels are far from a multiple of 16 (paper preset, 100 -> 112: 288-315 vs
+ * 321 GFLOP/s in nhwc). With AVX-512 the inference forward is best in nhwc (brgconv), and bf16
+ * has its brgconv kernels only there. Without it oneDNN's jit:avx2 forward runs nChw8c 1.5-2x
+ * faster than nhwc (Zen 3, 1024², 48 -> 48: 141 vs 86 GFLOP/s at dilation 2, 172 vs 120 for
+ * space-to-batch's batch 16 of 256²; the 48 -> 121 logits 179 vs 92). */
+static kpcn_status choose_tag(kpcn_net *n, int l) {
   layer *y = &n->L[l];
   y->tag = n->o.layout == KPCN_LAYOUT_NCHW16C ? dnnl_nChw16c : dnnl_nhwc;
-  if (n->o.layout != KPCN_LAYOUT_AUTO || !n->o.training || n->o.precision != KPCN_PREC_F32)
+  if (n->o.layout != KPCN_LAYOUT_AUTO || n->o.precision != KPCN_PREC_F32 ||
+      (!n->o.training && kpcn_cpu_allows_avx512()))
     return KPCN_OK;
   const kpcn_arch *a = &n->model->arch;
   const int cin = kpcn_arch_layer_in(a, l), cout = kpcn_arch_layer_out(a, l);
@@ -331,6 +340,23 @@ kpcn_status kpcn_net_choose_tag(kpcn_net *n, int l) {
     KPCN_TRY(kernels_are_direct(n, cin, cout, k, 1, n->o.batch * d * d, (n->o.height + d - 1) / d,
                                 (n->o.width + d - 1) / d, btag, &fast));
   if (fast) y->tag = btag;
+  return KPCN_OK;
+}
+
+/* Every layer's activation layout (choose_tag). An inference net keeps no activations, but a
+ * layer fed from one of another layout needs a buffer for the reordered input, as large as
+ * an activation: so an inference net goes blocked only where every layer can (the cpu
+ * preset). The paper preset, whose 36 -> 100 first layer would pad by 16 %, stays nhwc: the
+ * reorder buffer took a 4K frame's peak RSS from 3.7 to 4.2 GB for 5-8 % less time (Zen 3). */
+kpcn_status kpcn_net_choose_tags(kpcn_net *n) {
+  int mixed = 0;
+  for (int l = 0; l < n->nl; l++) {
+    KPCN_TRY(choose_tag(n, l));
+    mixed |= l > 0 && n->L[l].tag != n->L[0].tag;
+  }
+  if (mixed && !n->o.training)
+    for (int l = 0; l < n->nl; l++)
+      n->L[l].tag = dnnl_nhwc;
   return KPCN_OK;
 }
 
