@@ -93,8 +93,58 @@ static kpcn_vec3 g_env(void *c, float a, float b) {
 }
 static float p_env(void *c, kpcn_vec3 w) { return kpcn_envmap_pdf(c, w); }
 
+/* The cell a distribution's search finds (a guide table, then a short bisection) against a
+ * linear scan: the largest i in [0, n-1] with cdf[i] <= u, 0 for NaN. Probed at random u, at
+ * every cdf value and the floats beside it, on shapes with zero cells at the ends and in
+ * runs, a spike, one cell and an all-zero function. Returns the mismatches. */
+static int cell_search_vs_scan(const float *f, int n, unsigned seed) {
+  kpcn_distrib1d d;
+  if (kpcn_distrib1d_init(&d, f, n) != KPCN_OK) return 1;
+  kt_rng r = {seed};
+  int bad = 0;
+  for (int t = 0; t < 3 * (n + 1) + 2000; ++t) {
+    const int j = t / 3 % (n + 1);
+    float u = t >= 3 * (n + 1) ? kt_next(&r)
+              : t % 3 == 0     ? d.cdf[j]
+              : t % 3 == 1     ? nextafterf(d.cdf[j], 0.0f)
+                               : nextafterf(d.cdf[j], 2.0f);
+    if (u >= 1.0f) u = 0x1.fffffep-1f;
+    if (t == 0) u = NAN;
+    int want = 0;
+    for (int i = 0; i < n; ++i)
+      if (d.cdf[i] <= u) want = i;
+    float pmf;
+    bad += kpcn_distrib1d_sample_discrete(&d, u, &pmf) != want;
+  }
+  kpcn_distrib1d_free(&d);
+  return bad;
+}
+
+static void cell_search(void) {
+  enum { M = 4096 };
+  static float f[M];
+  kt_rng r = {11};
+  int bad = 0, n;
+  const float one = 1.0f, zero = 0.0f;
+  bad += cell_search_vs_scan(&one, 1, 1) + cell_search_vs_scan(&zero, 1, 2);
+  for (int shape = 0; shape < 6; ++shape) {
+    n = shape < 3 ? 1000 : shape == 3 ? M : shape == 4 ? 7 : 33;
+    for (int i = 0; i < n; ++i)
+      f[i] = shape == 5 ? 0.0f : kt_next(&r) < 0.3f ? 0.0f : kt_next(&r);
+    if (shape == 0) /* zero runs at both ends and inside */
+      for (int i = 0; i < n; ++i)
+        f[i] = i < 100 || i >= 900 || (i >= 400 && i < 600) ? 0.0f : f[i];
+    if (shape == 1) f[517] = 1e6f; /* a sun: cells around it hold almost nothing */
+    if (shape == 3) f[5] = 1e-9f;  /* a cell narrower than a float step of the cdf */
+    bad += cell_search_vs_scan(f, n, 20 + shape);
+  }
+  printf("distribution cell search vs a linear scan: %d mismatches\n", bad);
+  CHECK(bad == 0);
+}
+
 int main(void) {
   const double alpha = 0.01 / 10;
+  cell_search();
   double p;
   CHECK((p = dir_chi2(g_cos, p_cos, NULL, 1)) > alpha);
   printf("cosine hemisphere p=%.3f\n", p);

@@ -36,13 +36,36 @@ void kpcn_warp_uniform_triangle(float u1, float u2, float *b0, float *b1) {
 
 /* ---- 1D ---- */
 
+/* Largest index i in [lo, hi - 1] with cdf[i] <= u, given cdf[lo] <= u (or lo = 0). */
+static int bisect(const float *cdf, int lo, int hi, float u) {
+  while (hi - lo > 1) {
+    int mid = (lo + hi) >> 1;
+    if (cdf[mid] <= u)
+      lo = mid;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
+/* See kpcn_distrib1d_sample. */
+static int find_interval(const kpcn_distrib1d *d, float u) {
+  const int n = d->n;
+  const float x = u * (float)n;
+  const int k = x >= 0.0f ? (x < (float)n ? (int)x : n - 1) : 0;
+  const int i = bisect(d->cdf, d->guide[k], d->guide[k + 1] + 1 < n ? d->guide[k + 1] + 1 : n, u);
+  if (d->cdf[i] <= u && (i == n - 1 || d->cdf[i + 1] > u)) return i;
+  return bisect(d->cdf, 0, n, u);
+}
+
 kpcn_status kpcn_distrib1d_init(kpcn_distrib1d *d, const float *func, int n) {
   memset(d, 0, sizeof(*d));
   if (n < 1) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "distribution: %d cells (need >= 1)", n);
   d->n = n;
   d->func = kpcn_alloc(sizeof(float) * (size_t)n, "distribution function");
   d->cdf = kpcn_alloc(sizeof(float) * ((size_t)n + 1), "distribution cdf");
-  if (!d->func || !d->cdf) {
+  d->guide = kpcn_alloc(sizeof(int) * ((size_t)n + 1), "distribution guide table");
+  if (!d->func || !d->cdf || !d->guide) {
     kpcn_distrib1d_free(d);
     return KPCN_ERR_OUT_OF_MEMORY;
   }
@@ -74,6 +97,8 @@ kpcn_status kpcn_distrib1d_init(kpcn_distrib1d *d, const float *func, int n) {
   }
   d->cdf[n] = 1.0f;
   free(tmp);
+  for (int k = 0; k <= n; ++k)
+    d->guide[k] = bisect(d->cdf, 0, n, (float)((double)k / n));
   return KPCN_OK;
 }
 
@@ -81,28 +106,21 @@ void kpcn_distrib1d_free(kpcn_distrib1d *d) {
   if (!d) return;
   free(d->func);
   free(d->cdf);
+  free(d->guide);
   d->func = d->cdf = NULL;
+  d->guide = NULL;
   d->n = 0;
 }
 
-/* Largest index i in [0, n-1] with cdf[i] <= u. */
-static int find_interval(const float *cdf, int n, float u) {
-  int lo = 0, hi = n; /* invariant cdf[lo] <= u, answer in [lo, hi) */
-  while (hi - lo > 1) {
-    int mid = (lo + hi) >> 1;
-    if (cdf[mid] <= u)
-      lo = mid;
-    else
-      hi = mid;
-  }
-  /* skip zero-width cells (cdf[lo] == cdf[lo+1]) that u landed on exactly */
-  while (lo < n - 1 && cdf[lo + 1] <= u)
-    ++lo;
-  return lo;
-}
-
+/* The cell u falls in: the largest i in [0, n-1] with cdf[i] <= u (0 for NaN; the cdf is
+ * non-decreasing, so this is the one i with cdf[i] <= u < cdf[i + 1], or n - 1). A full
+ * bisection is ~log2(n) dependent loads, each a cache miss in an environment map's rows
+ * (1024 x 512: 4 MiB of cdf), which made it a quarter of a render's time. The guide table
+ * narrows it to the cells between guide[k] and guide[k + 1] for k = floor(u n), usually one
+ * or two; the answer is checked, and where rounding put u outside that range (or u is NaN)
+ * the full bisection decides. The same cell either way, so the same image. */
 float kpcn_distrib1d_sample(const kpcn_distrib1d *d, float u, float *pdf, int *index) {
-  int i = find_interval(d->cdf, d->n, u);
+  int i = find_interval(d, u);
   float w = d->cdf[i + 1] - d->cdf[i];
   float du = w > 0.0f ? (u - d->cdf[i]) / w : 0.5f;
   if (du >= 1.0f) du = 0x1.fffffep-1f;
@@ -114,7 +132,7 @@ float kpcn_distrib1d_sample(const kpcn_distrib1d *d, float u, float *pdf, int *i
 }
 
 int kpcn_distrib1d_sample_discrete(const kpcn_distrib1d *d, float u, float *pmf) {
-  int i = find_interval(d->cdf, d->n, u);
+  int i = find_interval(d, u);
   if (pmf) *pmf = d->func[i] / (d->integral * (float)d->n);
   return i;
 }

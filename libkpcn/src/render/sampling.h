@@ -60,6 +60,7 @@ typedef struct kpcn_distrib1d {
   int n;
   float *func;    /* n values (>= 0) */
   float *cdf;     /* n+1 values, cdf[0]=0, cdf[n]=1 */
+  int *guide;     /* n+1 values: guide[k] = the cell that u = k/n falls in (sampling.c) */
   float integral; /* sum(func)/n */
 } kpcn_distrib1d;
 
