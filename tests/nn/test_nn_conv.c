@@ -28,6 +28,15 @@ static void set_inputs(kpcn_arch *a, int n) {
   CHECK(kpcn_arch_set_inputs(a, n, names) == KPCN_OK);
 }
 
+/* A model of preset `name` with n_in inputs (weights from seed), *a its architecture. */
+static kpcn_model *preset_model(const char *name, int n_in, unsigned seed, kpcn_arch *a) {
+  kpcn_model *m = NULL;
+  CHECK(kpcn_arch_preset(name, a) == KPCN_OK);
+  set_inputs(a, n_in);
+  CHECK(kpcn_model_create(a, seed, &m) == KPCN_OK);
+  return m;
+}
+
 static void make_arch(const cfg *c, kpcn_arch *a) {
   kpcn_arch_preset("tiny", a);
   a->n_hidden = c->n_hidden;
@@ -396,10 +405,7 @@ static void fd_onednn(void) {
 static void bf16_vs_f32(void) {
   if (!kt_have_bf16("bf16 vs f32 nets")) return;
   kpcn_arch a;
-  kpcn_arch_preset("cpu", &a);
-  set_inputs(&a, 27);
-  kpcn_model *m = NULL;
-  kpcn_model_create(&a, 3, &m);
+  kpcn_model *m = preset_model("cpu", 27, 3, &a);
   const int H = 40, W = 48, K2 = a.kernel_size * a.kernel_size;
   size_t nin = (size_t)27 * H * W, nout = (size_t)K2 * H * W;
   float *in = malloc(nin * 4), *l32 = malloc(nout * 4), *l16 = malloc(nout * 4);
@@ -571,10 +577,7 @@ static void presets_fast(void) {
   const char *ps[2] = {"cpu", "paper"};
   for (int p = 0; p < 2; p++) {
     kpcn_arch a;
-    kpcn_arch_preset(ps[p], &a);
-    set_inputs(&a, 36);
-    kpcn_model *m = NULL;
-    kpcn_model_create(&a, 1, &m);
+    kpcn_model *m = preset_model(ps[p], 36, 1, &a);
     for (int mode = 0; mode < (kpcn_cpu_allows_avx512() ? 4 : 2); mode++) { /* 2, 3: bf16 */
       kpcn_net_options o;
       kpcn_net_options_defaults(&o);
@@ -608,9 +611,7 @@ static void inference_layouts(void) {
   const char *ps[2] = {"cpu", "paper"};
   for (int p = 0; p < 2; p++) {
     kpcn_arch a;
-    kpcn_arch_preset(ps[p], &a);
-    set_inputs(&a, 36);
-    kpcn_model *m = NULL;
+    kpcn_model *m = preset_model(ps[p], 36, 1, &a);
     kpcn_net *n = NULL;
     kpcn_net_options o;
     kpcn_net_options_defaults(&o);
@@ -619,8 +620,7 @@ static void inference_layouts(void) {
     const void *lg = NULL;
     kpcn_logits_layout lay = {0};
     kpcn_net_stats st = {0};
-    CHECK(x && kpcn_model_create(&a, 1, &m) == KPCN_OK &&
-          kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &n) == KPCN_OK &&
+    CHECK(x && m && kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &n) == KPCN_OK &&
           kpcn_net_forward_logits(n, x, &lg, &lay) == KPCN_OK);
     if (n) kpcn_net_get_stats(n, &st);
     const int blocked = p == 0 && !kpcn_cpu_allows_avx512(), K2 = a.kernel_size * a.kernel_size;
@@ -640,10 +640,7 @@ static void inference_layouts(void) {
  * activations. The 1024x536 tile keeps Winograd with a small scratchpad. */
 static void winograd_scratch_bounded(void) {
   kpcn_arch a;
-  kpcn_arch_preset("cpu", &a);
-  set_inputs(&a, 36);
-  kpcn_model *m = NULL;
-  CHECK(kpcn_model_create(&a, 1, &m) == KPCN_OK);
+  kpcn_model *m = preset_model("cpu", 36, 1, &a);
   const int heights[2] = {536, 540};
   for (int i = 0; i < 2; i++) {
     kpcn_net_options o;
