@@ -183,6 +183,11 @@ export FAKE_LOG="$T/log2" FAKE_SLEEP=0
 "$DS" run "$T/d" --jobs 2 --renderer "$FAKE" > "$T/run2.out" 2>&1
 rc=$?
 ok '[ $rc -eq 0 ]' "resumed run succeeds"
+# stderr is a file here: whole progress lines (the first job's, then at most one a minute), and
+# one after the last job
+ok 'grep -Eq "^\[15/15\] rendered [0-9]+, running 0, failed 0, [0-9]+s elapsed, ~0s left$" "$T/run2.out"' \
+  "a progress line after the last job (got: $(grep '^\[' "$T/run2.out" | tr '\n' '|'))"
+ok '[ "$(grep -c "^\[" "$T/run2.out")" -le 3 ]' "at most a line a minute (and the first and last)"
 sed -n 's|^start .*/d/||p' "$T/log2" | sort > "$T/started2"
 ok '[ -z "$(comm -12 "$T/done1" "$T/started2")" ]' "resume re-rendered a finished output"
 ok '[ $(ls "$T"/d/renders/*/*.exr | grep -v preview | wc -l) -eq 15 ]' "all 15 outputs exist"
@@ -194,7 +199,7 @@ export FAKE_LOG="$T/log3"
 ok '[ ! -s "$T/log3" ] && grep -q "rendered 0, already done 15" "$T/run3.out"' "third run renders nothing"
 # preview thresholds: fractions in [0, 1], a level > 0 (-1 used to reject every variant)
 for bad in "--max-black -1" "--max-black nan" "--max-background 1.5" "--max-blown inf" \
-           "--blown-level -inf" "--blown-level 0"; do
+           "--blown-level -inf" "--blown-level 0" "--progress-every -1" "--progress-every x"; do
   # shellcheck disable=SC2086
   "$DS" run "$T/d" --renderer "$FAKE" $bad > /dev/null 2> "$T/err"
   rc=$?

@@ -24,6 +24,7 @@ typedef struct run_opts {
   char renderer[DS_PATH];
   int jobs, shard_i, shard_n, threads, dry_run, list;
   double max_black, max_background, max_blown, blown_level;
+  double progress_every; /* seconds between progress lines when stderr is no terminal */
 } run_opts;
 
 static volatile sig_atomic_t g_stop = 0;
@@ -189,14 +190,21 @@ typedef struct counts {
   int done, skipped, failed, rejected_jobs, total;
 } counts;
 
-static void progress(const counts *c, int running, double t0) {
-  if (!ds_isatty()) return;
-  double el = ds_now() - t0;
+/* On a terminal one line rewritten after every job; elsewhere (a log file of a run under
+ * nohup, hours long) a line of its own at most every o->progress_every seconds, and after the
+ * last job. */
+static void progress(const run_opts *o, const counts *c, int running, double t0) {
+  static double last_line = -1e300;
+  const int tty = ds_isatty();
+  double now = ds_now(), el = now - t0;
   int fin = c->done + c->failed;
   int left = c->total - fin - c->skipped - c->rejected_jobs;
+  if (!tty && left > 0 && now - last_line < o->progress_every) return;
+  last_line = now;
   double eta = fin > 0 ? el / fin * left : 0;
-  fprintf(stderr, "\r[%d/%d] rendered %d, running %d, failed %d, %.0fs elapsed, ~%.0fs left   ",
-          fin + c->skipped + c->rejected_jobs, c->total, c->done, running, c->failed, el, eta);
+  fprintf(stderr, "%s[%d/%d] rendered %d, running %d, failed %d, %.0fs elapsed, ~%.0fs left%s",
+          tty ? "\r" : "", fin + c->skipped + c->rejected_jobs, c->total, c->done, running,
+          c->failed, el, eta, tty ? "   " : "\n");
   fflush(stderr);
 }
 
@@ -259,7 +267,7 @@ static int run_pool(const run_opts *o, const ds_manifest *m, const int *idx, int
       running--;
       break;
     }
-    progress(c, running, t0);
+    progress(o, c, running, t0);
   }
   free(slots);
   return g_stop ? -1 : 0;
@@ -269,7 +277,7 @@ static void usage(void) {
   fprintf(
       stderr,
       "usage: kpcn-dataset run DATASET_DIR [--jobs N] [--shard i/n] [--renderer PATH]\n"
-      "         [--threads-per-job T] [--dry-run] [--list]\n"
+      "         [--threads-per-job T] [--dry-run] [--list] [--progress-every 60]\n"
       "         [--max-black 0.9] [--max-background 0.9] [--max-blown 0.5] [--blown-level 1]\n");
 }
 
@@ -282,6 +290,7 @@ int ds_cmd_run(int argc, char **argv) {
   o.max_background = 0.9;
   o.max_blown = 0.5;
   o.blown_level = 1.0;
+  o.progress_every = 60.0;
   const char *renderer = NULL;
   int threads = -1;
   for (int i = 1; i < argc; i++) {
@@ -314,7 +323,10 @@ int ds_cmd_run(int argc, char **argv) {
         want = " (an integer in [0, 4096])";
       } else if (!strcmp(a, "--renderer"))
         renderer = v;
-      else if (!strcmp(a, "--shard")) {
+      else if (!strcmp(a, "--progress-every")) {
+        ok = ds_parse_double(v, &o.progress_every) && o.progress_every >= 0;
+        want = " (seconds >= 0)";
+      } else if (!strcmp(a, "--shard")) {
         char extra;
         ok = sscanf(v, "%d/%d%c", &o.shard_i, &o.shard_n, &extra) == 2 && o.shard_n >= 1 &&
              o.shard_i >= 0 && o.shard_i < o.shard_n;
