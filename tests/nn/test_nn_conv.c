@@ -19,7 +19,7 @@ typedef struct cfg {
   int size[4], dil[4];
 } cfg;
 
-/* n inputs by placeholder names (the denoiser's feature set has 36) */
+/* n inputs named in0, in1, ... (the denoiser's feature set has 36) */
 static void set_inputs(kpcn_arch *a, int n) {
   char nm[KPCN_NN_MAX_INPUTS][16];
   const char *names[KPCN_NN_MAX_INPUTS];
