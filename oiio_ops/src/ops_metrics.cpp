@@ -28,6 +28,26 @@ static std::string size_str(const ROI &r) {
   return std::to_string(r.width()) + "x" + std::to_string(r.height());
 }
 
+// The channels compared when the caller names none. An AOV image (DESIGN.md §4: R,G,B beside
+// its auxiliary buffers) is compared on its colour: averaging variances, normals and depth into
+// one figure is never what "relMSE against the reference" means, and an RGB result (a denoised
+// image) could not be compared with its AOV reference at all. Any other reference: every one
+// of its channels (an RGBA or single-channel image as it is).
+static std::vector<std::string> default_channels(const ImageBuf &x, const ImageBuf &ref) {
+  const std::vector<std::string> rgb = {"R", "G", "B"};
+  auto has = [](const ImageBuf &b, const std::string &n) {
+    return b.spec().channelindex(n) >= 0;
+  };
+  auto is_aov = [&](const ImageBuf &b) {
+    for (const std::string &n : b.spec().channelnames)
+      if (n != "R" && n != "G" && n != "B" && n != "A") return true;
+    return false;
+  };
+  for (const std::string &n : rgb)
+    if (!has(x, n) || !has(ref, n)) return {};
+  return is_aov(ref) || is_aov(x) ? rgb : std::vector<std::string>{};
+}
+
 // Shared body of compare() and errormap(): map != nullptr requests the error image.
 static MetricResult run(const ImageBuf &x, const ImageBuf &ref, Metric m, const CompareOptions &opt,
                         ROI roi, int nthreads, ImagePtr *map) {
@@ -54,14 +74,14 @@ static MetricResult run(const ImageBuf &x, const ImageBuf &ref, Metric m, const 
     return r;
   }
   std::string err;
-  ImagePtr ix =
-      opt.channels.empty() ? to_kpcn_image(x, err, rx) : to_kpcn_image(x, opt.channels, err, rx);
+  const std::vector<std::string> chans =
+      opt.channels.empty() ? default_channels(x, ref) : opt.channels;
+  ImagePtr ix = chans.empty() ? to_kpcn_image(x, err, rx) : to_kpcn_image(x, chans, err, rx);
   if (!ix) {
     r.error = std::string(what) + ": test image: " + err;
     return r;
   }
-  ImagePtr iy = opt.channels.empty() ? to_kpcn_image(ref, err, ry)
-                                     : to_kpcn_image(ref, opt.channels, err, ry);
+  ImagePtr iy = chans.empty() ? to_kpcn_image(ref, err, ry) : to_kpcn_image(ref, chans, err, ry);
   if (!iy) {
     r.error = std::string(what) + ": reference image: " + err;
     return r;

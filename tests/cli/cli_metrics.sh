@@ -35,6 +35,15 @@ run_ok --threads 1 "$NOISY" "$REF" --ssim --relmse --json
 cp out.txt t1.json
 run_ok --threads 2 "$NOISY" "$REF" --ssim --relmse --json
 cmp -s out.txt t1.json && pass "threads 1 == threads 2" || fail "thread results differ"
+# AOV images are compared on their colour by default (DESIGN.md's `--denoise ... ref.exr
+# --relmse` chain: an RGB result against an AOV reference), equal to naming R,G,B.
+S=$TD/dataset
+run_ok "$S/sample_noisy.exr" "$S/sample_ref.exr" --relmse --json
+cp out.txt aov_default.json
+run_ok "$S/sample_noisy.exr" --ch R,G,B "$S/sample_ref.exr" --ch R,G,B --relmse --json
+cmp -s out.txt aov_default.json && pass "AOV pair: R,G,B by default" || fail "AOV default: $(cat aov_default.json) vs $(cat out.txt)"
+run_ok "$S/sample_noisy.exr" --ch R,G,B "$S/sample_ref.exr" --relmse --json
+cmp -s out.txt aov_default.json && pass "RGB vs AOV reference" || fail "RGB vs AOV: $(cat out.txt)"
 # Non-finite values: error unless allowed; then excluded and counted.
 oiiotool --pattern constant:color=nan,0.5,0.5 4x4 3 --pattern constant:color=0.25,0.5,0.5 16x16 3 \
   --paste +0+0 -o part.exr

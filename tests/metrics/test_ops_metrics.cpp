@@ -47,6 +47,27 @@ int main() {
       }
   CHECK_CLOSE(r.value, s / (3.0 * w * h), 1e-12, 0);
   CHECK(r.nchannels == 3 && r.npixels == w * h && r.channel_names.size() == 3);
+  // Default channels: an AOV reference with an RGB (denoised) test image, and two AOV images,
+  // are compared on R,G,B (equal to naming them); RGBA images on all four channels.
+  {
+    ImageBuf aov = make(w, h, {"R", "G", "B", "albedo.R", "albedo.G", "albedo.B", "Z", "color.var"},
+                        21);
+    ops::CompareOptions rgb;
+    rgb.channels = {"R", "G", "B"};
+    ops::MetricResult a = ops::compare(y, aov, ops::Metric::RelMSE),
+                      b = ops::compare(y, aov, ops::Metric::RelMSE, rgb),
+                      c = ops::compare(x, aov, ops::Metric::RelMSE),
+                      d = ops::compare(x, aov, ops::Metric::RelMSE, rgb);
+    CHECK(a.ok && b.ok && a.value == b.value && a.nchannels == 3 && a.channel_names[2] == "B");
+    CHECK(c.ok && d.ok && c.value == d.value && c.nchannels == 3);
+    ImageBuf p = make(w, h, {"R", "G", "B", "A"}, 5), q = make(w, h, {"R", "G", "B", "A"}, 6);
+    ops::MetricResult e = ops::compare(p, q, ops::Metric::L1);
+    CHECK(e.ok && e.nchannels == 4 && e.channel_names[3] == "A");
+    // a reference without R,G,B: every one of its channels, as before
+    ImageBuf z = make(w, h, {"Z"}, 7);
+    ops::MetricResult f = ops::compare(x, z, ops::Metric::L1);
+    CHECK(f.ok && f.nchannels == 1 && f.channel_names[0] == "Z");
+  }
   // ROI: a window of both images.
   ROI roi(5, 25, 4, 20);
   ops::MetricResult rr = ops::compare(x, y, ops::Metric::L1, {}, roi);

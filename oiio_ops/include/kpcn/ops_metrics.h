@@ -8,8 +8,9 @@
 //   ImageBuf map;  kpcn::ops::errormap(map, x, ref, Metric::RelMSE, opt);   // errors on map
 //
 // x is the image under test, ref the reference (relMSE/relL1 divide by the reference).
-// Channels are matched by name: opt.channels, or, when empty, every channel of ref (which must
-// all exist in x). `roi` selects a pixel window (same window in both images, in each image's
+// Channels are matched by name: opt.channels, or, when empty, R,G,B if both images have them
+// and either is an AOV image (a channel other than R,G,B,A), else every channel of ref (which
+// must all exist in x). `roi` selects a pixel window (same window in both images, in each image's
 // own coordinates; default: the whole data window; the ROI's channel range is ignored — use
 // opt.channels; a window outside either image's data window is an error). Images must have
 // the same size. errormap's image lies where the compared pixels lie in x (its origin, or the
@@ -34,7 +35,7 @@ const char *metric_name(Metric m);
 bool metric_from_name(const std::string &name, Metric &m);
 
 struct CompareOptions {
-  std::vector<std::string> channels; // empty: all channels of the reference
+  std::vector<std::string> channels; // empty: see above (R,G,B of AOV images)
   bool display_srgb = false;         // clamp to [0,1] + sRGB-encode both before comparing
   double data_range = 1.0;           // SSIM data range, PSNR peak
   double eps = 0.01;                 // relMSE / relL1 epsilon
