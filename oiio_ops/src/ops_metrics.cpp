@@ -35,9 +35,7 @@ static std::string size_str(const ROI &r) {
 // of its channels (an RGBA or single-channel image as it is).
 static std::vector<std::string> default_channels(const ImageBuf &x, const ImageBuf &ref) {
   const std::vector<std::string> rgb = {"R", "G", "B"};
-  auto has = [](const ImageBuf &b, const std::string &n) {
-    return b.spec().channelindex(n) >= 0;
-  };
+  auto has = [](const ImageBuf &b, const std::string &n) { return b.spec().channelindex(n) >= 0; };
   auto is_aov = [&](const ImageBuf &b) {
     for (const std::string &n : b.spec().channelnames)
       if (n != "R" && n != "G" && n != "B" && n != "A") return true;

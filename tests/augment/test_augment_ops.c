@@ -399,7 +399,47 @@ static void test_rotate_any_geometry(void) {
   }
 }
 
+/* Normals under every name the AOV readers accept (docs/aov-exr.md) are mirrored and rotated
+ * like "N.X N.Y N.Z", and never colour-swapped (also when stored as "normal.R G B"): the same
+ * planes under each naming give the canonical naming's result bit for bit. */
+static void test_normal_aliases(void) {
+  enum { W = 6, H = 4, NCH = 7 };
+  static const char *const schemes[][3] = {
+      {"N.X", "N.Y", "N.Z"},
+      {"normal.X", "normal.Y", "normal.Z"},
+      {"Denoising Normal.X", "Denoising Normal.Y", "Denoising Normal.Z"},
+      {"ref.N.X", "ref.N.Y", "ref.N.Z"},
+      {"normal.R", "normal.G", "normal.B"},
+      {"ViewLayer.Denoising Normal.X", "ViewLayer.Denoising Normal.Y",
+       "ViewLayer.Denoising Normal.Z"}};
+  float src[NCH * W * H], want[NCH * W * H], got[NCH * W * H];
+  unsigned st = 5;
+  for (int i = 0; i < NCH * W * H; i++)
+    src[i] = kt_randf(&st) - 0.5f;
+  kpcn_augment_xform x;
+  kpcn_augment_identity(&x);
+  x.perm[0] = 2, x.perm[1] = 0, x.perm[2] = 1;
+  x.mirror_h = 1;
+  x.rot90 = 1;
+  for (int s = 0; s < (int)(sizeof schemes / sizeof schemes[0]); s++) {
+    const char *names[NCH] = {"R", "G", "B", schemes[s][0], schemes[s][1], schemes[s][2], "Z"};
+    CHECK(kpcn_augment_planes(s ? got : want, src, NCH, names, W, H, &x, 1) == KPCN_OK);
+    if (s) CHECK(memcmp(got, want, sizeof got) == 0);
+  }
+  /* and the canonical result is the definition: (nx, ny) -> mirrored, then turned */
+  int ok = 1;
+  for (int y = 0; y < H; y++)
+    for (int xx = 0; xx < W; xx++) {
+      const int sx = W - 1 - xx, ox = y, oy = W - 1 - xx; /* mirror, then (x,y) -> (y, W-1-x) */
+      const float nx = -src[3 * W * H + y * W + sx], ny = src[4 * W * H + y * W + sx];
+      ok &= want[3 * W * H + oy * H + ox] == -ny && want[4 * W * H + oy * H + ox] == nx;
+      ok &= want[0 * W * H + oy * H + ox] == src[2 * W * H + y * W + sx]; /* new R = old B */
+    }
+  CHECK(ok);
+}
+
 int main(void) {
+  test_normal_aliases();
   test_mirror_twice();
   test_rotations();
   test_colorswap();

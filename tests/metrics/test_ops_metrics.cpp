@@ -50,8 +50,8 @@ int main() {
   // Default channels: an AOV reference with an RGB (denoised) test image, and two AOV images,
   // are compared on R,G,B (equal to naming them); RGBA images on all four channels.
   {
-    ImageBuf aov = make(w, h, {"R", "G", "B", "albedo.R", "albedo.G", "albedo.B", "Z", "color.var"},
-                        21);
+    ImageBuf aov =
+        make(w, h, {"R", "G", "B", "albedo.R", "albedo.G", "albedo.B", "Z", "color.var"}, 21);
     ops::CompareOptions rgb;
     rgb.channels = {"R", "G", "B"};
     ops::MetricResult a = ops::compare(y, aov, ops::Metric::RelMSE),

@@ -11,8 +11,10 @@
  *    is empty or ends with '.' ("R G B", "diffuse.R ...", "ref.specular.R ..."). The colour
  *    permutation acts inside each triple. Variance channels ("color.var", ...) are averaged
  *    over RGB (seed §3.5) and therefore unchanged by a permutation.
- *  - normal: "<p>N.X" and "<p>N.Y" (camera space: x right, y up, z toward the camera).
- *    Mirrors negate them, rotations rotate them; N.Z is untouched.
+ *  - normal: X, Y, Z of a normal buffer under any name the AOV readers accept (kpcn/image.h:
+ *    "<p>N.X", "normal.X", "Denoising Normal.X", "normal.R" ...; camera space: x right, y up,
+ *    z toward the camera). Mirrors negate them, rotations rotate them, colour swaps leave
+ *    them alone; N.Z is untouched.
  *  - everything else (depth, visibility, variances, unknown channels) moves geometrically.
  *
  * Transform semantics (applied in this order):

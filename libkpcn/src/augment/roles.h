@@ -1,5 +1,5 @@
-/* Channel roles for augmentation, derived from canonical channel names (kpcn/augment.h):
- * colour triples "<p>R <p>G <p>B" (p empty or ending in '.') and normals "<p>N.X <p>N.Y". */
+/* Channel roles for augmentation, derived from channel names (kpcn/augment.h): colour triples
+ * "<p>R <p>G <p>B" (p empty or ending in '.') and normals under any accepted alias. */
 #ifndef KPCN_AUGMENT_ROLES_H
 #define KPCN_AUGMENT_ROLES_H
 
