@@ -29,6 +29,8 @@ expect_fail "PNG only supports 1-4 channels" out.png "$NOISY" -o out.png
 # All or nothing: a later output or command that fails leaves none of the earlier ones.
 expect_fail "PNG only supports 1-4 channels" out.exr "$NOISY" -o out.exr -o out.png
 expect_fail "has no channel 'Q'" p.kps "$NOISY" "$REF" --patches:size=16:count=4:out=p.kps --ch Q
+expect_fail "count= (random patches) and stride= (a regular grid) exclude each other" p.kps \
+  "$NOISY" "$REF" --patches:size=16:count=4:stride=8:out=p.kps
 expect_fail "has no channel 'Q'" pdir "$NOISY" "$REF" --patches:size=16:count=4:out=pdir --ch Q
 expect_fail "has no channel 'Q'" pdir "$NOISY" "$REF" --patches:size=16:count=4:out=pdir/ --ch Q
 # A directory named with a trailing slash (as docs/dataset.md writes it) is made next to its

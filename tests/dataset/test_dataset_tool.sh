@@ -219,6 +219,14 @@ unset FAKE_BLACK
 "$DS" patches "$T/r" --size 8 --per-image 5 -o "$T/r/train.kps" > "$T/p.out"
 rc=$?
 ok '[ $rc -eq 0 ] && [ -s "$T/r/train.kps" ] && grep -q "10 image pairs (2 rejected" "$T/p.out"' "patch store built ($(cat "$T/p.out"))"
+for order in "--per-image 5 --stride 4" "--stride 4 --per-image 5"; do
+  # shellcheck disable=SC2086 # two options
+  "$DS" patches "$T/r" --size 8 $order -o "$T/r/both.kps" 2> "$T/err"
+  rc=$?
+  ok '[ $rc -eq 2 ] && [ ! -e "$T/r/both.kps" ] && grep -q "exclude each other" "$T/err"' "--per-image with --stride refused ($order)"
+done
+"$DS" patches "$T/r" --size 8 --stride 4 -o "$T/r/grid.kps" > "$T/p.out"
+ok '[ $? -eq 0 ] && grep -q ", 490 candidates" "$T/p.out"' "--stride: a 7x7 grid on 10 pairs ($(cat "$T/p.out"))"
 rm "$T/r/renders/cornell-box/v001_ref128spp.exr"
 "$DS" patches "$T/r" --size 8 --per-image 5 -o "$T/r/train2.kps" 2> "$T/err"
 rc=$?

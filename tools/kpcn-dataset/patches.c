@@ -92,7 +92,7 @@ static void usage(void) {
 
 int ds_cmd_patches(int argc, char **argv) {
   const char *dirs[MAX_DIRS], *out = NULL, *split = "train", *spp_list = "all", *dtype = "f32";
-  int ndirs = 0, allow_partial = 0;
+  int ndirs = 0, allow_partial = 0, per_image_given = 0, stride_given = 0;
   kpcn_patch_settings ps;
   kpcn_patch_settings_defaults(&ps);
   ps.count = 100;
@@ -139,10 +139,11 @@ int ds_cmd_patches(int argc, char **argv) {
       want = " (an integer in [2, 4096])";
     } else if (!strcmp(a, "--per-image")) {
       ok = ds_parse_int(v, 1, 1 << 20, &ps.count);
+      per_image_given = 1;
       want = " (an integer in [1, 1048576])";
     } else if (!strcmp(a, "--stride")) {
       ok = ds_parse_int(v, 1, 4096, &ps.stride);
-      ps.count = 0;
+      stride_given = 1;
       want = " (an integer in [1, 4096])";
     } else if (!strcmp(a, "--cull") || !strcmp(a, "--cull-tol") || !strcmp(a, "--cull-abs")) {
       /* Finite (ds_parse_double): they are recorded in the store's settings JSON, which has
@@ -171,6 +172,13 @@ int ds_cmd_patches(int argc, char **argv) {
     usage();
     return 2;
   }
+  /* one or the other: which one won used to depend on their order on the command line */
+  if (per_image_given && stride_given) {
+    ds_err("patches: --per-image (random patches) and --stride (a regular grid) exclude each "
+           "other");
+    return 2;
+  }
+  if (stride_given) ps.count = 0;
   int spps[32], nspp = 0;
   if (strcmp(spp_list, "all") != 0) {
     char b[256];

@@ -102,10 +102,13 @@ bool cmd_patches(Context &ctx, const Modifiers &m, const std::vector<std::string
   }
   kpcn_patch_settings s;
   kpcn_patch_settings_defaults(&s);
+  if (m.has("stride") && m.has("count")) {
+    err = "count= (random patches) and stride= (a regular grid) exclude each other";
+    return false;
+  }
   s.size = (int)m.integer("size", 65);
-  s.count = (int)m.integer("count", 400);
+  s.count = m.has("stride") ? 0 : (int)m.integer("count", 400);
   s.stride = (int)m.integer("stride", 0);
-  if (m.has("stride") && !m.has("count")) s.count = 0;
   s.seed = m.u64("seed", 1);
   s.cull = m.num("cull", 0.9);
   s.cull_tol = m.num("tol", 0.05);
