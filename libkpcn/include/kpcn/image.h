@@ -14,8 +14,9 @@
  *   albedo      albedo.R albedo.G albedo.B       albedo.var
  *   normal      N.X N.Y N.Z                      N.var       camera space: x right, y up,
  *                                                            z toward the camera
- *   depth       Z                                Z.var       distance camera -> first hit;
- *                                                            0 where the ray missed
+ *   depth       Z                                Z.var       path length camera -> first
+ *                                                            non-delta hit (mirrors and glass
+ *                                                            followed); 0 where the ray missed
  *   visibility  visibility.V                     visibility.var
  *
  * Aliases accepted on read (see exr.h): Blender/Cycles pass names
