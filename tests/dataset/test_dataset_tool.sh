@@ -301,6 +301,35 @@ if [ -n "$REAL" ] && [ -x "$REAL" ]; then
   "$DS" patches "$T/real" --size 8 --per-image 4 -o "$T/real/train.kps" > /dev/null
   rc=$?
   ok '[ $rc -eq 0 ] && [ -s "$T/real/train.kps" ]' "real patches"
+  # --checkpoint-every: a stopped run leaves its renders' checkpoints, the next run resumes
+  # them to the bytes of a run never stopped, and no checkpoint stays behind
+  for d in ck plain; do
+    "$DS" plan --scenes "$TD/scenes" --variants 1 --seed 5 --spp 2 --ref-spp 2048 \
+      --resolution 32x32 --no-preview --split train:cornell-box,val:cornell-teal,test:cornell-wide \
+      -o "$T/$d" > /dev/null
+  done
+  "$DS" run "$T/ck" --jobs 1 --threads-per-job 1 --renderer "$REAL" --checkpoint-every 0.05 \
+    > /dev/null 2>&1 &
+  pid=$!
+  for _ in $(seq 600); do
+    [ -n "$(ls "$T"/ck/renders/*/*.ckpt 2>/dev/null)" ] && break
+    sleep 0.05
+  done
+  kill -TERM $pid
+  wait $pid
+  rc=$?
+  ok '[ $rc -eq 130 ] && [ -n "$(ls "$T"/ck/renders/*/*.ckpt 2>/dev/null)" ]' \
+    "a stopped run keeps its checkpoints (rc $rc)"
+  "$DS" run "$T/ck" --jobs 2 --renderer "$REAL" --checkpoint-every 0.05 > /dev/null 2>&1
+  rc=$?
+  "$DS" run "$T/plain" --jobs 2 --renderer "$REAL" > /dev/null 2>&1
+  same=1
+  # every channel's pixels (the headers name the scene files' different paths)
+  for f in "$T"/plain/renders/*/*.exr; do
+    idiff -fail 0 -warn 0 -a "$f" "$T/ck/${f#"$T"/plain/}" > /dev/null || same=0
+  done
+  ok '[ $rc -eq 0 ] && [ $same -eq 1 ] && [ -z "$(ls "$T"/ck/renders/*/*.ckpt 2>/dev/null)" ]' \
+    "resumed renders equal uninterrupted ones; checkpoints removed"
 else
   echo "kpcn-render not built: real render part skipped"
 fi

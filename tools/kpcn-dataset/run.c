@@ -25,6 +25,9 @@ typedef struct run_opts {
   int jobs, shard_i, shard_n, threads, dry_run, list;
   double max_black, max_background, max_blown, blown_level;
   double progress_every; /* seconds between progress lines when stderr is no terminal */
+  /* > 0: each render keeps a checkpoint <out>.ckpt, saved this often and when the run is
+   * stopped, so a long reference render resumes instead of starting again */
+  double checkpoint_every;
 } run_opts;
 
 static volatile sig_atomic_t g_stop = 0;
@@ -147,11 +150,24 @@ static pid_t spawn(const run_opts *o, const ds_job *j, char *part, size_t pn) {
   snprintf(seed, sizeof seed, "%llu", (unsigned long long)j->seed);
   snprintf(res, sizeof res, "%dx%d", j->width, j->height);
   snprintf(thr, sizeof thr, "%d", o->threads);
-  char fp[16];
+  char fp[16], ck[DS_PATH + 8], every[32];
   snprintf(fp, sizeof fp, "%d", j->albedo_footprint);
-  char *argv[] = {(char *)o->renderer, scene, "-o",        part, "--spp",   spp,  "--seed", seed,
-                  "--resolution",      res,   "--threads", thr,  "--quiet", NULL, NULL,     NULL};
-  if (j->albedo_footprint > 1) argv[13] = "--albedo-footprint", argv[14] = fp;
+  snprintf(ck, sizeof ck, "%s.ckpt", out); /* no pid: the next run must find it */
+  snprintf(every, sizeof every, "%g", o->checkpoint_every);
+  char *argv[20] = {(char *)o->renderer, scene, "-o",        part, "--spp",  spp, "--seed", seed,
+                    "--resolution",      res,   "--threads", thr,  "--quiet"};
+  int na = 13;
+  if (j->albedo_footprint > 1) {
+    argv[na++] = "--albedo-footprint";
+    argv[na++] = fp;
+  }
+  if (o->checkpoint_every > 0) {
+    argv[na++] = "--checkpoint";
+    argv[na++] = ck;
+    argv[na++] = "--checkpoint-every";
+    argv[na++] = every;
+  }
+  argv[na] = NULL;
   pid_t pid = fork();
   if (pid == 0) {
     /* Its own process group, so that stopping the run reaches everything the renderer
@@ -278,6 +294,7 @@ static void usage(void) {
       stderr,
       "usage: kpcn-dataset run DATASET_DIR [--jobs N] [--shard i/n] [--renderer PATH]\n"
       "         [--threads-per-job T] [--dry-run] [--list] [--progress-every 60]\n"
+      "         [--checkpoint-every S]\n"
       "         [--max-black 0.9] [--max-background 0.9] [--max-blown 0.5] [--blown-level 1]\n");
 }
 
@@ -323,7 +340,11 @@ int ds_cmd_run(int argc, char **argv) {
         want = " (an integer in [0, 4096])";
       } else if (!strcmp(a, "--renderer"))
         renderer = v;
-      else if (!strcmp(a, "--progress-every")) {
+      else if (!strcmp(a, "--checkpoint-every")) {
+        ok = ds_parse_double(v, &o.checkpoint_every) && o.checkpoint_every >= 0 &&
+             o.checkpoint_every <= 1e9;
+        want = " (seconds in [0, 1e9]; 0 = no checkpoints)";
+      } else if (!strcmp(a, "--progress-every")) {
         ok = ds_parse_double(v, &o.progress_every) && o.progress_every >= 0;
         want = " (seconds >= 0)";
       } else if (!strcmp(a, "--shard")) {

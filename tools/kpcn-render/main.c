@@ -1,15 +1,19 @@
 /* kpcn-render: renders a Tungsten scene.json into an AOV EXR (DESIGN.md §4).
  *   kpcn-render scene.json -o out.exr [--spp N] [--seed S] [--threads N] [--resolution WxH]
  *               [--crop x,y,w,h] [--color-only] [--max-bounces N] [--albedo-spp N]
- *               [--half] [--quiet]
+ *               [--half] [--quiet] [--checkpoint PATH [--checkpoint-every S]]
  * A progress line (percent, samples/s, time left) is shown only when stderr is a terminal.
  * The output is written atomically; on any error nothing is written and the exit code is 1
- * (2 for usage errors). */
+ * (2 for usage errors). With --checkpoint, SIGINT/SIGTERM save the finished rows there and
+ * exit 128 + the signal; the same command resumes, and the file is removed once the output
+ * is written. */
 #include "kpcn/exr.h"
 #include "kpcn/render.h"
 #include "kpcn/scene.h"
 
 #include <errno.h>
+#include <signal.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -21,16 +25,26 @@ static void usage(FILE *f) {
       f, "usage: kpcn-render scene.json -o out.exr [--spp N] [--seed S] [--threads N (0=all)]\n"
          "                   [--resolution WxH] [--crop x,y,w,h] [--color-only] [--max-bounces N]\n"
          "                   [--albedo-spp N] [--albedo-footprint K] [--half] [--quiet]\n"
+         "                   [--checkpoint PATH [--checkpoint-every S]]\n"
          "  --albedo-spp N   the albedo buffer from N >= spp camera samples of a features-only\n"
          "                   pass (less edge noise for the denoiser's remodulation)\n"
          "  --albedo-footprint K  each sample's textured albedo averaged over K x K points of\n"
-         "                   its pixel's footprint (texture lookups, no rays; 1 = off)\n");
+         "                   its pixel's footprint (texture lookups, no rays; 1 = off)\n"
+         "  --checkpoint PATH  save finished rows there every S seconds (default 60) and on\n"
+         "                   SIGINT/SIGTERM; the same command resumes from it (bit-identical)\n"
+         "                   and removes it once the output is written\n");
 }
 
 typedef struct progress_state {
+  int show; /* a terminal, not --quiet */
   double t0;
+  double f0; /* the fraction done when this call started (a resumed render), < 0 until known */
+  double row;
   double samples_total;
 } progress_state;
+
+static volatile sig_atomic_t g_signal = 0;
+static void on_signal(int sig) { g_signal = sig; }
 
 static double now_s(void) {
   struct timespec ts;
@@ -38,14 +52,35 @@ static double now_s(void) {
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
+/* Also how a signal reaches the render: a non-zero return cancels it (and saves its rows). */
 static int on_progress(void *user, double f) {
   progress_state *p = user;
-  double el = now_s() - p->t0;
-  double rate = el > 0 ? f * p->samples_total / el : 0.0;
-  double left = f > 0 ? el * (1.0 - f) / f : 0.0;
-  fprintf(stderr, "\r%5.1f%%  %.2f M samples/s  %.0f s left   ", 100.0 * f, rate * 1e-6, left);
-  fflush(stderr);
-  return 0;
+  if (p->f0 < 0) p->f0 = f - p->row > 0 ? f - p->row : 0; /* the first call follows one row */
+  if (p->show) {
+    double el = now_s() - p->t0, df = f - p->f0;
+    double rate = el > 0 ? df * p->samples_total / el : 0.0;
+    double left = df > 0 ? el * (1.0 - f) / df : 0.0;
+    fprintf(stderr, "\r%5.1f%%  %.2f M samples/s  %.0f s left   ", 100.0 * f, rate * 1e-6, left);
+    fflush(stderr);
+  }
+  return g_signal != 0;
+}
+
+/* FNV-1a of the scene file's bytes: the scene's identity in a checkpoint (a changed scene
+ * file must not resume from rows of the old one). Files it references are not read. */
+static int file_hash(const char *path, uint64_t *out) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return 0;
+  uint64_t h = 0xcbf29ce484222325ull;
+  unsigned char buf[65536];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof buf, f)) > 0)
+    for (size_t i = 0; i < n; i++)
+      h = (h ^ buf[i]) * 0x100000001b3ull;
+  int ok = !ferror(f);
+  fclose(f);
+  *out = h;
+  return ok;
 }
 
 static int parse_int(const char *s, long lo, long hi, int *out) {
@@ -148,6 +183,17 @@ int main(int argc, char **argv) {
         return 2;
       }
       rs.crop_x = c4[0], rs.crop_y = c4[1], rs.crop_w = c4[2], rs.crop_h = c4[3];
+    } else if (strcmp(a, "--checkpoint") == 0) {
+      NEED_VALUE rs.checkpoint = v;
+    } else if (strcmp(a, "--checkpoint-every") == 0) {
+      NEED_VALUE char *end;
+      double sec = strtod(v, &end);
+      if (end == v || *end != 0 || !(sec >= 0 && sec <= 1e9)) {
+        fprintf(stderr, "kpcn-render: --checkpoint-every: expected seconds in [0, 1e9], got '%s'\n",
+                v);
+        return 2;
+      }
+      rs.checkpoint_every_s = sec;
     } else if (strcmp(a, "--color-only") == 0) {
       rs.color_only = 1;
     } else if (strcmp(a, "--half") == 0) {
@@ -172,6 +218,14 @@ int main(int argc, char **argv) {
     usage(stderr);
     return 2;
   }
+  if (rs.checkpoint && !file_hash(scene_path, &rs.scene_key)) {
+    fprintf(stderr, "kpcn-render: cannot read '%s': %s\n", scene_path, strerror(errno));
+    return 1;
+  }
+  if (rs.checkpoint && strcmp(rs.checkpoint, out_path) == 0) {
+    fprintf(stderr, "kpcn-render: --checkpoint must not be the output path '%s'\n", out_path);
+    return 2;
+  }
   kpcn_scene *scene = NULL;
   if (kpcn_scene_load(scene_path, &scene) != KPCN_OK) {
     fprintf(stderr, "kpcn-render: %s\n", kpcn_last_error());
@@ -184,19 +238,39 @@ int main(int argc, char **argv) {
   if (rs.crop_w > 0) w = rs.crop_w, h = rs.crop_h;
   ps.samples_total = (double)w * h * (rs.spp > 0 ? rs.spp : info.spp);
   ps.t0 = now_s();
-  if (!quiet && isatty(2)) {
+  ps.f0 = -1.0;
+  ps.row = 1.0 / h;
+  ps.show = !quiet && isatty(2);
+  if (ps.show || rs.checkpoint) {
     rs.progress = on_progress;
     rs.progress_user = &ps;
+  }
+  if (rs.checkpoint) { /* a signal saves the finished rows instead of losing them */
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
   }
   kpcn_aov_set *aov = NULL;
   kpcn_render_stats stats;
   kpcn_status st = kpcn_render_ex(scene, &rs, &aov, &stats);
-  if (rs.progress) fprintf(stderr, "\n");
+  if (ps.show) fprintf(stderr, "\n");
   kpcn_scene_destroy(scene);
+  if (st == KPCN_ERR_CANCELLED && g_signal) {
+    fprintf(stderr,
+            "kpcn-render: stopped by signal %d; finished rows saved in '%s' (the same "
+            "command resumes)\n",
+            (int)g_signal, rs.checkpoint);
+    return 128 + g_signal;
+  }
   if (st != KPCN_OK) {
     fprintf(stderr, "kpcn-render: %s\n", kpcn_last_error());
     return 1;
   }
+  if (stats.rows_resumed && !quiet)
+    fprintf(stderr, "kpcn-render: resumed %d of %d rows from '%s'\n", stats.rows_resumed, h,
+            rs.checkpoint);
   /* not silent: these pixels are darker than the scene says (kpcn_render_stats) */
   if (stats.nonfinite_samples)
     fprintf(stderr,
@@ -211,6 +285,9 @@ int main(int argc, char **argv) {
     fprintf(stderr, "kpcn-render: %s\n", kpcn_last_error());
     return 1;
   }
+  if (rs.checkpoint && remove(rs.checkpoint) != 0 && errno != ENOENT)
+    fprintf(stderr, "kpcn-render: warning: cannot remove checkpoint '%s': %s\n", rs.checkpoint,
+            strerror(errno));
   if (!quiet && isatty(2))
     fprintf(stderr, "%s: %dx%d, %.2f s, %.2f M samples/s, %.1f M rays/s\n", out_path, w, h,
             stats.seconds, stats.samples / stats.seconds * 1e-6, stats.rays / stats.seconds * 1e-6);

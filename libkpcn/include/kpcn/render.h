@@ -60,6 +60,19 @@ typedef struct kpcn_render_settings {
   kpcn_light_strategy lights;
   kpcn_progress_fn progress; /* called from the calling thread; non-zero return cancels */
   void *progress_user;
+  /* Checkpoints (DESIGN.md §9). When not NULL: if this file holds finished rows of the same
+   * render (scene_key, every setting above that changes pixels, size, crop, kpcn version) the
+   * render starts from them; a file of another render, or a damaged one, is an error naming
+   * the difference, and nothing is rendered. While rendering, the finished rows are written
+   * to it (atomically) every checkpoint_every_s seconds (0: only when cancelled) and when
+   * the progress callback cancels. A resumed render is bit-identical to an uninterrupted one,
+   * at any thread count. The file is left in place at the end: remove it once the result is
+   * safe. */
+  const char *checkpoint;
+  double checkpoint_every_s; /* default 60 */
+  /* What the checkpoint records as the scene's identity; the library cannot see the files a
+   * scene was loaded from (kpcn-render: a hash of the scene file's bytes). */
+  uint64_t scene_key;
 } kpcn_render_settings;
 
 kpcn_render_settings kpcn_render_settings_defaults(void);
@@ -67,10 +80,11 @@ kpcn_render_settings kpcn_render_settings_defaults(void);
 /* Figures of the last render (optional). */
 typedef struct kpcn_render_stats {
   double seconds;   /* wall time of the sampling loop */
-  uint64_t samples; /* camera samples traced */
-  uint64_t rays;    /* Embree queries (intersect + occluded) */
+  uint64_t samples; /* camera samples traced (by this call: not the rows a checkpoint held) */
+  uint64_t rays;    /* Embree queries (intersect + occluded), by this call */
+  int rows_resumed; /* rows taken from the checkpoint */
   /* samples with a NaN/Inf value (radiance beyond float range: an albedo above 1 multiplies
-   * along a path), counted as black */
+   * along a path), counted as black; in the whole image, resumed rows included */
   uint64_t nonfinite_samples;
 } kpcn_render_stats;
 

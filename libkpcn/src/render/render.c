@@ -1,7 +1,8 @@
 /* The render loop: rows of the (cropped) image are distributed over OpenMP threads; each
  * pixel traces all of its samples in order with its own sample sequence and keeps per
  * channel Welford accumulators (mean, M2) in double. Nothing is shared between pixels, so
- * the result is bit-identical whatever the thread count or schedule.
+ * the result is bit-identical whatever the thread count or schedule, and a render resumed from
+ * a checkpoint (render_ckpt.c: the finished rows) equals an uninterrupted one.
  *
  * Filtering is done by importance sampling the reconstruction filter (Tungsten's approach):
  * every sample has weight 1 and lands in its own pixel, so the variance of the mean is the
@@ -9,6 +10,7 @@
 #include "core/internal.h"
 #include "render/render_internal.h"
 
+#include <cjson/cJSON.h>
 #include <float.h>
 #include <math.h>
 #include <omp.h>
@@ -25,6 +27,7 @@ kpcn_render_settings kpcn_render_settings_defaults(void) {
   s.nthreads = 0;
   s.max_bounces = -1;
   s.lights = KPCN_LIGHTS_SCENE;
+  s.checkpoint_every_s = 60.0;
   return s;
 }
 
@@ -171,6 +174,38 @@ kpcn_status kpcn_render_ctx_init(kpcn_render_ctx *ctx, const kpcn_scene *scene,
   return KPCN_OK;
 }
 
+/* What identifies a render's pixels, for its checkpoint: the scene, every resolved setting
+ * that changes a pixel, the window and the library version (its sampling may change). */
+static cJSON *render_identity(const kpcn_render_ctx *c, const kpcn_render_settings *st,
+                              const kpcn_scene *scene, int spp, int aspp, const int crop[4]) {
+  char key[32], seed[32];
+  snprintf(key, sizeof key, "%016llx", (unsigned long long)st->scene_key);
+  snprintf(seed, sizeof seed, "%lld", (long long)st->seed);
+  const int dims[2] = {c->width, c->height};
+  cJSON *o = cJSON_CreateObject();
+  if (!o) return NULL;
+  int ok = cJSON_AddStringToObject(o, "kpcn_version", KPCN_VERSION_STRING) &&
+           /* the caller's key names the scene's content; without one, its name (a path) */
+           (st->scene_key ? cJSON_AddStringToObject(o, "scene_key", key) != NULL
+                          : cJSON_AddStringToObject(o, "scene", scene->name) != NULL) &&
+           cJSON_AddItemToObject(o, "resolution", cJSON_CreateIntArray(dims, 2)) &&
+           cJSON_AddItemToObject(o, "crop", cJSON_CreateIntArray(crop, 4)) &&
+           cJSON_AddNumberToObject(o, "spp", spp) && cJSON_AddStringToObject(o, "seed", seed) &&
+           cJSON_AddNumberToObject(o, "albedo_spp", aspp) &&
+           cJSON_AddNumberToObject(o, "albedo_footprint", c->albedo_footprint) &&
+           cJSON_AddNumberToObject(o, "color_only", c->color_only) &&
+           cJSON_AddNumberToObject(o, "max_bounces", c->max_bounces) &&
+           cJSON_AddNumberToObject(o, "lights",
+                                   c->mis   ? 1
+                                   : c->nee ? 3
+                                            : 2);
+  if (!ok) {
+    cJSON_Delete(o);
+    return NULL;
+  }
+  return o;
+}
+
 kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *settings,
                            kpcn_aov_set **out, kpcn_render_stats *stats) {
   if (!scene || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_render: NULL scene or out");
@@ -235,57 +270,98 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   snprintf(set->scene, sizeof(set->scene), "%s", scene->name);
   snprintf(set->version, sizeof(set->version), "%s", KPCN_VERSION_STRING);
 
-  const size_t plane = (size_t)cw * (size_t)chh;
+  if (st.checkpoint && !(st.checkpoint_every_s >= 0)) {
+    kpcn_aov_destroy(set);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "checkpoint_every_s: %g must be >= 0",
+                     st.checkpoint_every_s);
+  }
+  const int crop[4] = {cx, cy, cw, chh};
+  cJSON *what = st.checkpoint ? render_identity(&ctx, &st, scene, spp, aspp, crop) : NULL;
+  kpcn_render_ckpt *ck = NULL;
+  kpcn_status cs = st.checkpoint && !what
+                       ? kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "render checkpoint: out of memory")
+                       : kpcn_render_ckpt_create(&ck, st.checkpoint, what, set);
+  cJSON_Delete(what);
+  int resumed = 0;
+  if (cs == KPCN_OK) cs = kpcn_render_ckpt_load(ck, &resumed);
+  if (cs != KPCN_OK) {
+    kpcn_render_ckpt_destroy(ck);
+    kpcn_aov_destroy(set);
+    return cs;
+  }
+
   int nthreads = kpcn_resolve_threads(st.nthreads);
   volatile int cancel = 0;
-  int rows_done = 0;
-  uint64_t total_rays = 0, nonfinite = 0;
+  int rows_done = resumed;
+  uint64_t total_rays = 0; /* traced by this call */
+  kpcn_status save_st = KPCN_OK;
   unsigned saved_csr = kpcn_fast_fp_begin(nthreads); /* radiance never needs denormals */
-  double t0 = now_s();
-#pragma omp parallel num_threads(nthreads) reduction(+ : total_rays, nonfinite)
+  double t0 = now_s(), last_save = t0;
+#pragma omp parallel num_threads(nthreads) reduction(+ : total_rays)
   {
 #pragma omp for schedule(dynamic, 1)
     for (int row = 0; row < chh; row++) {
-      if (cancel) continue;
+      if (cancel || kpcn_render_ckpt_is_done(ck, row)) continue;
       int py = cy + row;
+      uint64_t rays = 0, nonfinite = 0;
       for (int col = 0; col < cw; col++) {
         int px = cx + col;
         pixel_acc acc;
         memset(&acc, 0, sizeof(acc));
         kpcn_sampler_cache cache;
-        pixel_samples(&ctx, px, py, spp, &cache, &acc, &total_rays, &nonfinite);
+        pixel_samples(&ctx, px, py, spp, &cache, &acc, &rays, &nonfinite);
         size_t pi = (size_t)row * (size_t)cw + (size_t)col;
         for (int b = 0; b < KPCN_BUF_COUNT; b++)
           if (set->buf[b]) store_buffer(set, b, &acc, pi);
         if (aspp) { /* the albedo pass replaces the albedo buffer */
           memset(&acc, 0, sizeof(acc));
-          pixel_samples(&fctx, px, py, aspp, &cache, &acc, &total_rays, &nonfinite);
+          pixel_samples(&fctx, px, py, aspp, &cache, &acc, &rays, &nonfinite);
           store_buffer(set, KPCN_BUF_ALBEDO, &acc, pi);
         }
       }
+      total_rays += rays;
+      kpcn_render_ckpt_row_done(ck, row, rays, nonfinite);
 #pragma omp atomic
       rows_done++;
-      if (omp_get_thread_num() == 0 && st.progress) {
-        int done;
+      /* the calling thread (errors are thread-local: kpcn_last_error is the caller's) */
+      if (omp_get_thread_num() == 0) {
+        if (st.progress) {
+          int done;
 #pragma omp atomic read
-        done = rows_done;
-        if (st.progress(st.progress_user, (double)done / chh)) cancel = 1;
+          done = rows_done;
+          if (st.progress(st.progress_user, (double)done / chh)) cancel = 1;
+        }
+        if (st.checkpoint && st.checkpoint_every_s > 0 &&
+            now_s() - last_save >= st.checkpoint_every_s) {
+          if ((save_st = kpcn_render_ckpt_save(ck)) != KPCN_OK) cancel = 1;
+          last_save = now_s();
+        }
       }
     }
   }
   kpcn_fast_fp_end(saved_csr, nthreads);
   double secs = now_s() - t0;
   if (cancel) {
+    kpcn_status r = save_st; /* a failed periodic save stopped the render: report it */
+    if (r == KPCN_OK) r = kpcn_render_ckpt_save(ck);
+    if (r == KPCN_OK)
+      r = kpcn_fail(KPCN_ERR_CANCELLED, "render of '%s' cancelled%s", scene->name,
+                    st.checkpoint ? " (its finished rows are in the checkpoint)" : "");
+    kpcn_render_ckpt_destroy(ck);
     kpcn_aov_destroy(set);
-    return kpcn_fail(KPCN_ERR_CANCELLED, "render of '%s' cancelled", scene->name);
+    return r;
   }
   if (st.progress) st.progress(st.progress_user, 1.0);
   if (stats) {
+    uint64_t all_rays, nonfinite;
+    kpcn_render_ckpt_totals(ck, &all_rays, &nonfinite);
     stats->seconds = secs;
-    stats->samples = (uint64_t)plane * (uint64_t)spp;
+    stats->samples = (uint64_t)(chh - resumed) * (uint64_t)cw * (uint64_t)spp;
     stats->rays = total_rays;
+    stats->rows_resumed = resumed;
     stats->nonfinite_samples = nonfinite;
   }
+  kpcn_render_ckpt_destroy(ck);
   *out = set;
   return KPCN_OK;
 }

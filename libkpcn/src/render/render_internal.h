@@ -65,6 +65,25 @@ typedef struct kpcn_render_ctx {
  * of width x height exceed phys_bytes (0: this machine's physical memory). */
 kpcn_status kpcn_render_check_memory(int width, int height, int planes, uint64_t phys_bytes);
 
+/* render_ckpt.c: which rows of a render are finished, their statistics and, when path is not
+ * NULL, its checkpoint file (kpcn_render_settings.checkpoint). `what` is the JSON object that
+ * identifies the render (a resume refuses a file whose object differs); set receives the
+ * saved rows. Without a path, load and save do nothing. */
+typedef struct kpcn_render_ckpt kpcn_render_ckpt;
+struct cJSON;
+kpcn_status kpcn_render_ckpt_create(kpcn_render_ckpt **out, const char *path,
+                                    const struct cJSON *what, kpcn_aov_set *set);
+void kpcn_render_ckpt_destroy(kpcn_render_ckpt *c);
+/* Loads the file if it exists (*rows: rows it held; 0 and KPCN_OK when there is none); a file
+ * of another render, or a damaged one, is an error naming it, with nothing loaded. */
+kpcn_status kpcn_render_ckpt_load(kpcn_render_ckpt *c, int *rows);
+/* Marks row finished (its pixels are in the set), from any thread. */
+void kpcn_render_ckpt_row_done(kpcn_render_ckpt *c, int row, uint64_t rays, uint64_t nonfinite);
+int kpcn_render_ckpt_is_done(const kpcn_render_ckpt *c, int row);
+void kpcn_render_ckpt_totals(const kpcn_render_ckpt *c, uint64_t *rays, uint64_t *nonfinite);
+/* Writes the finished rows, atomically; safe while other threads render other rows. */
+kpcn_status kpcn_render_ckpt_save(const kpcn_render_ckpt *c);
+
 /* geometry.c */
 void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_vec3 d, float t,
                    unsigned prim_id, float bu, float bv, kpcn_hit *h);

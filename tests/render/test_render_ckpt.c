@@ -1,0 +1,220 @@
+/* Render checkpoints (kpcn_render_settings.checkpoint, kpcn-render --checkpoint):
+ *  - a render cancelled part-way and resumed, at another thread count, is bit-identical to an
+ *    uninterrupted one, and reports what it resumed and traced;
+ *  - a checkpoint of another render (spp, scene key) is refused naming the difference; a
+ *    damaged, truncated or foreign file is refused; nothing is rendered either way;
+ *  - periodic saves, a bad interval and an unwritable path;
+ *  - kpcn-render: SIGINT saves the rows and exits 130; the same command resumes to the same
+ *    bytes as a render never interrupted, and removes the checkpoint. */
+#define _GNU_SOURCE
+#include "render_testutil.h"
+#include "testutil.h"
+
+#include <signal.h>
+#include <spawn.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+extern char **environ;
+
+#define CORNELL KPCN_TESTDATA "/scenes/cornell-box/scene.json"
+#define RENDER_BIN KPCN_BINARY_DIR "/tools/kpcn-render/kpcn-render"
+enum { W = 48, H = 40, SPP = 16 };
+
+static int sets_equal(const kpcn_aov_set *a, const kpcn_aov_set *b) {
+  if (!a || !b || a->width != b->width || a->height != b->height) return 0;
+  const size_t plane = kpcn_aov_plane_size(a);
+  for (int k = 0; k < KPCN_BUF_COUNT; k++) {
+    const size_t n = plane * (size_t)kpcn_buffer_channels((kpcn_buffer)k);
+    if (!a->buf[k] != !b->buf[k] || !a->var[k] != !b->var[k]) return 0;
+    if (a->buf[k] && memcmp(a->buf[k], b->buf[k], n * sizeof(float))) return 0;
+    if (a->var[k] && memcmp(a->var[k], b->var[k], plane * sizeof(float))) return 0;
+  }
+  return 1;
+}
+
+static kpcn_render_settings settings(int threads, const char *ckpt) {
+  kpcn_render_settings rs = kpcn_render_settings_defaults();
+  rs.spp = SPP, rs.seed = 7, rs.nthreads = threads, rs.width = W, rs.height = H;
+  rs.checkpoint = ckpt;
+  rs.checkpoint_every_s = 0;
+  rs.scene_key = 0x1234;
+  return rs;
+}
+
+static int cancel_after(void *user, double f) {
+  (void)f;
+  return --*(int *)user <= 0;
+}
+
+static int file_exists(const char *p) {
+  struct stat sb;
+  return stat(p, &sb) == 0;
+}
+
+static void corrupt(const char *src, const char *dst, long at, long keep) {
+  FILE *f = fopen(src, "rb");
+  CHECK(f != NULL);
+  if (!f) return;
+  fseek(f, 0, SEEK_END);
+  long n = ftell(f);
+  fseek(f, 0, SEEK_SET);
+  unsigned char *b = malloc((size_t)n);
+  CHECK(fread(b, 1, (size_t)n, f) == (size_t)n);
+  fclose(f);
+  if (at >= 0 && at < n) b[at] ^= 0x40;
+  FILE *g = fopen(dst, "wb");
+  fwrite(b, 1, (size_t)(keep >= 0 && keep < n ? keep : n), g);
+  fclose(g);
+  free(b);
+}
+
+/* Renders with rs; *st gets the status; the set on success. */
+static kpcn_aov_set *render(const kpcn_scene *s, const kpcn_render_settings *rs, kpcn_status *st,
+                            kpcn_render_stats *stats) {
+  kpcn_aov_set *out = (kpcn_aov_set *)1;
+  *st = kpcn_render_ex(s, rs, &out, stats);
+  if (*st != KPCN_OK) CHECK(out == NULL);
+  return *st == KPCN_OK ? out : NULL;
+}
+
+static void test_library(const kpcn_scene *s) {
+  kpcn_status st;
+  kpcn_render_stats full_stats, stats;
+  kpcn_render_settings rs = settings(2, NULL);
+  kpcn_aov_set *full = render(s, &rs, &st, &full_stats);
+  CHECK(full != NULL);
+  remove("c.ckpt");
+
+  /* cancelled after 10 rows (one thread: rows 0-9), then resumed with two threads */
+  rs = settings(1, "c.ckpt");
+  int calls = 10;
+  rs.progress = cancel_after, rs.progress_user = &calls;
+  CHECK(render(s, &rs, &st, NULL) == NULL && st == KPCN_ERR_CANCELLED);
+  CHECK(strstr(kpcn_last_error(), "checkpoint") != NULL);
+  CHECK(file_exists("c.ckpt"));
+  rs = settings(2, "c.ckpt");
+  kpcn_aov_set *resumed = render(s, &rs, &st, &stats);
+  CHECK(resumed != NULL && sets_equal(full, resumed));
+  CHECK(stats.rows_resumed == 10);
+  CHECK(stats.samples == (uint64_t)(H - 10) * W * SPP);
+  CHECK(stats.rays > 0 && stats.rays < full_stats.rays);
+  CHECK(stats.nonfinite_samples == full_stats.nonfinite_samples);
+  CHECK(file_exists("c.ckpt")); /* the caller removes it once the result is safe */
+  kpcn_aov_destroy(resumed);
+
+  /* another render's checkpoint: refused, naming the difference */
+  rs = settings(2, "c.ckpt");
+  rs.spp = SPP / 2;
+  CHECK(render(s, &rs, &st, NULL) == NULL && st == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "its spp is 16, this render's is 8") != NULL);
+  rs = settings(2, "c.ckpt");
+  rs.scene_key = 99;
+  CHECK(render(s, &rs, &st, NULL) == NULL && strstr(kpcn_last_error(), "its scene_key is") != NULL);
+  rs = settings(2, "c.ckpt");
+  rs.albedo_footprint = 2;
+  CHECK(render(s, &rs, &st, NULL) == NULL &&
+        strstr(kpcn_last_error(), "its albedo_footprint is 0") != NULL);
+
+  /* damaged files: a flipped pixel bit, a truncation, something else entirely */
+  static const struct {
+    long at, keep;
+    const char *msg;
+  } bad[] = {{-1, 5, "is not a kpcn-render checkpoint"},
+             {-1, 1000, "is damaged"},
+             {20000, -1, "checksum does not match"},
+             {16, -1, "is damaged: its header is not JSON"}};
+  for (int i = 0; i < (int)(sizeof bad / sizeof bad[0]); i++) {
+    corrupt("c.ckpt", "bad.ckpt", bad[i].at, bad[i].keep);
+    rs = settings(2, "bad.ckpt");
+    CHECK(render(s, &rs, &st, NULL) == NULL && st == KPCN_ERR_FORMAT);
+    if (!strstr(kpcn_last_error(), bad[i].msg))
+      printf("case %d: '%s' lacks '%s'\n", i, kpcn_last_error(), bad[i].msg);
+    CHECK(strstr(kpcn_last_error(), bad[i].msg) != NULL);
+  }
+  remove("bad.ckpt");
+  remove("c.ckpt");
+
+  /* periodic saves: one thread saving after every row leaves every row in the file, and a
+   * second call resumes all of them and traces nothing */
+  rs = settings(1, "p.ckpt");
+  rs.checkpoint_every_s = 1e-9;
+  kpcn_aov_set *a = render(s, &rs, &st, NULL);
+  CHECK(a != NULL && sets_equal(full, a) && file_exists("p.ckpt"));
+  kpcn_aov_set *b = render(s, &rs, &st, &stats);
+  CHECK(b != NULL && sets_equal(full, b) && stats.rows_resumed == H && stats.samples == 0);
+  kpcn_aov_destroy(a);
+  kpcn_aov_destroy(b);
+  remove("p.ckpt");
+
+  rs = settings(1, "p.ckpt");
+  rs.checkpoint_every_s = -1;
+  CHECK(render(s, &rs, &st, NULL) == NULL && st == KPCN_ERR_INVALID_ARGUMENT);
+  rs = settings(1, "no_such_dir/p.ckpt");
+  rs.checkpoint_every_s = 1e-9;
+  CHECK(render(s, &rs, &st, NULL) == NULL && st == KPCN_ERR_IO);
+  CHECK(strstr(kpcn_last_error(), "no_such_dir/p.ckpt") != NULL);
+  kpcn_aov_destroy(full);
+}
+
+static pid_t spawn(char *const argv[]) {
+  pid_t pid;
+  return posix_spawn(&pid, argv[0], NULL, NULL, argv, environ) == 0 ? pid : -1;
+}
+
+static int wait_status(pid_t pid) {
+  int ws = 0;
+  waitpid(pid, &ws, 0);
+  return WIFEXITED(ws) ? WEXITSTATUS(ws) : 1000 + (WIFSIGNALED(ws) ? WTERMSIG(ws) : 0);
+}
+
+static void test_cli(void) {
+  if (access(RENDER_BIN, X_OK) != 0) {
+    printf("skip the CLI part: no %s\n", RENDER_BIN);
+    return;
+  }
+  remove("cli.ckpt");
+  remove("cli.exr");
+  /* long enough (1 thread, 2048 spp) that the signal lands mid-render */
+  char *run[] = {
+      RENDER_BIN,           CORNELL, "-o",           "cli.exr", "--spp",        "2048",
+      "--threads",          "1",     "--resolution", "64x64",   "--checkpoint", "cli.ckpt",
+      "--checkpoint-every", "0.05",  "--quiet",      NULL};
+  pid_t pid = spawn(run);
+  CHECK(pid > 0);
+  for (int i = 0; i < 6000 && !file_exists("cli.ckpt"); i++)
+    usleep(10000);
+  CHECK(file_exists("cli.ckpt"));
+  kill(pid, SIGINT);
+  CHECK(wait_status(pid) == 130);
+  CHECK(file_exists("cli.ckpt") && !file_exists("cli.exr"));
+  run[7] = "2"; /* resumed with two threads */
+  pid = spawn(run);
+  CHECK(wait_status(pid) == 0);
+  CHECK(file_exists("cli.exr") && !file_exists("cli.ckpt"));
+  char *plain[] = {RENDER_BIN,  CORNELL, "-o",           "plain.exr", "--spp",   "2048",
+                   "--threads", "2",     "--resolution", "64x64",     "--quiet", NULL};
+  CHECK(wait_status(spawn(plain)) == 0);
+  kpcn_aov_set *x = NULL, *y = NULL;
+  CHECK(kpcn_exr_read_aov("cli.exr", &x) == KPCN_OK &&
+        kpcn_exr_read_aov("plain.exr", &y) == KPCN_OK);
+  CHECK(sets_equal(x, y));
+  kpcn_aov_destroy(x);
+  kpcn_aov_destroy(y);
+  remove("cli.exr");
+  remove("plain.exr");
+}
+
+int main(void) {
+  kpcn_scene *s = NULL;
+  CHECK(kpcn_scene_load(CORNELL, &s) == KPCN_OK);
+  if (s) test_library(s);
+  kpcn_scene_destroy(s);
+  test_cli();
+  return kt_summary("render_ckpt");
+}
