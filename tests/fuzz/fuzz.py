@@ -20,6 +20,10 @@ Targets (each draws its own mutations from --seed, so a run is reproducible):
          payload (NaN/Inf) damaged, or truncated
   cli    kpcntool chains of random commands, modifiers and values
   exr    kpcntool (denoise, metrics, info, augment) on AOV EXRs with flipped bytes or truncated
+  ckpt   kpcn-render --checkpoint resuming from a damaged checkpoint (raw damage, and damage
+         behind a recomputed checksum: row flags, counts, NaN/Inf pixels)
+  dataset  kpcn-dataset run and patches on a dataset folder with a damaged plan, manifest,
+         variant scene or render, some renders removed
 
 The ctest `fuzz_smoke` runs a few hundred cases; longer runs (--cases 5000) are for
 developers (docs/robustness.md records what they found)."""
@@ -28,6 +32,7 @@ import copy
 import json
 import os
 import random
+import re
 import shutil
 import struct
 import subprocess
@@ -380,8 +385,104 @@ def fuzz_exr(fz, rng, n):
                finite=[out] if cmd[0].startswith("--denoise") else [])
 
 
+# ---------------------------------------------------------------- render checkpoints
+CKPT_ARGS = ["--spp", "4", "--resolution", "16x12", "--threads", "1", "--quiet"]
+
+
+def fnv1a(data, h=0xcbf29ce484222325):
+    for byte in data:
+        h = ((h ^ byte) * 0x100000001b3) % 2**64
+    return h
+
+
+def fuzz_ckpt(fz, rng, n):
+    """kpcn-render --checkpoint resuming from damaged checkpoints: raw damage (the checksum's
+    business) and, with the checksum made right again, damaged row flags, counts and pixels."""
+    with open(fz.path("small.ckpt"), "rb") as f:
+        raw = f.read()
+    hlen = struct.unpack("<Q", raw[8:16])[0]
+    body = 16 + hlen  # row flags, counts, planes, then the 8-byte checksum
+    scene = os.path.join(fz.a.testdata, "scenes", "cornell-box", "scene.json")
+    case, src, out = fz.path("case.ckpt"), fz.path("case_src.ckpt"), fz.path("ckpt_out.exr")
+    for _ in range(n):
+        b, r = bytearray(raw), rng.random()
+        if r < 0.2:  # anywhere, checksum left as it is
+            for _ in range(rng.randint(1, 6)):
+                b[rng.randrange(len(b))] = rng.randrange(256)
+        elif r < 0.35:  # header JSON or its length
+            for _ in range(rng.randint(1, 4)):
+                b[rng.randrange(8, body)] = rng.choice(b'{}[]",:0123456789-eE.x ')
+        elif r < 0.45:
+            b = b[:rng.randrange(len(b))]
+        else:  # the body, checksum recomputed: only the loader's own checks stand
+            end = len(b) - 8
+            for _ in range(rng.randint(1, 8)):
+                k = rng.randrange(body, end - 4)
+                b[k:k + 4] = rng.choice([struct.pack("<f", rng.choice(
+                    [float("nan"), float("inf"), -1e38, 3e38])), struct.pack("<I", 2**32 - 1),
+                    bytes([rng.randrange(256)]) * 4])
+            b[end:] = struct.pack("<Q", fnv1a(b[body:end]))
+        for p in (case, src):
+            with open(p, "wb") as f:
+                f.write(bytes(b))
+        fz.run("ckpt", [fz.bin("kpcn-render"), scene, "-o", out, "--checkpoint", case] + CKPT_ARGS,
+               [out], keep=[src], finite=[out])
+
+
+# ---------------------------------------------------------------- kpcn-dataset folders
+def fuzz_dataset(fz, rng, n):
+    """kpcn-dataset run and patches on a rendered dataset folder whose plan, manifest, variant
+    scene or renders are damaged (some renders removed, so that run has work to do)."""
+    base, case = fz.path("ds"), fz.path("ds_case")
+    files = [os.path.relpath(os.path.join(d, f), base) for d, _, fs in os.walk(base)
+             for f in fs if not f.endswith(".log")]
+    store = fz.path("ds_out.kps")
+    for _ in range(n):
+        shutil.rmtree(case, ignore_errors=True)
+        shutil.copytree(base, case, symlinks=True)
+        name = rng.choice(files)
+        p = os.path.join(case, name)
+        with open(p, "rb") as f:
+            b = bytearray(f.read())
+        if name.endswith(".exr") or rng.random() < 0.3:
+            if rng.random() < 0.5 and b:
+                b = b[:rng.randrange(len(b))]
+            else:
+                for _ in range(rng.randint(1, 6)):
+                    b[rng.randrange(len(b))] = rng.randrange(256)
+        else:  # text: a number made absurd, a key renamed, a line duplicated or cut
+            t = b.decode("latin1")
+            k = rng.randrange(4)
+            if k == 0:
+                nums = list(re.finditer(r"-?\d+(\.\d+)?", t))
+                if nums:
+                    m = rng.choice(nums)
+                    t = t[:m.start()] + str(rng.choice(WEIRD[:10])) + t[m.end():]
+            elif k == 1:
+                keys = list(re.finditer(r'"[a-z_]+":', t))
+                if keys:
+                    m = rng.choice(keys)
+                    t = t[:m.start()] + '"zz' + t[m.start() + 1:]
+            elif k == 2:
+                lines = t.splitlines(True)
+                if lines:
+                    i = rng.randrange(len(lines))
+                    lines.insert(i, lines[i])
+                t = "".join(lines)
+            else:
+                t = t[:rng.randrange(len(t) + 1)]
+            b = bytearray(t.encode("latin1"))
+        with open(p, "wb") as f:
+            f.write(bytes(b))
+        if rng.random() < 0.5:
+            shutil.rmtree(os.path.join(case, "renders", "cornell-box"), ignore_errors=True)
+        fz.run("dataset", [fz.bin("kpcn-dataset"), "run", case, "--jobs", "1"], [], keep=[p])
+        fz.run("dataset", [fz.bin("kpcn-dataset"), "patches", case, "-o", store, "--size", "8",
+                           "--per-image", "3", "--allow-partial"], [store], keep=[p])
+
+
 TARGETS = {"scene": fuzz_scene, "model": fuzz_model, "kps": fuzz_kps, "cli": fuzz_cli,
-           "exr": fuzz_exr}
+           "exr": fuzz_exr, "ckpt": fuzz_ckpt, "dataset": fuzz_dataset}
 
 
 def prepare(fz):
@@ -395,6 +496,27 @@ def prepare(fz):
                         "--resolution", res, "--threads", "1"], check=True, capture_output=True)
     with open(fz.path("bad.png"), "w") as f:
         f.write("not a png")
+    # a checkpoint holding every row: written after each row (one thread), kept because the
+    # output cannot be written (its folder does not exist)
+    ck = fz.path("small.ckpt")
+    if os.path.exists(ck):
+        os.remove(ck)
+    subprocess.run([fz.bin("kpcn-render"), scene % "cornell-box", "-o", fz.path("no/x.exr"),
+                    "--checkpoint", ck, "--checkpoint-every", "1e-9"] + CKPT_ARGS,
+                   capture_output=True)
+    assert os.path.exists(ck), "fuzz: no checkpoint to mutate"
+    # a rendered dataset folder: two scenes, one variant, 2 and 8 spp at 16x16
+    shutil.rmtree(fz.path("ds"), ignore_errors=True)
+    shutil.rmtree(fz.path("ds_scenes"), ignore_errors=True)
+    os.makedirs(fz.path("ds_scenes"))
+    for sc in ("cornell-box", "textures"):
+        os.symlink(os.path.join(fz.a.testdata, "scenes", sc), fz.path(os.path.join("ds_scenes", sc)))
+    subprocess.run([fz.bin("kpcn-dataset"), "plan", "--scenes", fz.path("ds_scenes"), "-o",
+                    fz.path("ds"), "--variants", "1", "--spp", "2", "--ref-spp", "8",
+                    "--resolution", "16x16", "--no-preview", "--split",
+                    "train:cornell-box+textures"], check=True, capture_output=True)
+    subprocess.run([fz.bin("kpcn-dataset"), "run", fz.path("ds"), "--jobs", "1"], check=True,
+                   capture_output=True)
     ds = os.path.join(fz.a.testdata, "dataset")
     subprocess.run([fz.bin("kpcntool"), os.path.join(ds, "sample_noisy.exr"),
                     os.path.join(ds, "sample_ref.exr"),

@@ -269,6 +269,15 @@ kpcn_status kpcn_render_ckpt_load(kpcn_render_ckpt *c, int *rows) {
     if (c->done[r] > 1) DAMAGED("render checkpoint '%s' is damaged (row flags)", c->path);
     *rows += c->done[r];
   }
+  /* a render's planes are finite (non-finite samples count as black, variances are clamped
+   * to FLT_MAX): anything else was not written by a render, whatever its checksum says */
+  for (int k = 0; k < np; k++) {
+    const float *p = plane_at(c->set, k);
+    for (size_t i = 0; i < h * w; i++)
+      if (!isfinite(p[i]))
+        DAMAGED("render checkpoint '%s' is damaged (a non-finite value in row %zu)", c->path,
+                i / w);
+  }
 done:
   if (st != KPCN_OK) { /* leave nothing half-loaded behind: the render starts from zeros */
     memset(c->done, 0, h);
