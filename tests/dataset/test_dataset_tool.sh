@@ -311,8 +311,8 @@ if [ -n "$REAL" ] && [ -x "$REAL" ]; then
   "$DS" run "$T/ck" --jobs 1 --threads-per-job 1 --renderer "$REAL" --checkpoint-every 0.05 \
     > /dev/null 2>&1 &
   pid=$!
-  for _ in $(seq 600); do
-    [ -n "$(ls "$T"/ck/renders/*/*.ckpt 2>/dev/null)" ] && break
+  for _ in $(seq 600); do # a reference render's (a 2-spp job's could end before the kill)
+    [ -n "$(ls "$T"/ck/renders/*/*ref*.ckpt 2>/dev/null)" ] && break
     sleep 0.05
   done
   kill -TERM $pid
@@ -322,7 +322,9 @@ if [ -n "$REAL" ] && [ -x "$REAL" ]; then
     "a stopped run keeps its checkpoints (rc $rc)"
   "$DS" run "$T/ck" --jobs 2 --renderer "$REAL" --checkpoint-every 0.05 > /dev/null 2>&1
   rc=$?
+  ok 'grep -q "kpcn-render: resumed " "$T"/ck/logs/*ref*.log' "a job resumed (its log says so)"
   "$DS" run "$T/plain" --jobs 2 --renderer "$REAL" > /dev/null 2>&1
+  rc=$((rc + $?))
   same=1
   # every channel's pixels (the headers name the scene files' different paths)
   for f in "$T"/plain/renders/*/*.exr; do

@@ -389,9 +389,16 @@ def fuzz_exr(fz, rng, n):
 CKPT_ARGS = ["--spp", "4", "--resolution", "16x12", "--threads", "1", "--quiet"]
 
 
-def fnv1a(data, h=0xcbf29ce484222325):
-    for byte in data:
-        h = ((h ^ byte) * 0x100000001b3) % 2**64
+def ckpt_hash(body, rows):
+    """render_ckpt.c's checksum: FNV-1a steps per row-flag byte, per u64 count, per float."""
+    h, P, M = 0xcbf29ce484222325, 0x100000001b3, 2**64 - 1
+    counts = 16 * rows
+    for byte in body[:rows]:
+        h = ((h ^ byte) * P) & M
+    for (v,) in struct.iter_unpack("<Q", body[rows:rows + counts]):
+        h = ((h ^ v) * P) & M
+    for (v,) in struct.iter_unpack("<I", body[rows + counts:]):
+        h = ((h ^ v) * P) & M
     return h
 
 
@@ -402,6 +409,7 @@ def fuzz_ckpt(fz, rng, n):
         raw = f.read()
     hlen = struct.unpack("<Q", raw[8:16])[0]
     body = 16 + hlen  # row flags, counts, planes, then the 8-byte checksum
+    rows = json.loads(raw[16:body])["crop"][3]
     scene = os.path.join(fz.a.testdata, "scenes", "cornell-box", "scene.json")
     case, src, out = fz.path("case.ckpt"), fz.path("case_src.ckpt"), fz.path("ckpt_out.exr")
     for _ in range(n):
@@ -421,7 +429,7 @@ def fuzz_ckpt(fz, rng, n):
                 b[k:k + 4] = rng.choice([struct.pack("<f", rng.choice(
                     [float("nan"), float("inf"), -1e38, 3e38])), struct.pack("<I", 2**32 - 1),
                     bytes([rng.randrange(256)]) * 4])
-            b[end:] = struct.pack("<Q", fnv1a(b[body:end]))
+            b[end:] = struct.pack("<Q", ckpt_hash(bytes(b[body:end]), rows))
         for p in (case, src):
             with open(p, "wb") as f:
                 f.write(bytes(b))

@@ -4,12 +4,15 @@
  *  - a checkpoint of another render (spp, scene key) is refused naming the difference; a
  *    damaged, truncated or foreign file is refused; nothing is rendered either way;
  *  - periodic saves, a bad interval and an unwritable path;
- *  - kpcn-render: SIGINT saves the rows and exits 130; the same command resumes to the same
- *    bytes as a render never interrupted, and removes the checkpoint. */
+ *  - kpcn-render: SIGINT saves the rows and exits 130; the same command resumes (saying so)
+ *    to the pixels of a render never interrupted, and removes the checkpoint; a texture
+ *    edited in between is refused; a checkpoint path that is the output or the scene is a
+ *    usage error. */
 #define _GNU_SOURCE
 #include "render_testutil.h"
 #include "testutil.h"
 
+#include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>
 #include <stdio.h>
@@ -162,9 +165,26 @@ static void test_library(const kpcn_scene *s) {
   kpcn_aov_destroy(full);
 }
 
-static pid_t spawn(char *const argv[]) {
+/* Starts argv with stderr into err_path (NULL: inherited). */
+static pid_t spawn(char *const argv[], const char *err_path) {
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  if (err_path)
+    posix_spawn_file_actions_addopen(&fa, 2, err_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
   pid_t pid;
-  return posix_spawn(&pid, argv[0], NULL, NULL, argv, environ) == 0 ? pid : -1;
+  int r = posix_spawn(&pid, argv[0], &fa, NULL, argv, environ);
+  posix_spawn_file_actions_destroy(&fa);
+  return r == 0 ? pid : -1;
+}
+
+static int file_contains(const char *path, const char *text) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return 0;
+  char buf[8192];
+  size_t n = fread(buf, 1, sizeof buf - 1, f);
+  fclose(f);
+  buf[n] = 0;
+  return strstr(buf, text) != NULL;
 }
 
 static int wait_status(pid_t pid) {
@@ -185,7 +205,7 @@ static void test_cli(void) {
       RENDER_BIN,           CORNELL, "-o",           "cli.exr", "--spp",        "2048",
       "--threads",          "1",     "--resolution", "64x64",   "--checkpoint", "cli.ckpt",
       "--checkpoint-every", "0.05",  "--quiet",      NULL};
-  pid_t pid = spawn(run);
+  pid_t pid = spawn(run, NULL);
   CHECK(pid > 0);
   for (int i = 0; i < 6000 && !file_exists("cli.ckpt"); i++)
     usleep(10000);
@@ -194,12 +214,13 @@ static void test_cli(void) {
   CHECK(wait_status(pid) == 130);
   CHECK(file_exists("cli.ckpt") && !file_exists("cli.exr"));
   run[7] = "2"; /* resumed with two threads */
-  pid = spawn(run);
+  pid = spawn(run, "cli.err");
   CHECK(wait_status(pid) == 0);
+  CHECK(file_contains("cli.err", "kpcn-render: resumed ")); /* it did not start again */
   CHECK(file_exists("cli.exr") && !file_exists("cli.ckpt"));
   char *plain[] = {RENDER_BIN,  CORNELL, "-o",           "plain.exr", "--spp",   "2048",
                    "--threads", "2",     "--resolution", "64x64",     "--quiet", NULL};
-  CHECK(wait_status(spawn(plain)) == 0);
+  CHECK(wait_status(spawn(plain, NULL)) == 0);
   kpcn_aov_set *x = NULL, *y = NULL;
   CHECK(kpcn_exr_read_aov("cli.exr", &x) == KPCN_OK &&
         kpcn_exr_read_aov("plain.exr", &y) == KPCN_OK);
@@ -208,9 +229,54 @@ static void test_cli(void) {
   kpcn_aov_destroy(y);
   remove("cli.exr");
   remove("plain.exr");
+  remove("cli.err");
+
+  /* a checkpoint path that is the output or the scene file: a usage error */
+  char *alias[] = {RENDER_BIN, CORNELL, "-o", "a.exr", "--checkpoint", "./a.exr", "--quiet", NULL};
+  CHECK(wait_status(spawn(alias, "a.err")) == 2 && file_contains("a.err", "is the output"));
+  alias[5] = CORNELL;
+  CHECK(wait_status(spawn(alias, "a.err")) == 2 && file_contains("a.err", "is the scene file"));
+  CHECK(!file_exists("a.exr"));
+  remove("a.err");
+
+  /* A texture edited between a stop and a resume is refused: the scene's identity covers the
+   * files it names. A checkpoint of every row comes from a render whose output cannot be
+   * written (its folder does not exist), saved after every row. */
+  CHECK(system("rm -rf tx && mkdir -p tx/scenes && cp -r " KPCN_TESTDATA
+               "/scenes/textures tx/scenes/") == 0);
+  char *tx[] = {RENDER_BIN,
+                "tx/scenes/textures/scene.json",
+                "-o",
+                "no_dir/t.exr",
+                "--spp",
+                "2",
+                "--resolution",
+                "24x16",
+                "--checkpoint",
+                "t.ckpt",
+                "--checkpoint-every",
+                "1e-9",
+                NULL};
+  remove("t.ckpt");
+  remove("t.exr");
+  CHECK(wait_status(spawn(tx, "t.err")) == 1 && file_exists("t.ckpt"));
+  CHECK(system("printf x >> tx/scenes/textures/bricks.png") == 0);
+  tx[3] = "t.exr";
+  CHECK(wait_status(spawn(tx, "t.err")) == 1 && file_contains("t.err", "its scene_key is"));
+  CHECK(!file_exists("t.exr"));
+  CHECK(system("cp " KPCN_TESTDATA "/scenes/textures/bricks.png tx/scenes/textures/") == 0);
+  CHECK(wait_status(spawn(tx, "t.err")) == 0 && file_contains("t.err", "resumed 16 of 16 rows"));
+  CHECK(file_exists("t.exr") && !file_exists("t.ckpt"));
+  remove("t.exr");
+  remove("t.err");
 }
 
 int main(void) {
+  /* fixed names in the test's folder: nothing of an earlier, failed run may be resumed */
+  static const char *const old[] = {"c.ckpt",    "p.ckpt", "bad.ckpt", "cli.ckpt", "cli.exr",
+                                    "plain.exr", "a.exr",  "t.ckpt",   "t.exr"};
+  for (size_t i = 0; i < sizeof old / sizeof old[0]; i++)
+    remove(old[i]);
   kpcn_scene *s = NULL;
   CHECK(kpcn_scene_load(CORNELL, &s) == KPCN_OK);
   if (s) test_library(s);

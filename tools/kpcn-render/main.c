@@ -17,6 +17,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -66,21 +67,90 @@ static int on_progress(void *user, double f) {
   return g_signal != 0;
 }
 
-/* FNV-1a of the scene file's bytes: the scene's identity in a checkpoint (a changed scene
- * file must not resume from rows of the old one). Files it references are not read. */
-static int file_hash(const char *path, uint64_t *out) {
+/* Folds a file's bytes into the FNV-1a hash *h; 0 if it cannot be read. */
+static int hash_file(const char *path, uint64_t *h) {
   FILE *f = fopen(path, "rb");
   if (!f) return 0;
-  uint64_t h = 0xcbf29ce484222325ull;
   unsigned char buf[65536];
   size_t n;
   while ((n = fread(buf, 1, sizeof buf, f)) > 0)
     for (size_t i = 0; i < n; i++)
-      h = (h ^ buf[i]) * 0x100000001b3ull;
+      *h = (*h ^ buf[i]) * 0x100000001b3ull;
   int ok = !ferror(f);
   fclose(f);
-  *out = h;
   return ok;
+}
+
+/* The scene's identity in a checkpoint: the scene file's bytes and those of every file it
+ * names (any string in it that is a regular file, absolute or next to it: meshes, textures,
+ * environment maps), so that a scene or texture edited between a stop and a resume is refused
+ * instead of mixed into one image. */
+static int scene_key(const char *scene_path, uint64_t *out) {
+  uint64_t h = 0xcbf29ce484222325ull;
+  FILE *f = fopen(scene_path, "rb");
+  if (!f) return 0;
+  fseek(f, 0, SEEK_END);
+  long n = ftell(f);
+  fseek(f, 0, SEEK_SET);
+  char *text = n >= 0 && n < (1L << 30) ? malloc((size_t)n + 1) : NULL;
+  int ok = text && fread(text, 1, (size_t)n, f) == (size_t)n;
+  fclose(f);
+  if (!ok) {
+    free(text);
+    return 0;
+  }
+  text[n] = 0;
+  for (long i = 0; i < n; i++)
+    h = (h ^ (unsigned char)text[i]) * 0x100000001b3ull;
+  const char *slash = strrchr(scene_path, '/');
+  const int dirlen = slash ? (int)(slash - scene_path) : 1;
+  const char *dir = slash ? scene_path : ".";
+  for (char *q = strchr(text, '"'); q; q = strchr(q + 1, '"')) {
+    char *end = strchr(q + 1, '"');
+    if (!end) break;
+    char path[8192];
+    const int len = (int)(end - q - 1);
+    if (len > 0 && len < 4096) {
+      if (q[1] == '/')
+        snprintf(path, sizeof path, "%.*s", len, q + 1);
+      else
+        snprintf(path, sizeof path, "%.*s/%.*s", dirlen, dir, len, q + 1);
+      struct stat sb;
+      if (stat(path, &sb) == 0 && S_ISREG(sb.st_mode) && !hash_file(path, &h)) {
+        free(text);
+        return 0;
+      }
+    }
+    q = end; /* the closing quote is not the next string's opening one */
+  }
+  free(text);
+  *out = h;
+  return 1;
+}
+
+/* path with its folder made canonical (realpath), for files that may not exist yet; the
+ * text itself if the folder does not exist either. */
+static void canonical(const char *path, char *out, size_t n) {
+  const char *slash = strrchr(path, '/');
+  char dir[4096], real[4096];
+  snprintf(dir, sizeof dir, "%.*s", slash ? (int)(slash - path) + (slash == path) : 1,
+           slash ? path : ".");
+  if (realpath(dir, real))
+    snprintf(out, n, "%s/%s", real, slash ? slash + 1 : path);
+  else
+    snprintf(out, n, "%s", path);
+}
+
+/* 1 if a and b name the same file: the same inode when both exist, else the same canonical
+ * path ("./out.exr" and "out.exr" before either is written). */
+static int same_file(const char *a, const char *b) {
+  struct stat sa, sb;
+  if (stat(a, &sa) == 0 && stat(b, &sb) == 0)
+    return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+  char ca[8192], cb[8192];
+  canonical(a, ca, sizeof ca);
+  canonical(b, cb, sizeof cb);
+  return strcmp(ca, cb) == 0;
 }
 
 static int parse_int(const char *s, long lo, long hi, int *out) {
@@ -218,13 +288,16 @@ int main(int argc, char **argv) {
     usage(stderr);
     return 2;
   }
-  if (rs.checkpoint && !file_hash(scene_path, &rs.scene_key)) {
-    fprintf(stderr, "kpcn-render: cannot read '%s': %s\n", scene_path, strerror(errno));
-    return 1;
-  }
-  if (rs.checkpoint && strcmp(rs.checkpoint, out_path) == 0) {
-    fprintf(stderr, "kpcn-render: --checkpoint must not be the output path '%s'\n", out_path);
+  if (rs.checkpoint &&
+      (same_file(rs.checkpoint, out_path) || same_file(rs.checkpoint, scene_path))) {
+    fprintf(stderr, "kpcn-render: --checkpoint '%s' is the %s\n", rs.checkpoint,
+            same_file(rs.checkpoint, out_path) ? "output" : "scene file");
     return 2;
+  }
+  if (rs.checkpoint && !scene_key(scene_path, &rs.scene_key)) {
+    fprintf(stderr, "kpcn-render: cannot read '%s' or a file it names: %s\n", scene_path,
+            strerror(errno));
+    return 1;
   }
   kpcn_scene *scene = NULL;
   if (kpcn_scene_load(scene_path, &scene) != KPCN_OK) {
@@ -249,6 +322,7 @@ int main(int argc, char **argv) {
     struct sigaction sa;
     memset(&sa, 0, sizeof sa);
     sa.sa_handler = on_signal;
+    sa.sa_flags = SA_RESETHAND; /* a second signal stops it at once, rows unsaved */
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
   }
@@ -268,9 +342,13 @@ int main(int argc, char **argv) {
     fprintf(stderr, "kpcn-render: %s\n", kpcn_last_error());
     return 1;
   }
-  if (stats.rows_resumed && !quiet)
+  /* also with --quiet: a job's log (kpcn-dataset run) should say that it resumed */
+  if (stats.rows_resumed)
     fprintf(stderr, "kpcn-render: resumed %d of %d rows from '%s'\n", stats.rows_resumed, h,
             rs.checkpoint);
+  if (stats.checkpoint_errors)
+    fprintf(stderr, "kpcn-render: warning: %d checkpoint save(s) to '%s' failed\n",
+            stats.checkpoint_errors, rs.checkpoint);
   /* not silent: these pixels are darker than the scene says (kpcn_render_stats) */
   if (stats.nonfinite_samples)
     fprintf(stderr,

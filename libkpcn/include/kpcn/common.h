@@ -19,7 +19,7 @@
 extern "C" {
 #endif
 
-#define KPCN_VERSION_STRING "0.1.0"
+#define KPCN_VERSION_STRING "0.2.0"
 
 typedef enum kpcn_status {
   KPCN_OK = 0,

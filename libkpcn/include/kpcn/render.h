@@ -63,9 +63,13 @@ typedef struct kpcn_render_settings {
   /* Checkpoints (DESIGN.md §9). When not NULL: if this file holds finished rows of the same
    * render (scene_key, every setting above that changes pixels, size, crop, kpcn version) the
    * render starts from them; a file of another render, or a damaged one, is an error naming
-   * the difference, and nothing is rendered. While rendering, the finished rows are written
-   * to it (atomically) every checkpoint_every_s seconds (0: only when cancelled) and when
-   * the progress callback cancels. A resumed render is bit-identical to an uninterrupted one,
+   * the difference, and nothing is rendered; so is a path that cannot be written. While
+   * rendering, the finished rows are written to it (atomically) every checkpoint_every_s
+   * seconds (0: only when cancelled), when the progress callback cancels, and once all rows
+   * are done (so that a failure to write the result loses nothing). A periodic save
+   * that fails (a full disk) does not stop the render: it is counted in
+   * kpcn_render_stats.checkpoint_errors and tried again at the next interval; a save on cancel
+   * that fails is the render's error. A resumed render is bit-identical to an uninterrupted one,
    * at any thread count. The file is left in place at the end: remove it once the result is
    * safe. */
   const char *checkpoint;
@@ -82,10 +86,11 @@ typedef struct kpcn_render_stats {
   double seconds;   /* wall time of the sampling loop */
   uint64_t samples; /* camera samples traced (by this call: not the rows a checkpoint held) */
   uint64_t rays;    /* Embree queries (intersect + occluded), by this call */
-  int rows_resumed; /* rows taken from the checkpoint */
   /* samples with a NaN/Inf value (radiance beyond float range: an albedo above 1 multiplies
    * along a path), counted as black; in the whole image, resumed rows included */
   uint64_t nonfinite_samples;
+  int rows_resumed;      /* rows taken from the checkpoint */
+  int checkpoint_errors; /* periodic saves that failed (the render went on; see render.h) */
 } kpcn_render_stats;
 
 kpcn_status kpcn_render(const kpcn_scene *scene, const kpcn_render_settings *settings,

@@ -284,6 +284,8 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   cJSON_Delete(what);
   int resumed = 0;
   if (cs == KPCN_OK) cs = kpcn_render_ckpt_load(ck, &resumed);
+  /* a path that cannot be written fails now, not after the first interval's work */
+  if (cs == KPCN_OK && st.checkpoint && !resumed) cs = kpcn_render_ckpt_save(ck);
   if (cs != KPCN_OK) {
     kpcn_render_ckpt_destroy(ck);
     kpcn_aov_destroy(set);
@@ -294,7 +296,7 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   volatile int cancel = 0;
   int rows_done = resumed;
   uint64_t total_rays = 0; /* traced by this call */
-  kpcn_status save_st = KPCN_OK;
+  int save_errors = 0;
   unsigned saved_csr = kpcn_fast_fp_begin(nthreads); /* radiance never needs denormals */
   double t0 = now_s(), last_save = t0;
 #pragma omp parallel num_threads(nthreads) reduction(+ : total_rays)
@@ -333,7 +335,8 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
         }
         if (st.checkpoint && st.checkpoint_every_s > 0 &&
             now_s() - last_save >= st.checkpoint_every_s) {
-          if ((save_st = kpcn_render_ckpt_save(ck)) != KPCN_OK) cancel = 1;
+          /* hours of rendering are worth more than one save: go on, try again later */
+          if (kpcn_render_ckpt_save(ck) != KPCN_OK) save_errors++;
           last_save = now_s();
         }
       }
@@ -342,8 +345,7 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   kpcn_fast_fp_end(saved_csr, nthreads);
   double secs = now_s() - t0;
   if (cancel) {
-    kpcn_status r = save_st; /* a failed periodic save stopped the render: report it */
-    if (r == KPCN_OK) r = kpcn_render_ckpt_save(ck);
+    kpcn_status r = kpcn_render_ckpt_save(ck);
     if (r == KPCN_OK)
       r = kpcn_fail(KPCN_ERR_CANCELLED, "render of '%s' cancelled%s", scene->name,
                     st.checkpoint ? " (its finished rows are in the checkpoint)" : "");
@@ -352,6 +354,9 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
     return r;
   }
   if (st.progress) st.progress(st.progress_user, 1.0);
+  /* every row, in case writing the result fails (a full disk, a missing folder): then the
+   * same call again returns at once */
+  if (st.checkpoint && resumed < chh && kpcn_render_ckpt_save(ck) != KPCN_OK) save_errors++;
   if (stats) {
     uint64_t all_rays, nonfinite;
     kpcn_render_ckpt_totals(ck, &all_rays, &nonfinite);
@@ -359,6 +364,7 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
     stats->samples = (uint64_t)(chh - resumed) * (uint64_t)cw * (uint64_t)spp;
     stats->rays = total_rays;
     stats->rows_resumed = resumed;
+    stats->checkpoint_errors = save_errors;
     stats->nonfinite_samples = nonfinite;
   }
   kpcn_render_ckpt_destroy(ck);
