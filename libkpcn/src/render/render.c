@@ -285,7 +285,7 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   int resumed = 0;
   if (cs == KPCN_OK) cs = kpcn_render_ckpt_load(ck, &resumed);
   /* a path that cannot be written fails now, not after the first interval's work */
-  if (cs == KPCN_OK && st.checkpoint && !resumed) cs = kpcn_render_ckpt_save(ck);
+  if (cs == KPCN_OK) cs = kpcn_render_ckpt_probe(ck);
   if (cs != KPCN_OK) {
     kpcn_render_ckpt_destroy(ck);
     kpcn_aov_destroy(set);

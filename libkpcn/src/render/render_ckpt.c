@@ -141,6 +141,18 @@ static void put(FILE *f, const void *p, size_t n, int *ok) {
   if (*ok && n && fwrite(p, 1, n, f) != n) *ok = 0;
 }
 
+kpcn_status kpcn_render_ckpt_probe(const kpcn_render_ckpt *c) {
+  if (!c->path) return KPCN_OK;
+  char tmp[4096];
+  KPCN_TRY(kpcn_temp_path(tmp, sizeof tmp, c->path));
+  FILE *f = fopen(tmp, "wb");
+  if (!f)
+    return kpcn_fail(KPCN_ERR_IO, "cannot write render checkpoint '%s': %s", tmp, strerror(errno));
+  fclose(f);
+  kpcn_abort_file(tmp);
+  return KPCN_OK;
+}
+
 kpcn_status kpcn_render_ckpt_save(const kpcn_render_ckpt *c) {
   if (!c->path) return KPCN_OK;
   const size_t h = (size_t)c->h, w = (size_t)c->w;

@@ -81,6 +81,8 @@ kpcn_status kpcn_render_ckpt_load(kpcn_render_ckpt *c, int *rows);
 void kpcn_render_ckpt_row_done(kpcn_render_ckpt *c, int row, uint64_t rays, uint64_t nonfinite);
 int kpcn_render_ckpt_is_done(const kpcn_render_ckpt *c, int row);
 void kpcn_render_ckpt_totals(const kpcn_render_ckpt *c, uint64_t *rays, uint64_t *nonfinite);
+/* Fails (KPCN_ERR_IO, naming it) if a checkpoint cannot be written where path says. */
+kpcn_status kpcn_render_ckpt_probe(const kpcn_render_ckpt *c);
 /* Writes the finished rows, atomically; safe while other threads render other rows. */
 kpcn_status kpcn_render_ckpt_save(const kpcn_render_ckpt *c);
 
