@@ -320,6 +320,9 @@ if [ -n "$REAL" ] && [ -x "$REAL" ]; then
   rc=$?
   ok '[ $rc -eq 130 ] && [ -n "$(ls "$T"/ck/renders/*/*.ckpt 2>/dev/null)" ]' \
     "a stopped run keeps its checkpoints (rc $rc)"
+  "$DS" run "$T/ck" --dry-run > "$T/dry.out" 2>&1
+  ok 'grep -q "^would render .*ref.* (a checkpoint is there)$" "$T/dry.out"' \
+    "--dry-run names the jobs with a checkpoint"
   "$DS" run "$T/ck" --jobs 2 --renderer "$REAL" --checkpoint-every 0.05 > /dev/null 2>&1
   rc=$?
   ok 'grep -q "kpcn-render: resumed " "$T"/ck/logs/*ref*.log' "a job resumed (its log says so)"

@@ -136,6 +136,9 @@ static void log_path(char *out, size_t n, const char *dir, const char *id) {
   ds_join(out, n, dir, name);
 }
 
+/* A job's checkpoint, beside its output; no pid in the name: the next run must find it. */
+static void job_ckpt(char *ck, size_t n, const char *out) { snprintf(ck, n, "%s.ckpt", out); }
+
 static pid_t spawn(const run_opts *o, const ds_job *j, char *part, size_t pn) {
   char scene[DS_PATH], out[DS_PATH], logp[DS_PATH], spp[16], seed[32], res[48], thr[16];
   ds_join(scene, sizeof scene, o->dir, j->scene_file);
@@ -152,7 +155,7 @@ static pid_t spawn(const run_opts *o, const ds_job *j, char *part, size_t pn) {
   snprintf(thr, sizeof thr, "%d", o->threads);
   char fp[16], ck[DS_PATH + 8], every[32];
   snprintf(fp, sizeof fp, "%d", j->albedo_footprint);
-  snprintf(ck, sizeof ck, "%s.ckpt", out); /* no pid: the next run must find it */
+  job_ckpt(ck, sizeof ck, out);
   snprintf(every, sizeof every, "%g", o->checkpoint_every);
   char *argv[20] = {(char *)o->renderer, scene, "-o",        part, "--spp",  spp, "--seed", seed,
                     "--resolution",      res,   "--threads", thr,  "--quiet"};
@@ -287,6 +290,15 @@ static int run_pool(const run_opts *o, const ds_manifest *m, const int *idx, int
   }
   free(slots);
   return g_stop ? -1 : 0;
+}
+
+/* --dry-run's line for a job, saying when a checkpoint of an earlier, stopped run is there
+ * (kpcn-render resumes from it when this run passes --checkpoint-every). */
+static void print_would_render(const run_opts *o, const ds_job *j) {
+  char out[DS_PATH], ck[DS_PATH + 8];
+  ds_join(out, sizeof out, o->dir, j->out);
+  job_ckpt(ck, sizeof ck, out);
+  printf("would render %s%s\n", j->id, ds_exists(ck) ? " (a checkpoint is there)" : "");
 }
 
 static void usage(void) {
@@ -437,7 +449,7 @@ int ds_cmd_run(int argc, char **argv) {
   int rc = 0;
   if (o.dry_run) {
     for (int i = 0; i < npv; i++)
-      printf("would render %s\n", m.jobs[pv[i]].id);
+      print_would_render(&o, &m.jobs[pv[i]]);
   } else if (npv) {
     counts pc = {0, 0, 0, 0, npv};
     if (run_pool(&o, &m, pv, npv, &pc, t0) != 0) rc = 130;
@@ -491,7 +503,7 @@ int ds_cmd_run(int argc, char **argv) {
   }
   if (o.dry_run) {
     for (int i = 0; i < npending; i++)
-      printf("would render %s\n", m.jobs[pending[i]].id);
+      print_would_render(&o, &m.jobs[pending[i]]);
   } else if (rc == 0 && npending) {
     if (run_pool(&o, &m, pending, npending, &c, t0) != 0) rc = 130;
     if (ds_isatty()) fputc('\n', stderr);
