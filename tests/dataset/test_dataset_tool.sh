@@ -219,6 +219,12 @@ unset FAKE_BLACK
 "$DS" patches "$T/r" --size 8 --per-image 5 -o "$T/r/train.kps" > "$T/p.out"
 rc=$?
 ok '[ $rc -eq 0 ] && [ -s "$T/r/train.kps" ] && grep -q "10 image pairs (2 rejected" "$T/p.out"' "patch store built ($(cat "$T/p.out"))"
+# progress off a terminal: whole lines, the last pair's always (DESIGN §9), every pair's at 0 s
+"$DS" patches "$T/r" --size 8 --per-image 5 -o "$T/r/prog.kps" > /dev/null 2> "$T/prog.err"
+ok '[ "$(grep -c "^\[" "$T/prog.err")" -ge 1 ] && tail -n 1 "$T/prog.err" | grep -q "^\[10/10\] 50 patches kept, .*s elapsed, ~0s left$"' \
+  "patches: a final progress line ($(tail -n 1 "$T/prog.err"))"
+"$DS" patches "$T/r" --size 8 --per-image 5 -o "$T/r/prog.kps" --progress-every 0 > /dev/null 2> "$T/prog.err"
+ok '[ "$(grep -c "^\[[0-9]*/10\] " "$T/prog.err")" -eq 10 ]' "patches --progress-every 0: a line per pair"
 for order in "--per-image 5 --stride 4" "--stride 4 --per-image 5"; do
   # shellcheck disable=SC2086 # two options
   "$DS" patches "$T/r" --size 8 $order -o "$T/r/both.kps" 2> "$T/err"

@@ -65,6 +65,12 @@ int ds_parse_u64(const char *s, uint64_t hi, uint64_t *out);
 uint64_t ds_hash(const char *s, uint64_t seed);
 double ds_now(void);
 int ds_isatty(void);
+/* A progress line on stderr, "[done/total] DETAIL, Es elapsed, ~Ls left" (DESIGN.md §9): on a
+ * terminal rewritten in place at every call; elsewhere (the log of a run under nohup, hours
+ * long) a line of its own at most every `every` seconds (*last: the previous line's time,
+ * start at -1e300) and when final is set. */
+void ds_progress(double *last, double every, int final, int done, int total, double elapsed,
+                 double eta, const char *detail);
 
 /* subcommands */
 int ds_cmd_plan(int argc, char **argv);

@@ -87,12 +87,14 @@ static void usage(void) {
       "usage: kpcn-dataset patches DATASET_DIR... -o OUT.kps [--split train] [--spp "
       "all|16,32,...]\n"
       "         [--size 65] [--per-image 100 | --stride S] [--cull 0.9] [--cull-tol 0.05]\n"
-      "         [--cull-abs 0.01] [--importance] [--seed 1] [--dtype f32|f16] [--allow-partial]\n");
+      "         [--cull-abs 0.01] [--importance] [--seed 1] [--dtype f32|f16] [--allow-partial]\n"
+      "         [--progress-every 60]\n");
 }
 
 int ds_cmd_patches(int argc, char **argv) {
   const char *dirs[MAX_DIRS], *out = NULL, *split = "train", *spp_list = "all", *dtype = "f32";
   int ndirs = 0, allow_partial = 0, per_image_given = 0, stride_given = 0;
+  double progress_every = 60.0; /* seconds between progress lines off a terminal */
   kpcn_patch_settings ps;
   kpcn_patch_settings_defaults(&ps);
   ps.count = 100;
@@ -153,6 +155,9 @@ int ds_cmd_patches(int argc, char **argv) {
                                                : &ps.cull_abs;
       ok = ds_parse_double(v, dst) && *dst >= 0;
       want = " (a finite number >= 0)";
+    } else if (!strcmp(a, "--progress-every")) {
+      ok = ds_parse_double(v, &progress_every) && progress_every >= 0;
+      want = " (seconds >= 0)";
     } else if (!strcmp(a, "--seed")) {
       ok = ds_parse_int(v, 0, 2147483647, &iv);
       ps.seed = (uint64_t)iv;
@@ -260,7 +265,7 @@ int ds_cmd_patches(int argc, char **argv) {
     return 1;
   }
   kpcn_patch_stats tot = {0, 0, 0};
-  double t0 = ds_now();
+  double t0 = ds_now(), last_line = -1e300;
   for (int p = 0; p < np && rc == 0; p++) {
     const char *dir = dirs[pairs[p].dir];
     const ds_job *j = &m[pairs[p].dir].jobs[pairs[p].job], *r = &m[pairs[p].dir].jobs[pairs[p].ref];
@@ -306,11 +311,12 @@ int ds_cmd_patches(int argc, char **argv) {
     free(o);
     kpcn_aov_destroy(noisy);
     kpcn_aov_destroy(ref);
-    if (ds_isatty()) {
-      fprintf(stderr, "\r[%d/%d] %lld patches kept, %lld culled, %.0fs   ", p + 1, np,
-              (long long)tot.kept, (long long)tot.culled, ds_now() - t0);
-      fflush(stderr);
-    }
+    char detail[96];
+    snprintf(detail, sizeof detail, "%lld patches kept, %lld culled", (long long)tot.kept,
+             (long long)tot.culled);
+    const double el = ds_now() - t0;
+    ds_progress(&last_line, progress_every, p + 1 == np || rc != 0, p + 1, np, el,
+                el / (p + 1) * (np - p - 1), detail);
   }
   if (ds_isatty()) fputc('\n', stderr);
   if (rc == 0 && kpcn_patchstore_finish(w) != KPCN_OK) {

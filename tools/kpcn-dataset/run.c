@@ -214,17 +214,14 @@ typedef struct counts {
  * last job. */
 static void progress(const run_opts *o, const counts *c, int running, double t0) {
   static double last_line = -1e300;
-  const int tty = ds_isatty();
-  double now = ds_now(), el = now - t0;
+  double el = ds_now() - t0;
   int fin = c->done + c->failed;
   int left = c->total - fin - c->skipped - c->rejected_jobs;
-  if (!tty && left > 0 && now - last_line < o->progress_every) return;
-  last_line = now;
-  double eta = fin > 0 ? el / fin * left : 0;
-  fprintf(stderr, "%s[%d/%d] rendered %d, running %d, failed %d, %.0fs elapsed, ~%.0fs left%s",
-          tty ? "\r" : "", fin + c->skipped + c->rejected_jobs, c->total, c->done, running,
-          c->failed, el, eta, tty ? "   " : "\n");
-  fflush(stderr);
+  char detail[128];
+  snprintf(detail, sizeof detail, "rendered %d, running %d, failed %d", c->done, running,
+           c->failed);
+  ds_progress(&last_line, o->progress_every, left <= 0, fin + c->skipped + c->rejected_jobs,
+              c->total, el, fin > 0 ? el / fin * left : 0, detail);
 }
 
 /* Runs the jobs in idx[0..n) through a pool of o->jobs renderer processes. */

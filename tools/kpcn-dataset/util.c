@@ -143,3 +143,14 @@ double ds_now(void) {
 }
 
 int ds_isatty(void) { return isatty(2); }
+
+void ds_progress(double *last, double every, int final, int done, int total, double elapsed,
+                 double eta, const char *detail) {
+  const int tty = ds_isatty();
+  const double now = ds_now();
+  if (!tty && !final && now - *last < every) return;
+  *last = now;
+  fprintf(stderr, "%s[%d/%d] %s, %.0fs elapsed, ~%.0fs left%s", tty ? "\r" : "", done, total,
+          detail, elapsed, eta, tty ? "   " : "\n");
+  fflush(stderr);
+}
