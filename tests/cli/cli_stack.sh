@@ -64,6 +64,24 @@ grep -q "warning: --mosaic: labels not drawn" err.txt && [ -f nofont.exr ] && pa
   fail "font fallback: $(cat err.txt)"
 # A font larger than the tile: OIIO's render_text aborted the process (found by fuzzing); now
 # the labels are skipped with a warning naming the size, and the mosaic is written.
+# --render: the pixels kpcn-render writes (every channel), in a chain with --denoise and a
+# metric; its errors name the problem and write nothing
+SC=$TD/scenes/cornell-box/scene.json
+KR=$(dirname "$KT")/../kpcn-render/kpcn-render
+if [ -x "$KR" ]; then
+  run_ok --render:spp=4:res=32x24:seed=3 "$SC" -o rr.exr
+  "$KR" "$SC" -o kr.exr --spp 4 --resolution 32x24 --seed 3 --quiet
+  idiff -fail 0 -warn 0 -a rr.exr kr.exr > /dev/null && pass "--render = kpcn-render" ||
+    fail "--render differs from kpcn-render"
+  run_ok --render:spp=4:res=32x24 "$SC" --denoise:method=nlmeans \
+    --render:spp=64:res=32x24:seed=9 "$SC" --relmse --json
+  $PY -c 'import json,sys; v=json.load(open(sys.argv[1]))["relmse"]; assert 0 < v < 1' out.txt &&
+    pass "render, denoise, measure in one chain" || fail "chain: $(cat out.txt)"
+  expect_fail "cannot open scene 'nope.json'" x.exr --render:spp=2 nope.json -o x.exr
+  expect_fail "crop 30,0,8,8 lies outside the 32x24 image" x.exr \
+    --render:res=32x24:crop=30,0,8,8 "$SC" -o x.exr
+  expect_fail "res must be WxH" x.exr --render:res=32 "$SC" -o x.exr
+fi
 oiiotool "$REF" --cut 0,0,23,23 -o tile24.exr
 run_ok tile24.exr tile24.exr --mosaic:labels=a,b:fontsize=90 -o big.exr
 grep -qF "fontsize 90 does not fit a 24x24 tile" err.txt && [ -f big.exr ] && pass "oversized labels" ||
