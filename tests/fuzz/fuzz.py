@@ -18,7 +18,7 @@ Targets (each draws its own mutations from --seed, so a run is reproducible):
          metadata, offsets and data damaged, or truncated
   kps    kpcn-train on a small patch store with header words, index records, metadata or
          payload (NaN/Inf) damaged, or truncated
-  cli    kpcntool chains of random commands, modifiers and values
+  cli    kpcntool chains of random commands, modifiers and values (--render among them)
   exr    kpcntool (denoise, metrics, info, augment) on AOV EXRs with flipped bytes or truncated
   ckpt   kpcn-render --checkpoint resuming from a damaged checkpoint (raw damage, and damage
          behind a recomputed checksum: row flags, counts, NaN/Inf pixels)
@@ -324,7 +324,8 @@ CLI_CMDS = {
     "--psnr": ["range", "channels"], "--rell1": ["eps"], "--relmse": ["eps", "channels"],
     "--rotate": ["deg", "all"], "--shift": ["dx", "dy", "all"],
     "--ssim": ["channels", "display", "range"], "--ch": [], "--threads": [], "-o": [],
-    "--json": []}
+    "--json": [], "--render": ["spp", "seed", "res", "crop", "albedo_spp", "footprint",
+                               "color_only", "max_bounces"]}
 CLI_CH = ["R,G,B", "R=albedo.R,G=albedo.G,B=albedo.B", "A=1", "nope", "", "R,R,R,R,R", ",", "=",
           "R=", "=R"]
 
@@ -336,7 +337,10 @@ def fuzz_cli(fz, rng, n):
     vals = ["0", "1", "-1", "2", "3", "4", "8", "16", "90", "45", "180", "1e9", "-1e9",
             "2147483648", "nan", "inf", "0.5", "", "x", "R,G,B", "color.R", "BRG", "RRR", "h", "v",
             "nlmeans", "bilateral", "foo", model, "/nonexistent.safetensors", "relmse", "ssim",
-            "inferno", "sRGB", "ACES", outs[5], outs[6], "a,b,c", "90", "diffuse", "specular"]
+            "inferno", "sRGB", "ACES", outs[5], outs[6], "a,b,c", "90", "diffuse", "specular",
+            "16x12", "0x0", "99999x99999", "0,0,4,4", "4,4,100,1", "1,2,3"]
+    scenes = [os.path.join(fz.a.testdata, "scenes", "cornell-box", "scene.json"),
+              fz.path("missing.json"), fz.path("small.exr")]
     for _ in range(n):
         argv = [fz.bin("kpcntool")]
         for _ in range(rng.randint(1, 6)):
@@ -356,6 +360,10 @@ def fuzz_cli(fz, rng, n):
                 argv.append(rng.choice(["0", "1", "2", "-3", "x", "100000"]))
             elif c == "-o":
                 argv.append(rng.choice(outs[:5] + [fz.path("nodir/o.exr")]))
+            elif c == "--render":
+                if ":res=" not in arg and rng.random() < 0.8:  # mostly small renders
+                    argv[-1] = arg + ":res=16x12"
+                argv.append(rng.choice(scenes))
         fz.run("cli", argv, outs)
 
 
