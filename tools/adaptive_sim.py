@@ -7,7 +7,7 @@ feature edges (relative depth + normal + relative albedo gradient of an L-spp re
 from an H-spp render, the rest from that L-spp render, so the mean is exactly 16 spp. Keep L
 and H powers of two: the Owen-scrambled Sobol sampler stratifies best there (at 11 spp a
 frame is about 25 % noisier than 1/spp predicts). Both are denoised with MODEL and
-measured against REF (relMSE, kpcntool); the noisy frames too. Results: docs/training.md,
+measured against REF (relMSE, kpcntool); the noisy frames too. Results: docs/training-log.md,
 "Session 18".
   python3 tools/adaptive_sim.py DATASET_DIR SCENE L H MODEL [KPCN_BIN]
   e.g. python3 tools/adaptive_sim.py dataset/v1 textures 8 64 testdata/models/kpcn-cpu.safetensors

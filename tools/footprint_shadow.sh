@@ -4,7 +4,7 @@
 # kpcn-render --albedo-footprint K (the manifest's seed, scene file and size, so only the
 # albedo differs: docs/renderer.md, "Albedo footprint") and whose every other file is a link
 # into SRC. `kpcn-dataset patches DST` then builds a store of footprint inputs against the same
-# references (docs/training.md, sessions 41 and 44).
+# references (docs/training-log.md, sessions 41 and 44).
 #   tools/footprint_shadow.sh SRC DST
 # Environment: K (default 2), SPP (default 16), KPCN_BIN (default build/tools), THREADS (2).
 # Resumable: a render already in DST is kept; each is written to a part file and renamed.

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The figures the textures-target rules judge a model by (docs/training.md, rules 54 and 55).
+"""The figures the textures-target rules judge a model by (docs/training-log.md, rules 54 and 55).
 
 usage: tools/judge_textures.py MODEL.safetensors TD_DIR [--bin DIR] [--denoise-opts OPTS]
                                [--threads N] [--pairs OUT.tsv] [--baseline BASE.tsv]

@@ -178,7 +178,7 @@ for l in open(sys.argv[2]):
         '%.3e' % kx[0] if kx else '-'))
 print('\nWith the reference\'s albedo in place of the noisy one, kpcn would be below noisy by: %s (against this reference).' % '; '.join(albedo))
 print('\nHow far the `cpu` preset can go on these two scenes, measured by fine-tuning it on the scenes')
-print('themselves (a bound, never a shipped model): docs/training.md, "Session 22".')
+print('themselves (a bound, never a shipped model): docs/training-log.md, "Session 22".')
 PY
 if [ -s "$work/rows2.tsv" ]; then
   targets "$work/rows2.tsv" ", against ${REF2_SPP}-spp references" >> "$md"

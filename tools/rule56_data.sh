@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Rule 56's data (docs/training.md, sessions 44-47) in one folder, from this repository: the
+# Rule 56's data (docs/training-log.md, sessions 44-47) in one folder, from this repository: the
 # judging datasets and N's fifteen store sources (tools/training_data.sh), the two bitmap
 # pools (tools/texture_pool.py), the planned sets tp, tq and roomsb, the sources' footprint
 # shadows (tools/footprint_shadow.sh) and the store pool2.kps.

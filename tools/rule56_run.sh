@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Rule 56's run R and its one judgement (docs/training.md, sessions 46-48), resumable.
+# Rule 56's run R and its one judgement (docs/training-log.md, sessions 46-48), resumable.
 #
 #   tools/rule56_run.sh [--minutes M] [--dry-run] DIR OUT
 #   tools/rule56_run.sh --verdict N.json R.json

@@ -2,7 +2,7 @@
 # Rebuilds the training data of the shipped model and the images its judging rules use, from
 # the recipes of docs/dataset.md, in one folder: the scene folders (links into testdata/scenes
 # and procedural rooms), the 21 kpcn-dataset datasets, the two 4096-spp references of the
-# held-out scenes and the patch store `rooms9v.kps` (docs/training.md, rule 50's store).
+# held-out scenes and the patch store `rooms9v.kps` (docs/training-log.md, rule 50's store).
 #
 #   tools/training_data.sh [--plan-only] [--no-store] DIR [DATASET ...]
 #

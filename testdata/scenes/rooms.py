@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Writes procedural rooms (Tungsten scene.json) for training data or distinct-scene validation.
 
-Why: session 22 (docs/training.md) found that the held-out diffuse-interreflection scene's gap
+Why: session 22 (docs/training-log.md) found that the held-out diffuse-interreflection scene's gap
 to the 20x target is data: the network reaches it when trained on that room, not on the
 training set's five rooms. These are many more rooms of that *kind* (enclosed, lit by area
 lights, most of their light indirect), none of them a held-out scene: random size and wall

@@ -1,5 +1,5 @@
 #!/bin/sh
-# tools/rule56_data.sh --plan-only: rule 56's three planned sets plan as docs/training.md
+# tools/rule56_data.sh --plan-only: rule 56's three planned sets plan as docs/training-log.md
 # recorded them (sessions 44 and 45: jobs, camera samples and the distinct pool bitmaps their
 # scene files name), nothing is rendered, and bad arguments are refused before anything is made.
 # usage: test_rule56_data.sh SCRIPT KPCN_BIN

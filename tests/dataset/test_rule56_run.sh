@@ -1,5 +1,5 @@
 #!/bin/sh
-# tools/rule56_run.sh: the training command is rule 56's as docs/training.md wrote it (session
+# tools/rule56_run.sh: the training command is rule 56's as docs/training-log.md wrote it (session
 # 46), --resume is added once a checkpoint exists and --time-limit with --minutes, the verdict
 # applies the rule's bounds, and bad calls are refused before anything is made.
 # usage: test_rule56_run.sh SCRIPT KPCN_BIN

@@ -1,5 +1,5 @@
 #!/bin/sh
-# tools/texture_pool.py (the procedural bitmap pool of docs/training.md, session 44): a pure
+# tools/texture_pool.py (the procedural bitmap pool of docs/training-log.md, session 44): a pure
 # function of (seed, count), every file a square 8-bit RGB bitmap that tiles where its family
 # says so, --exclude keeps a bitmap (and its shifts and flips) out, checked by brute force
 # against np.roll instead of the tool's FFT; bad arguments are a clear error with nothing written.
