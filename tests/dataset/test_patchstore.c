@@ -125,6 +125,19 @@ static void round_trip(kpcn_dtype dt) {
   else
     CHECK(maxrel <= 1.0 / 2048 && maxrel > 0);
   CHECK(kpcn_patchstore_get(ps, 3, buf, NULL) == KPCN_ERR_INVALID_ARGUMENT);
+  /* the record alone is the one get() returns, and is bounds-checked the same way */
+  for (int k = 0; k < 3; k++) {
+    kpcn_patch_record a, b;
+    CHECK(kpcn_patchstore_get(ps, (uint64_t)k, buf, &a) == KPCN_OK);
+    CHECK(kpcn_patchstore_record(ps, (uint64_t)k, &b) == KPCN_OK);
+    CHECK(memcmp(&a, &b, sizeof a) == 0 && b.x == xs[k] && b.y == ys[k]);
+  }
+  {
+    kpcn_patch_record r;
+    CHECK(kpcn_patchstore_record(ps, 3, &r) == KPCN_ERR_INVALID_ARGUMENT);
+    CHECK(kpcn_patchstore_record(ps, 0, NULL) == KPCN_ERR_INVALID_ARGUMENT);
+    CHECK(kpcn_patchstore_record(NULL, 0, &r) == KPCN_ERR_INVALID_ARGUMENT);
+  }
   /* Augmenting a stored patch through its names keeps noisy/reference aligned. */
   float *aug = malloc(sizeof(float) * 33 * 81);
   kpcn_augment_xform x;

@@ -1,7 +1,8 @@
 /* The trainer's batch assembly, checked against the definitions: the wiring of targets,
  * inputs and albedo, and the two input conditionings a run can switch on (exposure
  * normalisation, the firefly bound), each recorded in the checkpoint so that a resume with
- * another setting is refused; and the loss margin (kt_loss) against the interior's loss. */
+ * another setting is refused; the loss margin (kt_loss) against the interior's loss; and that
+ * only the training split's patches are drawn. */
 #include "train/train_internal.h"
 #include "kpcn/train.h"
 #include "testutil.h"
@@ -246,6 +247,38 @@ static void test_loss_margin(void) {
   kpcn_trainer_destroy(t);
 }
 
+/* Only patches of sources marked "train" are drawn when any source is so marked (all of them
+ * when none is): the index of training patches, built from the store's records alone. */
+static void test_batch_split(void) {
+  static const char *const splits[3] = {"train", "test", "val"};
+  static const char *const none[2] = {"", ""};
+  const char *p3 = tf_tmp("split3.kps"), *p0 = tf_tmp("split0.kps");
+  CHECK(tf_make_split_store(p3, 20, 48, 40, 12, 1, 0, NULL, 0, splits, 3) == 0);
+  CHECK(tf_make_split_store(p0, 20, 48, 40, 12, 1, 0, NULL, 0, none, 2) == 0);
+  kpcn_train_settings s;
+  tf_settings(&s, p3, tf_tmp("split.safetensors"));
+  kpcn_trainer *t = NULL;
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (t) {
+    CHECK(t->ntrain == 4);
+    for (uint64_t k = 0; k < t->ntrain && k < 4; k++)
+      CHECK(t->train_idx[k] == 3 * k);
+    CHECK(kt_batch_assemble(t) == KPCN_OK);
+    for (int b = 0; b < t->N; b++)
+      CHECK(t->batch_idx[b] % 3 == 0);
+  }
+  kpcn_trainer_destroy(t);
+  t = NULL;
+  tf_settings(&s, p0, tf_tmp("split0.safetensors"));
+  CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+  if (t) {
+    CHECK(t->ntrain == 12);
+    for (uint64_t k = 0; k < t->ntrain && k < 12; k++)
+      CHECK(t->train_idx[k] == k);
+  }
+  kpcn_trainer_destroy(t);
+}
+
 int main(void) {
   g_store = tf_make_test_store("batch.kps");
   if (!g_store) return 1;
@@ -253,5 +286,6 @@ int main(void) {
   test_batch_exposure();
   test_batch_firefly();
   test_loss_margin();
+  test_batch_split();
   return kt_summary("train_batch");
 }

@@ -82,6 +82,13 @@ int tf_make_pair(kpcn_aov_set **noisy, kpcn_aov_set **ref, int w, int h, unsigne
 
 int tf_make_store(const char *path, int S, int w, int h, int count, unsigned seed, int box_ref,
                   const char *const *channels, int nchannels) {
+  static const char *const train[1] = {"train"};
+  return tf_make_split_store(path, S, w, h, count, seed, box_ref, channels, nchannels, train, 1);
+}
+
+int tf_make_split_store(const char *path, int S, int w, int h, int count, unsigned seed,
+                        int box_ref, const char *const *channels, int nchannels,
+                        const char *const *splits, int nsources) {
   kpcn_aov_set *n, *r;
   if (tf_make_pair(&n, &r, w, h, seed, box_ref)) return 1;
   kpcn_patchstore_settings s;
@@ -92,19 +99,22 @@ int tf_make_store(const char *path, int S, int w, int h, int count, unsigned see
   kpcn_patchstore_writer *wr;
   int rc = 1;
   if (kpcn_patchstore_create(&wr, path, &s) != KPCN_OK) goto out;
-  kpcn_patch_source src;
-  memset(&src, 0, sizeof src);
-  snprintf(src.scene, sizeof src.scene, "synthetic");
-  snprintf(src.split, sizeof src.split, "train");
-  src.spp = 4, src.ref_spp = 1024, src.width = w, src.height = h;
-  if (kpcn_patch_source_image_stats(&src, n) != KPCN_OK) goto fail;
-  uint32_t id;
-  if (kpcn_patchstore_add_source(wr, &src, &id) != KPCN_OK) goto fail;
+  uint32_t id[8];
+  if (nsources < 1 || nsources > 8) goto fail;
+  for (int k = 0; k < nsources; k++) {
+    kpcn_patch_source src;
+    memset(&src, 0, sizeof src);
+    snprintf(src.scene, sizeof src.scene, "synthetic%d", k);
+    snprintf(src.split, sizeof src.split, "%s", splits[k]);
+    src.spp = 4, src.ref_spp = 1024, src.width = w, src.height = h;
+    if (kpcn_patch_source_image_stats(&src, n) != KPCN_OK) goto fail;
+    if (kpcn_patchstore_add_source(wr, &src, &id[k]) != KPCN_OK) goto fail;
+  }
   int per_row = (w - S) / 4 + 1;
   for (int i = 0; i < count; i++) {
     kpcn_patch_record rec;
     memset(&rec, 0, sizeof rec);
-    rec.source = id;
+    rec.source = id[i % nsources];
     rec.x = (i % per_row) * 4;
     rec.y = ((i / per_row) * 4) % (h - S + 1);
     rec.weight = 1;

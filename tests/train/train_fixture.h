@@ -15,6 +15,11 @@ int tf_make_pair(kpcn_aov_set **noisy, kpcn_aov_set **ref, int w, int h, unsigne
  * with the given channel list (NULL = default). Returns 0 on success. */
 int tf_make_store(const char *path, int S, int w, int h, int count, unsigned seed, int box_ref,
                   const char *const *channels, int nchannels);
+/* The same with nsources (1 to 8) sources of the same pair, source k marked with split
+ * splits[k]; patch i belongs to source i % nsources. */
+int tf_make_split_store(const char *path, int S, int w, int h, int count, unsigned seed,
+                        int box_ref, const char *const *channels, int nchannels,
+                        const char *const *splits, int nsources);
 
 /* A temporary file path that stays valid for the test's life: kt_tmpfile cycles through 8
  * buffers, and the trainer tests hold many paths at once, so tf_tmp copies them into a pool of

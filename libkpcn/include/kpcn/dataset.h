@@ -151,6 +151,10 @@ kpcn_status kpcn_patchstore_exposure(const kpcn_patchstore *ps, double *median);
  * Thread-safe (read-only mapping). */
 kpcn_status kpcn_patchstore_get(const kpcn_patchstore *ps, uint64_t i, float *dst,
                                 kpcn_patch_record *rec);
+/* The record of patch i (its source, position, flat fraction and weight) without reading
+ * its pixels: the index sits apart from the pixel data, so a pass over every record of a
+ * store larger than memory reads kilobytes, not the store. Thread-safe. */
+kpcn_status kpcn_patchstore_record(const kpcn_patchstore *ps, uint64_t i, kpcn_patch_record *rec);
 /* Raw mapped pointer to patch i (dtype elements), valid until close. */
 const void *kpcn_patchstore_raw(const kpcn_patchstore *ps, uint64_t i);
 

@@ -268,6 +268,15 @@ const void *kpcn_patchstore_raw(const kpcn_patchstore *ps, uint64_t i) {
   return ps->map + KPCN_PATCHSTORE_DATA_OFFSET + i * ps->h.patch_bytes;
 }
 
+kpcn_status kpcn_patchstore_record(const kpcn_patchstore *ps, uint64_t i, kpcn_patch_record *rec) {
+  if (!ps || !rec) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_patchstore_record: NULL");
+  if (i >= ps->h.count)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch store '%s': patch %llu of %llu", ps->path,
+                     (unsigned long long)i, (unsigned long long)ps->h.count);
+  kps_get_record(rec, ps->map + ps->h.index_offset + i * KPS_RECORD_BYTES);
+  return KPCN_OK;
+}
+
 kpcn_status kpcn_patchstore_get(const kpcn_patchstore *ps, uint64_t i, float *dst,
                                 kpcn_patch_record *rec) {
   if (!ps || !dst) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_patchstore_get: NULL");
@@ -286,6 +295,5 @@ kpcn_status kpcn_patchstore_get(const kpcn_patchstore *ps, uint64_t i, float *ds
     for (size_t k = 0; k < n; k++)
       dst[k] = kpcn_half_to_float((uint16_t)(p[2 * k] | p[2 * k + 1] << 8));
   }
-  if (rec) kps_get_record(rec, ps->map + ps->h.index_offset + i * KPS_RECORD_BYTES);
-  return KPCN_OK;
+  return rec ? kpcn_patchstore_record(ps, i, rec) : KPCN_OK;
 }

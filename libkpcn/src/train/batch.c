@@ -63,25 +63,15 @@ kpcn_status kt_batch_setup(kpcn_trainer *t) {
   t->train_idx = kpcn_alloc(n * sizeof(uint64_t), "training patch index");
   if (!t->train_idx) return kpcn_last_status();
   t->ntrain = 0;
-  /* The store has no record-only accessor, so the split is read through a full patch
-   * copy once per patch at setup (the cost of reading the store once). */
-  float *tmp = any_train ? kpcn_alloc((size_t)t->nch * t->S * t->S * sizeof(float), "patch") : NULL;
-  if (any_train && !tmp) return kpcn_last_status();
   for (uint64_t i = 0; i < n; i++) {
-    if (!any_train) {
-      t->train_idx[t->ntrain++] = i;
-      continue;
+    if (any_train) { /* the record alone: a store larger than memory is not read here */
+      kpcn_patch_record rec;
+      KPCN_TRY(kpcn_patchstore_record(t->ps, i, &rec));
+      const kpcn_patch_source *src = kpcn_patchstore_source(t->ps, (int)rec.source);
+      if (!src || strcmp(src->split, "train") != 0) continue;
     }
-    kpcn_patch_record rec;
-    kpcn_status st = kpcn_patchstore_get(t->ps, i, tmp, &rec);
-    if (st != KPCN_OK) {
-      free(tmp);
-      return st;
-    }
-    const kpcn_patch_source *src = kpcn_patchstore_source(t->ps, (int)rec.source);
-    if (src && strcmp(src->split, "train") == 0) t->train_idx[t->ntrain++] = i;
+    t->train_idx[t->ntrain++] = i;
   }
-  free(tmp);
   if (t->ntrain == 0)
     return kpcn_fail(KPCN_ERR_FORMAT, "patch store '%s' has no training patches", t->store_path);
   kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_INFO,
