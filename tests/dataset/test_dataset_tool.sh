@@ -247,6 +247,17 @@ np_rd=$("$DS" patches "$T/r" "$T/d" --size 8 --per-image 5 --allow-partial -o "$
 echo "two directories: $np_rd pairs = $np_r + $np_d"
 ok '[ -n "$np_r" ] && [ -n "$np_d" ] && [ "$np_rd" -eq $((np_r + np_d)) ]' "two directories: $np_rd pairs = $np_r + $np_d"
 ok 'grep -a -q "$T/d/renders/" "$T/both.kps" && grep -a -q "$T/r/renders/" "$T/both.kps"' "sources carry their directory"
+# many directories (rule 56 merges 18): 20 links to one directory give 20 times its pairs; 65 are
+# refused by name before anything is read
+many=$(for i in $(seq 20); do ln -s "$T/d" "$T/d$i" && printf '%s ' "$T/d$i"; done)
+# shellcheck disable=SC2086
+np_many=$("$DS" patches $many --size 8 --per-image 5 -o "$T/many.kps" | sed 's/.*: \([0-9]*\) image pairs.*/\1/')
+ok '[ -n "$np_many" ] && [ "$np_many" -eq $((20 * np_d)) ]' "20 directories: $np_many pairs = 20 x $np_d"
+# shellcheck disable=SC2046
+"$DS" patches $(for i in $(seq 65); do printf '%s ' "$T/d"; done) -o "$T/too.kps" 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 2 ] && [ ! -e "$T/too.kps" ] && grep -q "more than 64 dataset directories" "$T/err"' \
+  "65 directories refused (rc $rc: $(cat "$T/err"))"
 "$DS" patches "$T/r" "$T/nothing" --size 8 --allow-partial -o "$T/none.kps" 2> "$T/err"
 rc=$?
 ok '[ $rc -eq 1 ] && [ ! -e "$T/none.kps" ] && grep -q "nothing" "$T/err"' "a second directory without manifest"

@@ -40,7 +40,8 @@ static int spp_selected(const int *spps, int n, int spp) {
   return 0;
 }
 
-enum { MAX_DIRS = 16 };
+/* Rule 56's store takes 18 directories (session 51); each costs a manifest on the stack. */
+enum { MAX_DIRS = 64 };
 
 typedef struct pair_t {
   int dir, job, ref; /* dataset directory index, noisy job, its variant's reference job */
