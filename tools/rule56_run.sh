@@ -6,8 +6,9 @@
 #
 # DIR is the folder tools/rule56_data.sh built (it must have finished: DIR/pool2.kps). OUT gets
 # R: model.safetensors with its .ckpt, .csv, .png and train.log. Each call trains for at most M
-# minutes (default: no limit) and continues from OUT/model.ckpt when there is one (--resume,
-# bit-exact), so the same command carries R across sessions. Once R's 12 000 iterations have
+# minutes (default: no limit) and continues from OUT/model.safetensors.ckpt (kpcn-train names
+# the checkpoint after -o) when there is one (--resume, bit-exact), so the same command carries
+# R across sessions. Once R's 12 000 iterations have
 # finished, and only once, it judges the shipped model N and R with this build
 # (tools/judge_textures.py: OUT/judge_N.json and .tsv, then OUT/judge_R.json and .tsv against
 # N's pairs) and prints rule 56's verdict (OUT/verdict.txt). N is judged again here, not taken
@@ -99,7 +100,7 @@ cmd=("$B/kpcn-train/kpcn-train" --store "$T/pool2.kps" -o "$O/model.safetensors"
   --val "$V/roomsval/renders/room-202-0/v000_16spp.exr,$V/roomsval/renders/room-202-0/v000_ref1024spp.exr"
   --val "$V/roomsval/renders/room-202-1/v000_16spp.exr,$V/roomsval/renders/room-202-1/v000_ref1024spp.exr")
 [ "$minutes" = 0 ] || cmd+=(--time-limit "$minutes")
-[ ! -f "$O/model.ckpt" ] || cmd+=(--resume)
+[ ! -f "$O/model.safetensors.ckpt" ] || cmd+=(--resume)
 if [ $dry = 1 ]; then
   echo "${cmd[*]}"
   exit 0

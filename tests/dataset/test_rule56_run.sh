@@ -19,7 +19,7 @@ for want in "--store $D/data/pool2.kps " "-o $D/R/model.safetensors " "--preset 
 done
 [ "$(grep -o -- '--val ' "$D/cmd" | wc -l)" -eq 4 ] || fail "expected four --val pairs"
 grep -q -- '--resume\|--time-limit' "$D/cmd" && fail "a first call resumes or has a time limit"
-: >"$D/R/model.ckpt"
+: >"$D/R/model.safetensors.ckpt" # kpcn-train writes its checkpoint beside -o
 KPCN_BIN=$B bash "$S" --minutes 40 --dry-run "$D/data" "$D/R" >"$D/cmd2" || fail "second dry run"
 grep -q -- '--time-limit 40 --resume' "$D/cmd2" || fail "no --time-limit 40 --resume: $(cat "$D/cmd2")"
 [ ! -e "$D/data/fp16.exr" ] || fail "--dry-run rendered"
