@@ -13,7 +13,9 @@
 # (tools/judge_textures.py: OUT/judge_N.json and .tsv, then OUT/judge_R.json and .tsv against
 # N's pairs) and prints rule 56's verdict (OUT/verdict.txt). N is judged again here, not taken
 # from a file, because the bounds compare R with N on the same data, host class and code
-# (session 47: the judging figures moved by up to 2.5 % per pair between hosts).
+# (session 47: the judging figures moved by up to 2.5 % per pair between hosts). R shipped in
+# session 52; N is kept as docs/img/experiments/N_model.safetensors so that this command still
+# means what rule 56 wrote.
 # --dry-run prints the training command and renders nothing; --verdict prints the verdict for
 # two judge_textures.py objects. Environment: KPCN_BIN (default
 # build/tools).
@@ -71,7 +73,8 @@ T=$(cd "$1" && pwd)
 mkdir -p "$2"
 O=$(cd "$2" && pwd)
 V=$T/td/dataset
-N=$R/testdata/models/kpcn-cpu.safetensors
+# N, the model rule 56 started from (shipped from session 38 until R replaced it in session 52)
+N=$R/docs/img/experiments/N_model.safetensors
 
 # The first validation pair: v1's 16-spp textures render made again with the albedo footprint
 # (v1's seed for it), as judge_textures.py makes it.

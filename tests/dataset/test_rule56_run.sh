@@ -11,7 +11,7 @@ fail() { echo "FAIL: $*"; exit 1; }
 mkdir -p "$D/data" && : >"$D/data/pool2.kps"
 KPCN_BIN=$B bash "$S" --dry-run "$D/data" "$D/R" >"$D/cmd" 2>"$D/err" || fail "dry run: $(cat "$D/err")"
 for want in "--store $D/data/pool2.kps " "-o $D/R/model.safetensors " "--preset cpu " \
-  "testdata/models/kpcn-cpu.safetensors --freeze specular --stage1-iters 0 --loss l1 --loss2 rell1-sg --lr 1e-4 --decay-every 500 --seed 56 --threads 2 --iters 12000 --val-every 250 --ckpt-every 250 " \
+  "docs/img/experiments/N_model.safetensors --freeze specular --stage1-iters 0 --loss l1 --loss2 rell1-sg --lr 1e-4 --decay-every 500 --seed 56 --threads 2 --iters 12000 --val-every 250 --ckpt-every 250 " \
   "--val $D/data/fp16.exr,$D/data/td/dataset/v1/renders/textures/v000_ref4096spp.exr " \
   "diffuse-interreflection/v000_16spp.exr,$D/data/td/dataset/v1/renders/diffuse-interreflection/v000_ref4096spp.exr " \
   "room-202-0/v000_16spp.exr," "room-202-1/v000_ref1024spp.exr"; do
