@@ -53,9 +53,10 @@ PROBE_KERNEL(dpbf16, "avx512f,avx512bf16", __m512, __m512bh, _mm512_set1_ps,
 static double probe(int kind, int nthreads) {
   const double flop_per_iter = CHAINS * (kind == 0 ? 32.0 : kind == 1 ? 16.0 : 64.0);
   const long iters = 3000000; /* ~0.1 s per try at ~3.5 GHz */
+  static int warmed[3];       /* kind's untimed first try done (probes run on one thread) */
   double best = 0.0;
   volatile float sink = 0.0f;
-  for (int r = 0; r < 3; r++) {
+  for (int r = warmed[kind] ? 0 : -1; r < 3; r++) {
     float acc = 0.0f;
     double t0 = now_s();
 #pragma omp parallel num_threads(nthreads) reduction(+ : acc)
@@ -63,14 +64,15 @@ static double probe(int kind, int nthreads) {
     double dt = now_s() - t0;
     sink += acc;
     double g = (double)nthreads * (double)iters * flop_per_iter / dt * 1e-9;
-    if (g > best) best = g;
+    if (r >= 0 && g > best) best = g;
   }
+  warmed[kind] = 1;
   (void)sink;
   return best;
 }
 
 kt_machine_peak kt_measure_peak(int nthreads) {
-  kt_machine_peak p = {0.0, 0.0, "avx2"};
+  kt_machine_peak p = {0.0, 0.0, "avx2", kpcn_cpu_allows_amx()};
   if (nthreads < 1) nthreads = omp_get_max_threads();
   __builtin_cpu_init();
   /* under ONEDNN_MAX_CPU_ISA=AVX2 (kpcn_cpu_allows_avx512) the code runs as on an AVX2 CPU,
@@ -89,6 +91,13 @@ kt_machine_peak kt_measure_peak(int nthreads) {
 void kt_print_vs_peak(const kt_machine_peak *p, int bf16, const char *what, double gflops,
                       double target) {
   double peak = bf16 ? p->bf16 : p->fp32, ref = bf16 ? KT_REF_PEAK_BF16 : KT_REF_PEAK_FP32;
+  if (bf16 && p->amx) { /* a share of the vdpbf16ps peak would read 300 % and more there */
+    printf("  %s %.1f GFLOP/s: bf16 on AMX tiles, whose peak is not probed (vdpbf16ps: %.0f "
+           "GFLOP/s), so no share; target %.0f GFLOP/s on the targets' machine (no AMX), "
+           "compared as is: %s\n",
+           what, gflops, p->bf16, target, gflops >= target ? "met" : "NOT met");
+    return;
+  }
   if (!(peak > 0.0)) {
     printf("  %s vs peak: this CPU has no %s FMA probe\n", what, bf16 ? "bf16" : "fp32");
     return;

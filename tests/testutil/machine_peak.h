@@ -10,9 +10,11 @@ typedef struct kt_machine_peak {
   double fp32;     /* GFLOP/s of independent fused multiply-adds (2 FLOP each), all threads */
   double bf16;     /* GFLOP/s of bf16 dot-product accumulates (vdpbf16ps), 0 if none */
   const char *isa; /* "avx512" or "avx2" (the fp32 probe's width) */
+  int amx;         /* oneDNN may run bf16 convolutions on AMX tiles, which bf16 does not bound */
 } kt_machine_peak;
 
-/* Runs each probe with nthreads threads, ~0.1 s per try, best of three. */
+/* Runs each probe with nthreads threads, ~0.1 s per try, best of three (after one untimed
+ * try per process: a VM's first AVX-512 work ran at three quarters of the later rate). */
 kt_machine_peak kt_measure_peak(int nthreads);
 
 /* The targets' machine (STACK_NOTES.md "Measured limits"): fp32 and bf16 FMA peaks. */
@@ -21,7 +23,8 @@ kt_machine_peak kt_measure_peak(int nthreads);
 
 /* Prints one line: `what` (GFLOP/s measured in the same minute as p) as a share of this
  * machine's peak for its precision, that share applied to the targets' machine, and whether
- * the target (GFLOP/s on the targets' machine) is reached at that share. */
+ * the target (GFLOP/s on the targets' machine) is reached at that share. bf16 on an AMX CPU
+ * has no probed peak (p->amx): the line then compares the absolute figure with the target. */
 void kt_print_vs_peak(const kt_machine_peak *p, int bf16, const char *what, double gflops,
                       double target);
 #endif

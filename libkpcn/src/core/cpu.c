@@ -5,7 +5,7 @@
 #include <stdlib.h>
 #include <strings.h>
 
-static int allows_avx512;
+static int allows_avx512, allows_amx;
 static pthread_once_t once = PTHREAD_ONCE_INIT;
 
 /* A cap names a level below AVX-512 when it is an SSE or AVX level other than AVX512_*. */
@@ -20,12 +20,22 @@ static void detect(void) {
   if (!cap || !*cap) cap = getenv("DNNL_MAX_CPU_ISA");
 #if defined(__x86_64__) || defined(__i386__)
   allows_avx512 = __builtin_cpu_supports("avx512f") && !cap_below_avx512(cap);
+  /* oneDNN runs bf16 convolutions on AMX tiles up to the cap AVX512_CORE_AMX (or none) */
+  allows_amx = allows_avx512 && __builtin_cpu_supports("amx-tile") &&
+               __builtin_cpu_supports("amx-bf16") &&
+               (!cap || !*cap || strcasecmp(cap, "all") == 0 ||
+                strncasecmp(cap, "avx512_core_amx", 15) == 0);
 #else
-  allows_avx512 = 0;
+  allows_avx512 = allows_amx = 0;
 #endif
 }
 
 int kpcn_cpu_allows_avx512(void) {
   pthread_once(&once, detect);
   return allows_avx512;
+}
+
+int kpcn_cpu_allows_amx(void) {
+  pthread_once(&once, detect);
+  return allows_amx;
 }

@@ -53,6 +53,11 @@ void kpcn_fast_fp_end(unsigned saved, int nthreads);
  * an AVX2 machine, which is how the tests cover the fallback paths on an AVX-512 host. */
 int kpcn_cpu_allows_avx512(void);
 
+/* Whether oneDNN may run bf16 convolutions on AMX tiles (Sapphire Rapids and later): the CPU
+ * has AMX-TILE and AMX-BF16, AVX-512 is allowed, and the cap is absent, ALL or names an AMX
+ * level. Benchmarks use it: the vdpbf16ps probe does not bound AMX throughput. */
+int kpcn_cpu_allows_amx(void);
+
 /* Median of v[0..n) (sorts v; the mean of the two middle values for even n; 0 for n = 0). */
 double kpcn_median_inplace(double *v, size_t n);
 
