@@ -10,7 +10,7 @@ typedef struct kt_machine_peak {
   double fp32;     /* GFLOP/s of independent fused multiply-adds (2 FLOP each), all threads */
   double bf16;     /* GFLOP/s of bf16 dot-product accumulates (vdpbf16ps), 0 if none */
   const char *isa; /* "avx512" or "avx2" (the fp32 probe's width) */
-  int amx;         /* oneDNN may run bf16 convolutions on AMX tiles, which bf16 does not bound */
+  int amx;         /* oneDNN may run bf16 on AMX tiles, which the bf16 probe does not bound */
 } kt_machine_peak;
 
 /* Runs each probe with nthreads threads, ~0.1 s per try, best of three (after one untimed
