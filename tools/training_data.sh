@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# Rebuilds the training data of the shipped model and the images its judging rules use, from
-# the recipes of docs/dataset.md, in one folder: the scene folders (links into testdata/scenes
-# and procedural rooms), the 21 kpcn-dataset datasets, the two 4096-spp references of the
-# held-out scenes and the patch store `rooms9v.kps` (docs/training-log.md, rule 50's store).
+# Rebuilds the training data of N (the shipped model from session 38 to 52, which the shipped
+# model R was trained from) and the images the judging rules use, from the recipes of
+# docs/dataset.md, in one folder: the scene folders (links into testdata/scenes and procedural
+# rooms), the 21 kpcn-dataset datasets, the two 4096-spp references of the held-out scenes and
+# the patch store `rooms9v.kps` (docs/training-log.md, rule 50's store). R's store is built on
+# top of this by tools/rule56_data.sh.
 #
 #   tools/training_data.sh [--plan-only] [--no-store] DIR [DATASET ...]
 #
