@@ -9,7 +9,7 @@
 # minutes (default: no limit) and continues from OUT/model.safetensors.ckpt (kpcn-train names
 # the checkpoint after -o) when there is one (--resume, bit-exact), so the same command carries
 # R across sessions. Once R's 12 000 iterations have
-# finished, and only once, it judges the shipped model N and R with this build
+# finished, and only once, it judges N (the model shipped when rule 56 was written) and R with this build
 # (tools/judge_textures.py: OUT/judge_N.json and .tsv, then OUT/judge_R.json and .tsv against
 # N's pairs) and prints rule 56's verdict (OUT/verdict.txt). N is judged again here, not taken
 # from a file, because the bounds compare R with N on the same data, host class and code

@@ -20,8 +20,8 @@
 #
 # The renders are the current renderer's. The shipped model's lineage trained on renders of
 # the same plans made by the renderer of their session, so where the renderer has changed
-# since, the files differ (docs/dataset.md, "The shipped model's data in one command", has
-# what session 40 found reproduced).
+# since, the files differ (docs/dataset.md, "N's data and the judging sets in one command",
+# has what session 40 found reproduced).
 set -euo pipefail
 shopt -s inherit_errexit
 here=$(cd "$(dirname "$0")/.." && pwd)

@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
-# Trains the shipped model and writes testdata/models/README.md from what actually ran
+# Trains a model to ship and writes testdata/models/README.md from what actually ran
 # (command line, dataset, time, hardware, final validation metrics), so the README is a
-# record produced by the pipeline, never edited by hand.
+# record produced by the pipeline. It trained the shipped models of sessions 2-23; the model
+# shipped now (R) came from tools/rule56_run.sh, whose README was written from its log, so a
+# run of this script replaces that README with its own.
 #
 # usage: tools/kpcn-train/ship_model.sh STORE.kps [NOISY.exr,REF.exr ...]
-# environment (defaults): MINUTES (60) training budget, PRESET (cpu), ITERS (100000; the time
-#   limit normally ends the run first), STAGE1_FRACTION (0.6 of the iterations, or of the
+# environment (defaults): MINUTES (60) training budget, PRESET (cpu), ITERS (none: sized to fit
+#   MINUTES from a 20-iteration speed probe, below), STAGE1_FRACTION (0.6 of the iterations, or of the
 #   budget when time-limited: see below), LOSS2 (l1), THREADS (0), SEED (1),
 #   NAME (kpcn-$PRESET), DATASET_RECIPE (free text: how the store was made), KPCN_TRAIN,
 #   LR (1e-3), LR2 (stage-2 lr, default LR), DECAY_EVERY (iterations per x0.96, default
