@@ -78,6 +78,11 @@ t, tn, di, rp = (json.loads(x)["relmse"] for x in sys.argv[2:6])
 close = lambda x, y: abs(x - y) <= 1e-9 * abs(y)
 assert close(d["textures"], t) and close(d["textures_noisy"], tn), (d, t, tn)
 assert close(d["below_noisy"], tn / t) and close(d["di"], di), d
+flags = [l for l in open("/proc/cpuinfo") if l.startswith("flags")][0].split()
+import os
+if not os.environ.get("ONEDNN_MAX_CPU_ISA") and not os.environ.get("DNNL_MAX_CPU_ISA"):
+    assert d["host"]["isa"] == ("avx512" if "avx512f" in flags else "avx2"), d["host"]
+assert d["host"]["cpu"], d["host"]
 rows = [l.rstrip("\n").split("\t") for l in open(sys.argv[6])]
 rooms = [float(r[4]) for r in rows if r[0].startswith("roomsval")]
 val = [float(r[4]) for r in rows if r[0] in ("v2val", "v3val")]
@@ -97,6 +102,16 @@ assert vb["better"] == sum(float(r[4]) < 1 for r in rows), vb
 top = max(rows, key=lambda r: float(r[4]))
 assert vb["worst"][0][0] == "/".join(top[:3]) and close(vb["worst"][0][1], float(top[4])), vb
 PY
+# the host's instruction set under caps (libkpcn's rule: a cap names an SSE or AVX level
+# below AVX-512, or not)
+isa() { env "$@" /usr/bin/python3 -c "import sys; sys.path.insert(0, sys.argv[1])
+import judge_textures; print(judge_textures.host()['isa'])" "$(dirname "$S")"; }
+[ "$(isa ONEDNN_MAX_CPU_ISA=AVX2)" = avx2 ] || fail "host() under the AVX2 cap"
+[ "$(isa -u ONEDNN_MAX_CPU_ISA DNNL_MAX_CPU_ISA=sse41)" = avx2 ] || fail "host() under DNNL's SSE4.1 cap"
+want=avx2
+! grep -qw avx512f /proc/cpuinfo || want=avx512
+[ "$(isa ONEDNN_MAX_CPU_ISA=AVX512_CORE_BF16)" = $want ] || fail "host() under an AVX-512 cap"
+[ "$(isa ONEDNN_MAX_CPU_ISA=ALL)" = $want ] || fail "host() with the cap ALL"
 # --compare, no rendering: one room twice as bad, one v2val pair half, the rest equal
 # (sprintf: awk would print the products to 6 digits)
 awk -F'\t' 'BEGIN{OFS="\t"} $1=="roomsval2" && !a {$5=sprintf("%.17g", $5*2); a=1}
