@@ -19,8 +19,8 @@ roomsval, roomsval2 and roomsval3 and v1's 4096-spp references. Prints one JSON 
   di              the held-out diffuse-interreflection scene, v1's 16-spp render (no texture,
                   so no footprint render) against its 4096-spp reference
   host            the CPU ("cpu", /proc/cpuinfo's model name) and the instruction set its
-                  renders and nets ran ("isa": avx512, or avx2 on CPUs without AVX-512 or
-                  under an ONEDNN_MAX_CPU_ISA cap below it, as libkpcn decides). Renders differ
+                  renders and nets ran ("isa", from kpcntool --version: avx512, or avx2 on
+                  CPUs without AVX-512 or under an ONEDNN_MAX_CPU_ISA cap below it). Renders differ
                   between the two in their last bits, and a pair's figure by up to a few per
                   cent (docs/renderer.md, "Determinism"): compare models judged on one of them.
 Every relMSE is kpcntool's on linear R, G, B. --denoise-opts is appended to
@@ -35,6 +35,7 @@ import argparse
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -85,23 +86,19 @@ def pairs_present(ds, variants):
     return n
 
 
-def host():
-    """The CPU and the instruction set libkpcn, Embree and oneDNN run on it (src/core/cpu.c's
-    rule: AVX-512 where the CPU has it and ONEDNN_MAX_CPU_ISA names no SSE or AVX level below)."""
-    model, flags = "", set()
+def host(tool):
+    """The CPU (/proc/cpuinfo's model name) and the instruction set libkpcn, Embree and oneDNN
+    run on it, as `kpcntool --version` reports it."""
+    model = ""
     try:
         with open("/proc/cpuinfo") as f:
-            for line in f:
-                key, _, val = line.partition(":")
-                if key.strip() == "model name" and not model:
-                    model = val.strip()
-                elif key.strip() == "flags" and not flags:
-                    flags = set(val.split())
+            model = next((l.partition(":")[2].strip() for l in f if l.startswith("model name")), "")
     except OSError:
         pass
-    cap = (os.environ.get("ONEDNN_MAX_CPU_ISA") or os.environ.get("DNNL_MAX_CPU_ISA") or "").lower()
-    capped = cap[:3] in ("sse", "avx") and not cap.startswith("avx512")
-    return {"cpu": model, "isa": "avx512" if "avx512f" in flags and not capped else "avx2"}
+    m = re.search(r"instruction set (\w+)", run([tool, "--version"]))
+    if not m:
+        fail("'%s --version' names no instruction set" % tool)
+    return {"cpu": model, "isa": m.group(1)}
 
 
 def geomean(xs):
@@ -223,7 +220,7 @@ def main():
              % (len(rooms), len(val)))
     out["dprime"] = geomean(rooms)
     out["val32"] = geomean(val)
-    out["host"] = host()
+    out["host"] = host(tool)
     if a.pairs:
         with open(a.pairs, "w") as f:
             f.write("".join("\t".join(r) + "\n" for r in rows))

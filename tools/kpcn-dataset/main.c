@@ -4,11 +4,12 @@
  *   kpcn-dataset patches DATASET -o train.kps [...]      patch store with culling stats
  * Exit codes: 0 ok, 1 failure, 2 usage error, 130 interrupted. */
 #include "ds.h"
+#include "kpcn/common.h"
 
 #include <string.h>
 
 static void usage(FILE *f) {
-  fprintf(f, "usage: kpcn-dataset plan|run|patches ... (kpcn-dataset CMD --help)\n");
+  fprintf(f, "usage: kpcn-dataset plan|run|patches ... (kpcn-dataset CMD --help; --version)\n");
 }
 
 int main(int argc, char **argv) {
@@ -22,6 +23,10 @@ int main(int argc, char **argv) {
   if (!strcmp(cmd, "patches")) return ds_cmd_patches(argc - 1, argv + 1);
   if (!strcmp(cmd, "-h") || !strcmp(cmd, "--help")) {
     usage(stdout);
+    return 0;
+  }
+  if (!strcmp(cmd, "--version")) {
+    printf("kpcn-dataset %s\n%s\n", KPCN_VERSION_STRING, kpcn_build_info());
     return 0;
   }
   ds_err("unknown command '%s'", cmd);

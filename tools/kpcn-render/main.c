@@ -23,17 +23,20 @@
 
 static void usage(FILE *f) {
   fprintf(
-      f, "usage: kpcn-render scene.json -o out.exr [--spp N] [--seed S] [--threads N (0=all)]\n"
-         "                   [--resolution WxH] [--crop x,y,w,h] [--color-only] [--max-bounces N]\n"
-         "                   [--albedo-spp N] [--albedo-footprint K] [--half] [--quiet]\n"
-         "                   [--checkpoint PATH [--checkpoint-every S]]\n"
-         "  --albedo-spp N   the albedo buffer from N >= spp camera samples of a features-only\n"
-         "                   pass (less edge noise for the denoiser's remodulation)\n"
-         "  --albedo-footprint K  each sample's textured albedo averaged over K x K points of\n"
-         "                   its pixel's footprint (texture lookups, no rays; 1 = off)\n"
-         "  --checkpoint PATH  save finished rows there every S seconds (default 60) and on\n"
-         "                   SIGINT/SIGTERM; the same command resumes from it (bit-identical)\n"
-         "                   and removes it once the output is written\n");
+      f,
+      "usage: kpcn-render scene.json -o out.exr [--spp N] [--seed S] [--threads N (0=all)]\n"
+      "                   [--resolution WxH] [--crop x,y,w,h] [--color-only] [--max-bounces N]\n"
+      "                   [--albedo-spp N] [--albedo-footprint K] [--half] [--quiet]\n"
+      "                   [--checkpoint PATH [--checkpoint-every S]]\n"
+      "  --albedo-spp N   the albedo buffer from N >= spp camera samples of a features-only\n"
+      "                   pass (less edge noise for the denoiser's remodulation)\n"
+      "  --albedo-footprint K  each sample's textured albedo averaged over K x K points of\n"
+      "                   its pixel's footprint (texture lookups, no rays; 1 = off)\n"
+      "  --checkpoint PATH  save finished rows there every S seconds (default 60) and on\n"
+      "                   SIGINT/SIGTERM; the same command resumes from it (bit-identical)\n"
+      "                   and removes it once the output is written\n"
+      "  --version        the versions and the instruction set (avx512 or avx2) in use: renders\n"
+      "                   are bit-identical for a seed only on one of the two\n");
 }
 
 typedef struct progress_state {
@@ -272,6 +275,9 @@ int main(int argc, char **argv) {
       quiet = 1;
     } else if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
       usage(stdout);
+      return 0;
+    } else if (strcmp(a, "--version") == 0) {
+      printf("kpcn-render %s\n%s\n", KPCN_VERSION_STRING, kpcn_build_info());
       return 0;
     } else if (a[0] == '-') {
       fprintf(stderr, "kpcn-render: unknown option '%s'\n", a);

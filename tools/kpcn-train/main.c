@@ -61,6 +61,7 @@ static void usage(FILE *f) {
         "  --firefly R               bound each patch's isolated diffuse fireflies (ratio R >= 1)\n"
         "                            before its features, as the denoiser does by default (4)\n"
         "  --quiet                   no log lines\n"
+        "  --version                 the versions and the instruction set (avx512 or avx2)\n"
         "\n"
         "usage: kpcn-train --compare OUT.png [--x iter|elapsed_s] [--y COLUMN] [--title T]\n"
         "                  [--linear] LABEL=RUN.csv ...\n"
@@ -419,6 +420,10 @@ int main(int argc, char **argv) {
   }
     if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
       usage(stdout);
+      return 0;
+    }
+    if (!strcmp(a, "--version")) {
+      printf("kpcn-train %s\n%s\n", KPCN_VERSION_STRING, kpcn_build_info());
       return 0;
     }
     STR("--store", s.store_path)

@@ -38,6 +38,8 @@ void print_help() {
       "commands:\n",
       KPCN_VERSION_STRING);
   std::printf("  %-14s %s\n", "--help", "print this help");
+  std::printf("  %-14s %s\n", "--version",
+              "print the versions and the instruction set (avx512 or avx2) in use");
   for (const kpcntool::Command *c : kpcntool::all_commands()) {
     std::string name = (c->name.size() == 1 ? "-" : "--") + c->name;
     for (int i = 0; i < c->nargs; ++i)
@@ -167,6 +169,12 @@ int main(int argc, char **argv) {
     std::string a = argv[i];
     if (a == "--help" || a == "-h") {
       print_help();
+      return 0;
+    }
+    if (a == "--version") { // the library, its dependencies and the instruction set in use
+      const int v = OIIO::openimageio_version();
+      std::printf("kpcntool %s\n%s, OpenImageIO %d.%d.%d\n", KPCN_VERSION_STRING, kpcn_build_info(),
+                  v / 10000, v / 100 % 100, v % 100);
       return 0;
     }
   }

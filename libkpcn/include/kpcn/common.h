@@ -54,6 +54,15 @@ typedef void (*kpcn_log_fn)(void *user, kpcn_log_level level, const char *messag
  * (the job then stops at the next safe point and returns KPCN_ERR_CANCELLED). */
 typedef int (*kpcn_progress_fn)(void *user, double fraction);
 
+/* The instruction set libkpcn's kernels, oneDNN and Embree run on this CPU: "avx512", or
+ * "avx2" on a CPU without AVX-512F or when $ONEDNN_MAX_CPU_ISA (or $DNNL_MAX_CPU_ISA) names a
+ * level below it. Renders and networks are bit-identical for a seed and thread count only on
+ * one of the two: their kernels round differently (docs/renderer.md, "Determinism"). */
+const char *kpcn_cpu_isa(void);
+/* One line for --version: "libkpcn 0.2.0; instruction set avx512; oneDNN 2.6.3, Embree
+ * 3.13.5, OpenEXR 3.1.5" (oneDNN's and OpenEXR's as loaded, Embree's as built against). */
+const char *kpcn_build_info(void);
+
 /* Number of threads a call will use for the request n (0 = all cores). */
 int kpcn_resolve_threads(int n);
 
