@@ -52,12 +52,10 @@ check kpcntool "$KT" avx2 DNNL_MAX_CPU_ISA=sse41
 check kpcntool "$KT" $native ONEDNN_MAX_CPU_ISA=ALL
 check kpcntool "$KT" $native ONEDNN_MAX_CPU_ISA=AVX512_CORE_BF16
 # --version is listed where each tool lists its options
-"$KT" --help | grep -q -- "--version" && pass "kpcntool --help lists --version" ||
-  fail "kpcntool --help lacks --version"
-"$KR" --help | grep -q -- "--version" && pass "kpcn-render --help lists --version" ||
-  fail "kpcn-render --help lacks --version"
-"$KTR" --help | grep -q -- "--version" && pass "kpcn-train --help lists --version" ||
-  fail "kpcn-train --help lacks --version"
-"$KD" --help | grep -q -- "--version" && pass "kpcn-dataset --help lists --version" ||
-  fail "kpcn-dataset --help lacks --version"
+for t in "kpcntool $KT" "kpcn-render $KR" "kpcn-train $KTR" "kpcn-dataset $KD"; do
+  # shellcheck disable=SC2086 # name and path
+  set -- $t
+  if "$2" --help | grep -q -- "--version"; then pass "$1 --help lists --version"; else
+    fail "$1 --help lacks --version"; fi
+done
 [ $fails -eq 0 ] && echo "cli_version: ok" || { echo "cli_version: $fails failure(s)"; exit 1; }
