@@ -23,13 +23,14 @@ static void build(void) {
   int maj = 0, min = 0, patch = 0;
   const char *extra = NULL;
   exr_get_library_version(&maj, &min, &patch, &extra);
-  char dnnl[48] = "none", embree[48] = "none";
+  char dnnl[48] = "none";
+  const char *embree = "none";
 #ifdef KPCN_HAVE_DNNL
   const dnnl_version_t *v = dnnl_version(); /* the loaded library's, not the header's */
   snprintf(dnnl, sizeof dnnl, "%d.%d.%d", v->major, v->minor, v->patch);
 #endif
 #ifdef KPCN_HAVE_EMBREE
-  snprintf(embree, sizeof embree, "%s", RTC_VERSION_STRING); /* the headers built against */
+  embree = RTC_VERSION_STRING; /* the headers built against */
 #endif
   snprintf(info, sizeof info,
            "libkpcn %s; instruction set %s; oneDNN %s, Embree %s, OpenEXR %d.%d.%d%s",
