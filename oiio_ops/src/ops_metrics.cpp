@@ -71,6 +71,18 @@ static MetricResult run(const ImageBuf &x, const ImageBuf &ref, Metric m, const 
               size_str(rx) + ", " + label(ref, "the reference image") + " is " + size_str(ry) + ")";
     return r;
   }
+  // Pixels are compared by position: two crops of one render at different offsets (a data
+  // window is where an image's pixels sit) hold different regions, not a noisy/reference pair.
+  if (rx.xbegin != ry.xbegin || rx.ybegin != ry.ybegin) {
+    auto window = [](const ROI &r) {
+      return size_str(r) + "+" + std::to_string(r.xbegin) + "+" + std::to_string(r.ybegin);
+    };
+    r.error = std::string(what) + ": the images cover different pixels (" +
+              label(x, "the test image") + " has the data window " + window(rx) + ", " +
+              label(ref, "the reference image") + " " + window(ry) +
+              "): crop or shift them to the same window first";
+    return r;
+  }
   std::string err;
   const std::vector<std::string> chans =
       opt.channels.empty() ? default_channels(x, ref) : opt.channels;

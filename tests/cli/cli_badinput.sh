@@ -36,7 +36,7 @@ expect_fail "modifier 'allow_nonfinite' must be 0 or 1 (got 'maybe')" "" "$REF" 
 expect_fail "modifier 'bf16' must be 0 or 1 (got '5')" "" "$NOISY" --denoise:model=m.safetensors:bf16=5
 expect_fail "modifier 'ensemble' applies only to the KPCN, not method=bilateral" "" "$NOISY" \
   --denoise:method=bilateral:ensemble=8
-expect_fail "exposure must be auto, off or a number > 0 (got '1e-50')" "" "$NOISY" \
+expect_fail "exposure must be auto, off or a number > 0 and < 1e30 that a float holds (got '1e-50')" "" "$NOISY" \
   --denoise:model=m.safetensors:exposure=1e-50
 expect_fail "channel 'A': the constant 'nan' is not a finite float" "" "$REF" --ch R,G,B,A=nan
 expect_fail "channel name 'X' appears twice" "" "$REF" --ch X=R,X=G
@@ -70,5 +70,12 @@ if grep -q "$(printf '\033')" info.txt || ! grep -qF '\x1b[31mR\xff' info.txt; t
 else
   pass "file text printed escaped"
 fi
+# A colour map of an image with no finite pixel has nothing to scale by: said so.
+expect_fail "every pixel of the image is NaN or Inf" out.png nan.exr --colormap -o out.png
+# Two crops of one image at different offsets hold different pixels: not compared as a pair.
+oiiotool "$REF" --crop 16x16+0+0 -o crop0.exr
+oiiotool "$REF" --crop 16x16+24+24 -o crop24.exr
+expect_fail "the images cover different pixels ('crop0.exr' has the data window 16x16+0+0, 'crop24.exr' 16x16+24+24)" \
+  "" crop0.exr crop24.exr --l1
 [ -z "$(ls -a | grep -E '\.tmp|^out\.(exr|png)$|^map\.exr$')" ] && pass "no stray outputs" || fail "stray: $(ls -a)"
 finish

@@ -20,11 +20,11 @@ expect_fail "-o out.xyz: no image format writes '.xyz' files" out.exr "$REF" -o 
 [ "$("$KT" "$REF" -o out.xyz 2>/dev/null; echo $?)" = 2 ] && pass "bad -o format exits 2" ||
   fail "bad -o format exit code"
 # Files.
-expect_fail "'missing.exr': no such file" out.exr missing.exr -o out.exr
+expect_fail "cannot open 'missing.exr': No such file or directory" out.exr missing.exr -o out.exr
 expect_fail "truncated.exr" out.exr truncated.exr "$REF" --relmse -o out.exr
 expect_fail "garbage.exr" out.exr garbage.exr -o out.exr
 expect_fail "'wide.exr' has an unsupported or absurd size 70000x1" out.exr wide.exr -o out.exr
-expect_fail "cannot write 'nodir/out.exr'" "" "$REF" -o nodir/out.exr
+expect_fail "-o 'nodir/out.exr': folder 'nodir': No such file or directory" "" "$REF" -o nodir/out.exr
 expect_fail "PNG only supports 1-4 channels" out.png "$NOISY" -o out.png
 # All or nothing: a later output or command that fails leaves none of the earlier ones.
 expect_fail "PNG only supports 1-4 channels" out.exr "$NOISY" -o out.exr -o out.png
@@ -51,5 +51,42 @@ run_ok "$REF" -o twice.exr --ch R,G,B,A=1 -o twice.exr
 [ "$(oiiotool --info twice.exr | grep -c '4 channel')" = 1 ] && pass "the later of two -o to one file wins" ||
   fail "two -o to one file: $(oiiotool --info twice.exr)"
 rm -f twice.exr
+# Files that are not regular files: a FIFO or a device is neither read (it would block or
+# never end) nor replaced by the renamed temporary; a symbolic link is written through.
+mkfifo fifo.exr
+[ "$(timeout 20 "$KT" fifo.exr --info 2>&1 >/dev/null)" = \
+  "kpcntool: error: fifo.exr: cannot open 'fifo.exr': is not a regular file (a FIFO, device or socket)" ] &&
+  pass "a FIFO as input is refused at once" || fail "FIFO input: $(timeout 20 "$KT" fifo.exr --info 2>&1)"
+expect_fail "cannot open '/dev/zero': is not a regular file" "" /dev/zero --info
+expect_fail "-o 'fifo.exr' is not a regular file (a FIFO, device or socket): it would be replaced" "" \
+  "$REF" -o fifo.exr
+[ -p fifo.exr ] && pass "the FIFO is still a FIFO" || fail "fifo.exr replaced: $(ls -l fifo.exr)"
+ln -s /dev/null null.exr
+expect_fail "-o 'null.exr' is not a regular file" "" "$REF" -o null.exr
+[ -c /dev/null ] && [ -L null.exr ] && pass "/dev/null and the link to it are kept" || fail "null.exr: $(ls -l null.exr /dev/null)"
+mkdir adir.exr
+expect_fail "cannot open 'adir.exr': is a directory" "" adir.exr --info
+expect_fail "-o 'adir.exr' is a directory" "" "$REF" -o adir.exr
+ln -s gone.exr dangling.exr
+expect_fail "-o 'dangling.exr' is a symbolic link to a missing file" "" "$REF" -o dangling.exr
+rm -f fifo.exr null.exr dangling.exr
+rmdir adir.exr
+cp "$REF" target.exr
+ln -s target.exr link.exr
+run_ok "$NOISY" --ch R,G,B -o link.exr
+[ -L link.exr ] && [ "$(oiiotool --info target.exr | grep -c '3 channel')" = 1 ] &&
+  pass "-o through a symbolic link replaces its target, keeps the link" || fail "link.exr: $(ls -l link.exr target.exr)"
+# An output that is one of the inputs (by inode: a link or another spelling) is refused before
+# anything is read.
+expect_fail "-o 'target.exr' is the same file as input image 'target.exr'" "" target.exr -o target.exr
+expect_fail "-o './link.exr' is the same file as input image 'target.exr'" "" target.exr --ch R -o ./link.exr
+[ "$(oiiotool --info target.exr | grep -c '3 channel')" = 1 ] && pass "the input is unchanged" ||
+  fail "target.exr changed: $(oiiotool --info target.exr)"
+rm -f link.exr target.exr
+# A file name at the 255-byte limit: its temporary gets a short name in the same folder.
+long=$(printf 'n%.0s' $(seq 1 251)).exr
+run_ok "$REF" --ch R -o "$long"
+[ -f "$long" ] && pass "a 255-byte file name is written" || fail "no $long"
+rm -f "$long"
 [ -z "$(ls -a | grep -E '\.tmp|^out\.(exr|png)$|^map\.exr$')" ] && pass "no stray outputs" || fail "stray: $(ls -a)"
 finish

@@ -50,6 +50,12 @@ ok '[ $rc -eq 1 ]' "missing scenes dir"
 "$DS" plan --scenes "$TD/scenes" --spp 4,x -o "$T/bad4" 2> /dev/null
 rc=$?
 ok '[ $rc -eq 2 ] && [ ! -e "$T/bad4" ]' "bad --spp, nothing written"
+# a count twice would plan one job (one output file) twice; an empty item is a typo
+for spp in 2,2 4,2,4 1,,2 2, ,2; do
+  "$DS" plan --scenes "$TD/scenes" --spp "$spp" -o "$T/bad5" 2> "$T/err"
+  rc=$?
+  ok '[ $rc -eq 2 ] && [ ! -e "$T/bad5" ] && grep -q "distinct integers" "$T/err"' "plan --spp $spp refused (rc $rc)"
+done
 # bad values: exit 2, the option and value named, nothing written
 bad_plan() { # PATTERN DESC PLAN-ARGS...
   pat=$1; desc=$2; shift 2
@@ -206,6 +212,18 @@ for bad in "--max-black -1" "--max-black nan" "--max-background 1.5" "--max-blow
   ok '[ $rc -eq 2 ] && grep -F -q -- "for ${bad%% *}" "$T/err"' "run $bad refused (rc $rc: $(cat "$T/err"))"
 done
 
+# a renderer that exits 0 without writing its output: the job fails, saying so; a directory is
+# not a renderer
+"$DS" plan --scenes "$TD/scenes" --variants 0 --seed 3 --spp 2 --ref-spp 8 --no-preview \
+  --split train:cornell-box+cornell-teal+cornell-wide -o "$T/t0" > /dev/null
+"$DS" run "$T/t0" --jobs 1 --renderer /bin/true > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -ne 0 ] && grep -q "the renderer exited 0 without writing" "$T/err"' \
+  "a renderer that writes nothing (rc $rc: $(head -n 2 "$T/err"))"
+"$DS" run "$T/t0" --renderer "$T" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -ne 0 ] && grep -q "is not an executable file" "$T/err"' "a directory as --renderer (rc $rc)"
+
 # ---- degenerate variant rejection + patches ----
 "$DS" plan --scenes "$TD/scenes" --variants 2 --seed 3 --spp 2,4 --ref-spp 128 \
   --split train:cornell-box+cornell-teal,test:cornell-wide -o "$T/r" > /dev/null
@@ -247,9 +265,9 @@ np_rd=$("$DS" patches "$T/r" "$T/d" --size 8 --per-image 5 --allow-partial -o "$
 echo "two directories: $np_rd pairs = $np_r + $np_d"
 ok '[ -n "$np_r" ] && [ -n "$np_d" ] && [ "$np_rd" -eq $((np_r + np_d)) ]' "two directories: $np_rd pairs = $np_r + $np_d"
 ok 'grep -a -q "$T/d/renders/" "$T/both.kps" && grep -a -q "$T/r/renders/" "$T/both.kps"' "sources carry their directory"
-# many directories (rule 56 merges 18): 20 links to one directory give 20 times its pairs; 65 are
-# refused by name before anything is read
-many=$(for i in $(seq 20); do ln -s "$T/d" "$T/d$i" && printf '%s ' "$T/d$i"; done)
+# many directories (rule 56 merges 18): 20 copies of one directory give 20 times its pairs; 65
+# are refused by name before anything is read
+many=$(for i in $(seq 20); do cp -r "$T/d" "$T/d$i" && printf '%s ' "$T/d$i"; done)
 # shellcheck disable=SC2086
 np_many=$("$DS" patches $many --size 8 --per-image 5 -o "$T/many.kps" | sed 's/.*: \([0-9]*\) image pairs.*/\1/')
 ok '[ -n "$np_many" ] && [ "$np_many" -eq $((20 * np_d)) ]' "20 directories: $np_many pairs = 20 x $np_d"
@@ -258,6 +276,23 @@ ok '[ -n "$np_many" ] && [ "$np_many" -eq $((20 * np_d)) ]' "20 directories: $np
 rc=$?
 ok '[ $rc -eq 2 ] && [ ! -e "$T/too.kps" ] && grep -q "more than 64 dataset directories" "$T/err"' \
   "65 directories refused (rc $rc: $(cat "$T/err"))"
+# one directory twice (also through a link) would cut every pair twice: refused before any work
+ln -s "$T/d" "$T/dlink"
+"$DS" patches "$T/d" "$T/r" "$T/dlink" --size 8 --allow-partial -o "$T/twice.kps" 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 2 ] && [ ! -e "$T/twice.kps" ] && grep -q "is given twice" "$T/err"' \
+  "a directory given twice refused (rc $rc: $(cat "$T/err"))"
+# the store may not replace a file it reads (the manifest, a render), nor be written where it
+# cannot be (checked before the renders are read)
+cp "$T/r/manifest.jsonl" "$T/manifest.bak"
+for o in "$T/r/manifest.jsonl" "$T/r/renders/cornell-box/v000_2spp.exr" "$T/nodir/x.kps" "$T/r"; do
+  "$DS" patches "$T/r" --size 8 --allow-partial -o "$o" 2> "$T/err"
+  rc=$?
+  ok '[ $rc -eq 2 ] && grep -Eq "is the same file as|folder .*nodir|is a directory" "$T/err"' \
+    "patches -o $o refused (rc $rc: $(cat "$T/err"))"
+done
+ok 'cmp -s "$T/r/manifest.jsonl" "$T/manifest.bak" && [ -f "$T/r/renders/cornell-box/v000_2spp.exr" ]' \
+  "the manifest and the render are intact"
 "$DS" patches "$T/r" "$T/nothing" --size 8 --allow-partial -o "$T/none.kps" 2> "$T/err"
 rc=$?
 ok '[ $rc -eq 1 ] && [ ! -e "$T/none.kps" ] && grep -q "nothing" "$T/err"' "a second directory without manifest"

@@ -21,6 +21,14 @@ grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/api_in.json" && fail "kpcn returned its 
 # files may differ in header metadata (command history), so compare pixels
 "$T" --json "$D/out_t.exr" "$D/out.exr" --l1 >"$D/l1.json" || fail "l1"
 grep -Eq '"l1": *0(\.0*)?([,} ]|$)' "$D/l1.json" || fail "tile=16 differs from untiled: $(cat "$D/l1.json")"
+# a tile below half the model's overlap would cost over 25 times the untiled work (tile=1 of the
+# shipped model ran for minutes on a 16x16 image): refused, naming the bound, nothing written
+if "$T" "$D/aov.exr" --denoise:model="$D/model.safetensors":tile=1 -o "$D/out_1.exr" 2>"$D/err"; then
+  fail "tile=1 accepted"
+fi
+grep -q "tile 1 would pad each 1x1 core to .* more than 25 times the untiled work" "$D/err" ||
+  fail "tile=1: $(cat "$D/err")"
+[ ! -e "$D/out_1.exr" ] || fail "tile=1 wrote an output"
 # bf16 needs AVX-512 (oneDNN 2.6); elsewhere (or under ONEDNN_MAX_CPU_ISA=AVX2) it is refused
 # with a message and no output file
 bf16=yes

@@ -512,14 +512,13 @@ def prepare(fz):
                         "--resolution", res, "--threads", "1"], check=True, capture_output=True)
     with open(fz.path("bad.png"), "w") as f:
         f.write("not a png")
-    # a checkpoint holding every row: written after each row (one thread), kept because the
-    # output cannot be written (its folder does not exist)
+    # a checkpoint holding the first row: --time-limit 0 stops one thread after it, without
+    # an output (the damaged copies then resume the other rows)
     ck = fz.path("small.ckpt")
     if os.path.exists(ck):
         os.remove(ck)
-    subprocess.run([fz.bin("kpcn-render"), scene % "cornell-box", "-o", fz.path("no/x.exr"),
-                    "--checkpoint", ck, "--checkpoint-every", "1e-9"] + CKPT_ARGS,
-                   capture_output=True)
+    subprocess.run([fz.bin("kpcn-render"), scene % "cornell-box", "-o", fz.path("x.exr"),
+                    "--checkpoint", ck, "--time-limit", "0"] + CKPT_ARGS, capture_output=True)
     assert os.path.exists(ck), "fuzz: no checkpoint to mutate"
     # a rendered dataset folder: two scenes, one variant, 2 and 8 spp at 16x16
     shutil.rmtree(fz.path("ds"), ignore_errors=True)

@@ -237,35 +237,42 @@ static void test_cli(void) {
   alias[5] = CORNELL;
   CHECK(wait_status(spawn(alias, "a.err")) == 2 && file_contains("a.err", "is the scene file"));
   CHECK(!file_exists("a.exr"));
+  /* --time-limit without a checkpoint would throw the rows away: a usage error */
+  char *nolimit[] = {RENDER_BIN, CORNELL, "-o", "a.exr", "--time-limit", "1", "--quiet", NULL};
+  CHECK(wait_status(spawn(nolimit, "a.err")) == 2 && file_contains("a.err", "needs --checkpoint"));
+  CHECK(!file_exists("a.exr"));
   remove("a.err");
 
   /* A texture edited between a stop and a resume is refused: the scene's identity covers the
-   * files it names. A checkpoint of every row comes from a render whose output cannot be
-   * written (its folder does not exist), saved after every row. */
+   * files it names. The checkpoint comes from --time-limit 0: one thread stops after its first
+   * row (exit 3, no output). */
   CHECK(system("rm -rf tx && mkdir -p tx/scenes && cp -r " KPCN_TESTDATA
                "/scenes/textures tx/scenes/") == 0);
   char *tx[] = {RENDER_BIN,
                 "tx/scenes/textures/scene.json",
                 "-o",
-                "no_dir/t.exr",
+                "t.exr",
                 "--spp",
                 "2",
                 "--resolution",
                 "24x16",
                 "--checkpoint",
                 "t.ckpt",
-                "--checkpoint-every",
-                "1e-9",
+                "--threads",
+                "1",
+                "--time-limit",
+                "0",
                 NULL};
   remove("t.ckpt");
   remove("t.exr");
-  CHECK(wait_status(spawn(tx, "t.err")) == 1 && file_exists("t.ckpt"));
+  CHECK(wait_status(spawn(tx, "t.err")) == 3 && file_exists("t.ckpt") && !file_exists("t.exr"));
+  CHECK(file_contains("t.err", "stopped by --time-limit"));
+  tx[12] = NULL; /* from here on without the limit */
   CHECK(system("printf x >> tx/scenes/textures/bricks.png") == 0);
-  tx[3] = "t.exr";
   CHECK(wait_status(spawn(tx, "t.err")) == 1 && file_contains("t.err", "its scene_key is"));
   CHECK(!file_exists("t.exr"));
   CHECK(system("cp " KPCN_TESTDATA "/scenes/textures/bricks.png tx/scenes/textures/") == 0);
-  CHECK(wait_status(spawn(tx, "t.err")) == 0 && file_contains("t.err", "resumed 16 of 16 rows"));
+  CHECK(wait_status(spawn(tx, "t.err")) == 0 && file_contains("t.err", "resumed 1 of 16 rows"));
   CHECK(file_exists("t.exr") && !file_exists("t.ckpt"));
   remove("t.exr");
   remove("t.err");

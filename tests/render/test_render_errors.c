@@ -105,6 +105,50 @@ static void test_tool_options(const char *exe) {
   expect_cli(exe, hot, "--spp 2 --resolution 8x8", 0, "non-finite");
 }
 
+/* Output paths refused before rendering, each left as it was: a name that is not .exr, a
+ * missing folder, a FIFO, a directory, and the scene file itself (through a link named .exr). */
+static void test_tool_outputs(const char *exe) {
+  const char *cornell = KPCN_TESTDATA "/scenes/cornell-box/scene.json";
+  char dir[512];
+  snprintf(dir, sizeof dir, "%s", kt_tmpfile("outs"));
+  char cmd[4096];
+  snprintf(cmd, sizeof cmd,
+           "rm -rf %s && mkdir -p %s/adir.exr && mkfifo %s/fifo.exr && ln -s %s %s/scene.exr", dir,
+           dir, dir, cornell, dir);
+  CHECK(run(cmd) == 0);
+  static const char *const cases[][2] = {{"x.png", "must end in .exr"},
+                                         {"nodir/x.exr", "folder 'nodir'"},
+                                         {"fifo.exr", "is not a regular file"},
+                                         {"adir.exr", "is a directory"},
+                                         {"scene.exr", "is the scene file"}};
+  for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+    snprintf(cmd, sizeof cmd, "cd %s && %s %s -o %s --spp 1 --resolution 8x8 --threads 1 2>err.txt",
+             dir, exe, cornell, cases[k][0]);
+    if (!strcmp(cases[k][0], "scene.exr"))
+      snprintf(cmd, sizeof cmd, "cd %s && %s scene.exr -o ./scene.exr --spp 1 2>err.txt", dir, exe);
+    const int rc = run(cmd);
+    char err[1200];
+    snprintf(err, sizeof err, "%s/err.txt", dir);
+    char *msg = kt_slurp(err, NULL);
+    printf("kpcn-render -o %-12s -> rc %d: %s", cases[k][0], rc, msg ? msg : "(no stderr)\n");
+    CHECK(rc == 2 && msg && strstr(msg, cases[k][1]));
+    free(msg);
+  }
+  struct stat st;
+  char p[1200];
+  snprintf(p, sizeof p, "%s/fifo.exr", dir);
+  CHECK(stat(p, &st) == 0 && S_ISFIFO(st.st_mode));
+  snprintf(p, sizeof p, "%s/adir.exr", dir);
+  CHECK(stat(p, &st) == 0 && S_ISDIR(st.st_mode));
+  snprintf(p, sizeof p, "%s/x.png", dir);
+  CHECK(!file_exists(p));
+  char *scene = kt_slurp(cornell, NULL);
+  CHECK(scene && scene[0] == '{'); /* still the scene */
+  free(scene);
+  snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
+  CHECK(run(cmd) == 0);
+}
+
 static void test_tool(void) {
   const char *bin = getenv("KPCN_RENDER_BIN");
   char exe[1024];
@@ -123,7 +167,9 @@ static void test_tool(void) {
   expect_cli(exe, "/nonexistent/scene.json", "", 1,
              "cannot open scene '/nonexistent/scene.json': No such file");
   expect_cli(exe, bad, "", 1, "invalid JSON near line 1 (byte 16)");
-  expect_cli(exe, cornell, "--spp zero", 2, "--spp: expected an integer >= 1, got 'zero'");
+  expect_cli(exe, cornell, "--spp zero", 2,
+             "--spp: expected an integer in [1, 16777216], got 'zero'");
+  expect_cli(exe, cornell, "--threads 100000", 2, "--threads: expected an integer in [0, 4096]");
   expect_cli(exe, cornell, "--crop 0,0,999,999 --resolution 16x16", 1,
              "crop 0,0,999,999 lies outside the 16x16 image");
   /* an albedo pass with fewer samples than the colour, or on a colour-only render: refused,
@@ -150,6 +196,7 @@ static void test_tool(void) {
   for (int b = 0; b < KPCN_BUF_COUNT; b++)
     CHECK(info.has_buffer[b] && info.has_variance[b]);
   test_tool_options(exe);
+  test_tool_outputs(exe);
 }
 
 #define CAM(fields) "{\"primitives\":[" LIGHT "],\"camera\":{" fields "}}"
@@ -404,6 +451,37 @@ int main(void) {
               "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"lambert\",\"albedo\":"
               "\"nope.png\"}}]}",
               "nope.png", NULL);
+  { /* an EXR texture with a NaN and one with an Inf texel: named, not rendered as black */
+    static const char *const rgb[3] = {"R", "G", "B"};
+    kpcn_image *t = NULL;
+    CHECK(kpcn_image_create(&t, 4, 3, 3, rgb) == KPCN_OK);
+    for (int i = 0; t && i < 36; i++)
+      t->data[i] = 0.5f;
+    if (t) t->data[12 + 7] = NAN; /* G plane, texel (3, 1) */
+    CHECK(t && kpcn_exr_write_image(kt_tmpfile("nan.exr"), t, NULL) == KPCN_OK);
+    if (t) t->data[12 + 7] = 0.5f, t->data[2] = INFINITY; /* R plane, texel (2, 0) */
+    CHECK(t && kpcn_exr_write_image(kt_tmpfile("inf.exr"), t, NULL) == KPCN_OK);
+    kpcn_image_destroy(t);
+    expect_fail("NaN texel in an EXR texture",
+                "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"lambert\",\"albedo\":"
+                "\"nan.exr\"}}]}",
+                "nan.exr", "non-finite value at texel (3, 1)");
+    expect_fail("Inf texel in an EXR texture",
+                "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"lambert\",\"albedo\":"
+                "\"inf.exr\"}}]}",
+                "inf.exr", "non-finite value at texel (2, 0)");
+  }
+  { /* deeper than cJSON's nesting limit: said, not only "invalid JSON" */
+    static char deep[2 * 1100 + 256];
+    int n = snprintf(deep, sizeof deep, "{\"primitives\":[" LIGHT "],\"x\":");
+    for (int i = 0; i < 1100; i++)
+      deep[n++] = '[';
+    for (int i = 0; i < 1100; i++)
+      deep[n++] = ']';
+    deep[n++] = '}';
+    deep[n] = 0;
+    expect_fail("nested 1100 deep", deep, "invalid JSON", "nested deeper than 1000 levels");
+  }
   expect_fail("empty scene", "{\"primitives\":[]}", "primitives", NULL);
   expect_fail("bad resolution",
               "{\"primitives\":[" LIGHT "],\"camera\":{\"type\":\"pinhole\",\"resolution\":[0,5]}}",

@@ -145,4 +145,44 @@ fi
 grep -q "are the same file" "$D/err" || fail "store clash unclear: $(cat "$D/err")"
 "$T" "$N" "$TD/dataset/sample_ref.exr" --patches:size=16:count=6:cull=1:out="$D/p2.kps" || fail "patches 2"
 cmp -s "$D/p.kps" "$D/p2.kps" || fail "the store was changed"
+# every mode that writes a file refuses an output that is one of its inputs, before any work
+if "$K" --record-exposure "$D/p.kps" "$M" "$D/p.kps" 2>"$D/err"; then fail "record-exposure over the store"; fi
+grep -q "is the same file as input" "$D/err" || fail "record-exposure clash unclear: $(cat "$D/err")"
+cmp -s "$D/p.kps" "$D/p2.kps" || fail "record-exposure changed the store"
+if "$K" --set-eps "$D/m.safetensors" "$D/m.safetensors" 0.01 2>"$D/err"; then fail "set-eps in place"; fi
+grep -q "is the same file as input" "$D/err" || fail "set-eps clash unclear: $(cat "$D/err")"
+if "$K" --compare "$D/cmp.exr" a="$D/c.csv" 2>"$D/err"; then fail "--compare to .exr accepted"; fi
+grep -q "must end in .png" "$D/err" || fail "--compare extension unclear: $(cat "$D/err")"
+# outputs that cannot be written are refused before training, not after it: nothing is left
+for o in "-o $D/nodir/x.safetensors" "-o $D/y.safetensors --plot $D/nodir/y.png" \
+  "-o $D/y.safetensors --ckpt $D/nodir/y.ckpt" "-o $D/y.safetensors --csv $D" "-o ''"; do
+  # shellcheck disable=SC2086
+  if eval "\"$K\" --store \"$D/p.kps\" --preset tiny --iters 50 --batch 2 --patch 16 $o" 2>"$D/err"; then
+    fail "accepted: $o"
+  fi
+  grep -Eq "folder '$D/nodir'|is a directory|empty file name" "$D/err" || fail "unclear for $o: $(cat "$D/err")"
+  [ -z "$(ls "$D" | grep -E '^y\.|^x\.')" ] || fail "files left for $o: $(ls "$D")"
+done
+# a validation reference with a NaN is refused, naming the file and the pixel
+oiiotool --pattern constant:color=0.5,nan,0.5 1x1 3 "$TD/dataset/sample_ref.exr" --ch R,G,B \
+  --paste +5+2 -o "$D/vref.exr" || fail "NaN reference"
+if "$K" --store "$D/p.kps" -o "$D/v.safetensors" --preset tiny --iters 1 --batch 2 --patch 16 \
+  --val "$N,$D/vref.exr" 2>"$D/err"; then fail "NaN validation reference accepted"; fi
+grep -q "vref.exr': non-finite colour at pixel (5, 2)" "$D/err" || fail "NaN reference unclear: $(cat "$D/err")"
+# stopped by a signal: the checkpoint and the model so far are written, and the exit status
+# (128 + the signal) says it did not finish
+"$K" --store "$D/p.kps" -o "$D/s.safetensors" --preset tiny --iters 1000000 --batch 2 --patch 16 \
+  --quiet --plot '' 2>"$D/err" &
+pid=$!
+i=0 # the CSV log is opened when the run starts, after the signal handlers are set
+while [ ! -e "$D/s.safetensors.csv" ] && [ $i -lt 1200 ]; do
+  sleep 0.1
+  i=$((i + 1))
+done
+sleep 0.5
+kill -TERM $pid
+wait $pid
+rc=$?
+[ $rc -eq 143 ] || fail "SIGTERM: exit $rc, not 143: $(cat "$D/err")"
+[ -e "$D/s.safetensors" ] && [ -e "$D/s.safetensors.ckpt" ] || fail "SIGTERM: no model or checkpoint: $(ls "$D")"
 echo "test_train_cli: ok"

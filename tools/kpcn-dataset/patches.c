@@ -186,16 +186,28 @@ int ds_cmd_patches(int argc, char **argv) {
   }
   if (stride_given) ps.count = 0;
   int spps[32], nspp = 0;
-  if (strcmp(spp_list, "all") != 0) {
-    char b[256];
-    snprintf(b, sizeof b, "%s", spp_list);
-    char *save = NULL;
-    for (char *t = strtok_r(b, ",", &save); t; t = strtok_r(NULL, ",", &save))
-      if (nspp == 32 || !ds_parse_int(t, 1, 1 << 24, &spps[nspp++])) {
-        ds_err("patches: --spp '%s': expected a comma list or 'all'", spp_list);
+  if (strcmp(spp_list, "all") != 0 && (nspp = ds_parse_int_list(spp_list, 1 << 24, spps, 32)) < 1) {
+    ds_err("patches: --spp '%s': expected 'all' or a comma list of at most 32 distinct "
+           "integers in [1, %d]",
+           spp_list, 1 << 24);
+    return 2;
+  }
+  /* before any work: the store is written last, after every image was read */
+  if (kpcn_check_output_path(out, "-o") != KPCN_OK) {
+    ds_err("patches: %s", kpcn_last_error());
+    return 2;
+  }
+  for (int d = 0; d < ndirs; d++)
+    for (int e = 0; e < d; e++) {
+      struct stat sd, se;
+      if (stat(dirs[d], &sd) == 0 && stat(dirs[e], &se) == 0 && sd.st_dev == se.st_dev &&
+          sd.st_ino == se.st_ino) {
+        ds_err("patches: the dataset directory '%s' is given twice (as '%s'): its pairs would "
+               "be cut twice",
+               dirs[d], dirs[e]);
         return 2;
       }
-  }
+    }
   ds_manifest m[MAX_DIRS];
   memset(m, 0, sizeof m);
   pair_t *pairs = NULL;
@@ -214,6 +226,23 @@ int ds_cmd_patches(int argc, char **argv) {
     pairs = grown;
     collect_pairs(dirs[d], d, &m[d], split, spps, nspp, allow_partial, pairs, &np, &missing, &nrej);
   }
+  /* the store must not replace a file it reads: the manifest, the plan or a render */
+  for (int d = 0; d < ndirs && rc == 0; d++) {
+    char mf[DS_PATH], pf[DS_PATH];
+    ds_join(mf, sizeof mf, dirs[d], "manifest.jsonl");
+    ds_join(pf, sizeof pf, dirs[d], "plan.json");
+    if (kpcn_check_not_input(out, "-o", mf, "the manifest") != KPCN_OK ||
+        kpcn_check_not_input(out, "-o", pf, "the plan") != KPCN_OK)
+      rc = 2;
+  }
+  for (int p = 0; p < np && rc == 0; p++)
+    for (int k = 0; k < 2 && rc == 0; k++) {
+      const ds_job *j = &m[pairs[p].dir].jobs[k ? pairs[p].ref : pairs[p].job];
+      char a[DS_PATH];
+      ds_join(a, sizeof a, dirs[pairs[p].dir], j->out);
+      if (kpcn_check_not_input(out, "-o", a, "a render it reads") != KPCN_OK) rc = 2;
+    }
+  if (rc == 2) ds_err("patches: %s", kpcn_last_error());
   if (rc == 0 && ((missing && !allow_partial) || np == 0)) {
     if (np == 0)
       ds_err("patches: no finished %s image pairs in '%s'%s", split, dirs[0],
@@ -227,7 +256,7 @@ int ds_cmd_patches(int argc, char **argv) {
     free(pairs);
     for (int d = 0; d < ndirs; d++)
       ds_manifest_free(&m[d]);
-    return 1;
+    return rc;
   }
   kpcn_patchstore_settings ss;
   kpcn_patchstore_settings_defaults(&ss);

@@ -636,22 +636,12 @@ int ds_cmd_plan(int argc, char **argv) {
     usage();
     return 2;
   }
-  int spps[32], nspp = 0;
-  {
-    char b[512];
-    snprintf(b, sizeof b, "%s", spp_list);
-    char *save = NULL;
-    for (char *t = strtok_r(b, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
-      if (nspp == 32 || !ds_parse_int(t, 1, 1 << 20, &spps[nspp])) {
-        ds_err("plan: --spp '%s': expected a comma list of positive integers", spp_list);
-        return 2;
-      }
-      nspp++;
-    }
-    if (!nspp) {
-      ds_err("plan: --spp is empty");
-      return 2;
-    }
+  int spps[32];
+  const int nspp = ds_parse_int_list(spp_list, 1 << 20, spps, 32);
+  if (nspp < 1) {
+    ds_err("plan: --spp '%s': expected a comma list of at most 32 distinct integers in [1, %d]",
+           spp_list, 1 << 20);
+    return 2;
   }
   if (ps.texture_dir && ps.texture_swap > 0) {
     /* Reject a directory without images now, before anything is written: perturbing a

@@ -16,6 +16,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/prctl.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -38,7 +39,8 @@ static void on_signal(int s) {
 
 static int find_renderer(run_opts *o, const char *given) {
   if (given) {
-    if (access(given, X_OK) != 0) {
+    struct stat st; /* a directory passes access(X_OK) and then fails every job with 127 */
+    if (stat(given, &st) != 0 || !S_ISREG(st.st_mode) || access(given, X_OK) != 0) {
       ds_err("run: --renderer '%s' is not an executable file", given);
       return -1;
     }
@@ -263,8 +265,11 @@ static int run_pool(const run_opts *o, const ds_manifest *m, const int *idx, int
       const ds_job *j = &m->jobs[slots[k].job];
       char out[DS_PATH];
       ds_join(out, sizeof out, o->dir, j->out);
-      if (WIFEXITED(status) && WEXITSTATUS(status) == 0 && ds_exists(slots[k].part) &&
-          rename(slots[k].part, out) == 0) {
+      const int exit0 = WIFEXITED(status) && WEXITSTATUS(status) == 0;
+      const int written = exit0 && ds_exists(slots[k].part);
+      const int renamed = written && rename(slots[k].part, out) == 0;
+      const int rename_errno = errno;
+      if (renamed) {
         c->done++;
       } else {
         if (g_stop) wait_group_gone(p);
@@ -273,9 +278,16 @@ static int run_pool(const run_opts *o, const ds_manifest *m, const int *idx, int
           char lp[DS_PATH];
           log_path(lp, sizeof lp, o->dir, j->id);
           if (ds_isatty()) fputc('\n', stderr);
-          ds_err("run: job %s failed (%s %d); see %s", j->id,
-                 WIFEXITED(status) ? "exit code" : "signal",
-                 WIFEXITED(status) ? WEXITSTATUS(status) : WTERMSIG(status), lp);
+          if (written) /* the rename failed */
+            ds_err("run: job %s: cannot rename '%s' to '%s': %s", j->id, slots[k].part, out,
+                   strerror(rename_errno));
+          else if (exit0)
+            ds_err("run: job %s failed: the renderer exited 0 without writing '%s'; see %s", j->id,
+                   slots[k].part, lp);
+          else
+            ds_err("run: job %s failed (%s %d); see %s", j->id,
+                   WIFEXITED(status) ? "exit code" : "signal",
+                   WIFEXITED(status) ? WEXITSTATUS(status) : WTERMSIG(status), lp);
           c->failed++;
         }
       }

@@ -2,6 +2,8 @@
 #define _GNU_SOURCE
 #include "ds.h"
 
+#include "kpcn/common.h"
+
 #include <errno.h>
 #include <math.h>
 #include <stdarg.h>
@@ -48,7 +50,7 @@ void ds_join(char *out, size_t n, const char *a, const char *b) {
 }
 
 char *ds_slurp(const char *path, size_t *len) {
-  FILE *f = fopen(path, "rb");
+  FILE *f = kpcn_fopen_input(path, NULL);
   if (!f) return NULL;
   size_t cap = 1 << 16, n = 0;
   char *b = malloc(cap);
@@ -99,6 +101,25 @@ int ds_parse_int(const char *s, long lo, long hi, int *out) {
   if (*end || errno || v < lo || v > hi) return 0;
   *out = (int)v;
   return 1;
+}
+
+int ds_parse_int_list(const char *s, long hi, int *out, int cap) {
+  int n = 0;
+  if (!s || !*s) return -1;
+  for (const char *p = s;; p++) {
+    const char *comma = strchr(p, ',');
+    const size_t len = comma ? (size_t)(comma - p) : strlen(p);
+    char item[32];
+    if (len == 0 || len >= sizeof item || n == cap) return -1; /* "4,,8", "4,", ",4" */
+    memcpy(item, p, len);
+    item[len] = 0;
+    if (!ds_parse_int(item, 1, hi, &out[n])) return -1;
+    for (int k = 0; k < n; k++)
+      if (out[k] == out[n]) return -1; /* twice: the same job planned (or a pair cut) twice */
+    n++;
+    if (!comma) return n;
+    p = comma;
+  }
 }
 
 /* Finite only: strtod also reads "inf" and "nan" (and 1e999 as inf), which no option means

@@ -1,12 +1,13 @@
 /* kpcn-render: renders a Tungsten scene.json into an AOV EXR (DESIGN.md §4).
  *   kpcn-render scene.json -o out.exr [--spp N] [--seed S] [--threads N] [--resolution WxH]
  *               [--crop x,y,w,h] [--color-only] [--max-bounces N] [--albedo-spp N]
- *               [--half] [--quiet] [--checkpoint PATH [--checkpoint-every S]]
+ *               [--half] [--quiet] [--checkpoint PATH [--checkpoint-every S]
+ *               [--time-limit M]]
  * A progress line (percent, samples/s, time left) is shown only when stderr is a terminal.
  * The output is written atomically; on any error nothing is written and the exit code is 1
  * (2 for usage errors). With --checkpoint, SIGINT/SIGTERM save the finished rows there and
- * exit 128 + the signal; the same command resumes, and the file is removed once the output
- * is written. */
+ * exit 128 + the signal, and --time-limit stops the same way after M minutes (exit 3); the
+ * same command resumes, and the file is removed once the output is written. */
 #include "kpcn/exr.h"
 #include "kpcn/render.h"
 #include "kpcn/scene.h"
@@ -17,6 +18,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
@@ -27,7 +29,7 @@ static void usage(FILE *f) {
       "usage: kpcn-render scene.json -o out.exr [--spp N] [--seed S] [--threads N (0=all)]\n"
       "                   [--resolution WxH] [--crop x,y,w,h] [--color-only] [--max-bounces N]\n"
       "                   [--albedo-spp N] [--albedo-footprint K] [--half] [--quiet]\n"
-      "                   [--checkpoint PATH [--checkpoint-every S]]\n"
+      "                   [--checkpoint PATH [--checkpoint-every S] [--time-limit M]]\n"
       "  --albedo-spp N   the albedo buffer from N >= spp camera samples of a features-only\n"
       "                   pass (less edge noise for the denoiser's remodulation)\n"
       "  --albedo-footprint K  each sample's textured albedo averaged over K x K points of\n"
@@ -35,6 +37,9 @@ static void usage(FILE *f) {
       "  --checkpoint PATH  save finished rows there every S seconds (default 60) and on\n"
       "                   SIGINT/SIGTERM; the same command resumes from it (bit-identical)\n"
       "                   and removes it once the output is written\n"
+      "  --time-limit M   with --checkpoint: stop after M minutes (at the next finished row;\n"
+      "                   0 = after the first), save the rows and exit 3 without an output,\n"
+      "                   so a long render can be split across runs of the same command\n"
       "  --version        the versions and the instruction set (avx512 or avx2) in use: renders\n"
       "                   are bit-identical for a seed only on one of the two\n");
 }
@@ -42,7 +47,8 @@ static void usage(FILE *f) {
 typedef struct progress_state {
   int show; /* a terminal, not --quiet */
   double t0;
-  double f0; /* the fraction done when this call started (a resumed render), < 0 until known */
+  double limit_s; /* --time-limit in seconds; < 0 for none */
+  double f0;      /* the fraction done when this call started (a resumed render), < 0 until known */
   double row;
   double samples_total;
 } progress_state;
@@ -67,12 +73,12 @@ static int on_progress(void *user, double f) {
     fprintf(stderr, "\r%5.1f%%  %.2f M samples/s  %.0f s left   ", 100.0 * f, rate * 1e-6, left);
     fflush(stderr);
   }
-  return g_signal != 0;
+  return g_signal != 0 || (p->limit_s >= 0 && now_s() - p->t0 >= p->limit_s);
 }
 
 /* Folds a file's bytes into the FNV-1a hash *h; 0 if it cannot be read. */
 static int hash_file(const char *path, uint64_t *h) {
-  FILE *f = fopen(path, "rb");
+  FILE *f = kpcn_fopen_input(path, NULL);
   if (!f) return 0;
   unsigned char buf[65536];
   size_t n;
@@ -186,6 +192,7 @@ int main(int argc, char **argv) {
   const char *scene_path = NULL, *out_path = NULL;
   kpcn_render_settings rs = kpcn_render_settings_defaults();
   int quiet = 0, half = 0;
+  double time_limit_min = -1.0;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i];
     const char *v = i + 1 < argc ? argv[i + 1] : NULL;
@@ -199,7 +206,8 @@ int main(int argc, char **argv) {
       NEED_VALUE out_path = v;
     } else if (strcmp(a, "--spp") == 0) {
       NEED_VALUE if (!parse_int(v, 1, 1 << 24, &rs.spp)) {
-        fprintf(stderr, "kpcn-render: --spp: expected an integer >= 1, got '%s'\n", v);
+        fprintf(stderr, "kpcn-render: --spp: expected an integer in [1, %d], got '%s'\n", 1 << 24,
+                v);
         return 2;
       }
     } else if (strcmp(a, "--seed") == 0) {
@@ -215,12 +223,13 @@ int main(int argc, char **argv) {
       rs.seed = s;
     } else if (strcmp(a, "--threads") == 0) {
       NEED_VALUE if (!parse_int(v, 0, 4096, &rs.nthreads)) {
-        fprintf(stderr, "kpcn-render: --threads: expected an integer >= 0, got '%s'\n", v);
+        fprintf(stderr, "kpcn-render: --threads: expected an integer in [0, 4096], got '%s'\n", v);
         return 2;
       }
     } else if (strcmp(a, "--albedo-spp") == 0) {
       NEED_VALUE if (!parse_int(v, 1, 1 << 24, &rs.albedo_spp)) {
-        fprintf(stderr, "kpcn-render: --albedo-spp: expected an integer >= 1, got '%s'\n", v);
+        fprintf(stderr, "kpcn-render: --albedo-spp: expected an integer in [1, %d], got '%s'\n",
+                1 << 24, v);
         return 2;
       }
     } else if (strcmp(a, "--albedo-footprint") == 0) {
@@ -231,7 +240,8 @@ int main(int argc, char **argv) {
       }
     } else if (strcmp(a, "--max-bounces") == 0) {
       NEED_VALUE if (!parse_int(v, 0, 100000, &rs.max_bounces)) {
-        fprintf(stderr, "kpcn-render: --max-bounces: expected an integer >= 0, got '%s'\n", v);
+        fprintf(stderr,
+                "kpcn-render: --max-bounces: expected an integer in [0, 100000], got '%s'\n", v);
         return 2;
       }
     } else if (strcmp(a, "--resolution") == 0) {
@@ -267,6 +277,13 @@ int main(int argc, char **argv) {
         return 2;
       }
       rs.checkpoint_every_s = sec;
+    } else if (strcmp(a, "--time-limit") == 0) {
+      NEED_VALUE char *end;
+      time_limit_min = strtod(v, &end);
+      if (end == v || *end != 0 || !(time_limit_min >= 0 && time_limit_min <= 1e9)) {
+        fprintf(stderr, "kpcn-render: --time-limit: expected minutes in [0, 1e9], got '%s'\n", v);
+        return 2;
+      }
     } else if (strcmp(a, "--color-only") == 0) {
       rs.color_only = 1;
     } else if (strcmp(a, "--half") == 0) {
@@ -294,6 +311,27 @@ int main(int argc, char **argv) {
     usage(stderr);
     return 2;
   }
+  if (time_limit_min >= 0 && !rs.checkpoint) {
+    fprintf(stderr, "kpcn-render: --time-limit needs --checkpoint (the rows it stops with are "
+                    "kept there)\n");
+    return 2;
+  }
+  const size_t olen = strlen(out_path);
+  if (olen < 4 || strcasecmp(out_path + olen - 4, ".exr") != 0) {
+    fprintf(stderr, "kpcn-render: -o '%s': the output is an OpenEXR file and must end in .exr\n",
+            out_path);
+    return 2;
+  }
+  if (same_file(out_path, scene_path)) {
+    fprintf(stderr, "kpcn-render: -o '%s' is the scene file\n", out_path);
+    return 2;
+  }
+  /* before rendering: a device, FIFO, directory or missing folder is refused now, not after */
+  if (kpcn_check_output_path(out_path, "-o") != KPCN_OK ||
+      (rs.checkpoint && kpcn_check_output_path(rs.checkpoint, "--checkpoint") != KPCN_OK)) {
+    fprintf(stderr, "kpcn-render: %s\n", kpcn_last_error());
+    return 2;
+  }
   if (rs.checkpoint &&
       (same_file(rs.checkpoint, out_path) || same_file(rs.checkpoint, scene_path))) {
     fprintf(stderr, "kpcn-render: --checkpoint '%s' is the %s\n", rs.checkpoint,
@@ -318,6 +356,7 @@ int main(int argc, char **argv) {
   ps.samples_total = (double)w * h * (rs.spp > 0 ? rs.spp : info.spp);
   ps.t0 = now_s();
   ps.f0 = -1.0;
+  ps.limit_s = time_limit_min >= 0 ? 60.0 * time_limit_min : -1.0;
   ps.row = 1.0 / h;
   ps.show = !quiet && isatty(2);
   if (ps.show || rs.checkpoint) {
@@ -343,6 +382,13 @@ int main(int argc, char **argv) {
             "command resumes)\n",
             (int)g_signal, rs.checkpoint);
     return 128 + g_signal;
+  }
+  if (st == KPCN_ERR_CANCELLED) { /* the time limit */
+    fprintf(stderr,
+            "kpcn-render: stopped by --time-limit; finished rows saved in '%s' (the same command "
+            "resumes)\n",
+            rs.checkpoint);
+    return 3;
   }
   if (st != KPCN_OK) {
     fprintf(stderr, "kpcn-render: %s\n", kpcn_last_error());

@@ -9,14 +9,12 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
-static volatile sig_atomic_t g_stop = 0;
-static void on_signal(int sig) {
-  (void)sig;
-  g_stop = 1;
-}
+static volatile sig_atomic_t g_stop = 0; /* the signal that asked to stop, 0 if none */
+static void on_signal(int sig) { g_stop = sig; }
 
 static void usage(FILE *f) {
   fputs("usage: kpcn-train --store PATCHES.kps -o MODEL.safetensors [options]\n"
@@ -191,6 +189,17 @@ static int val_from_store(const char *store) {
   return ok;
 }
 
+/* The start of every mode that writes a file: out must be writable as a new file renamed into
+ * place and must not be one of the n inputs. Returns 0, or the exit code 2 after the message. */
+static int check_mode_output(const char *out, const char *mode, const char *const *in, int n) {
+  kpcn_status st = kpcn_check_output_path(out, "output");
+  for (int i = 0; st == KPCN_OK && i < n; i++)
+    st = kpcn_check_not_input(out, "output", in[i], "input");
+  if (st == KPCN_OK) return 0;
+  fprintf(stderr, "kpcn-train %s: %s\n", mode, kpcn_last_error());
+  return 2;
+}
+
 static int compare_main(int argc, char **argv) {
   const char *png = argv[2], *x = "elapsed_s", *y = "loss", *title = NULL;
   const char *labels[KPCN_PLOT_MAX_SERIES], *csvs[KPCN_PLOT_MAX_SERIES];
@@ -221,6 +230,19 @@ static int compare_main(int argc, char **argv) {
     fprintf(stderr, "kpcn-train --compare: no runs given\n");
     return 2;
   }
+  const size_t plen = strlen(png);
+  if (plen < 4 || strcasecmp(png + plen - 4, ".png") != 0) {
+    fprintf(stderr, "kpcn-train --compare: '%s': the plot is a PNG file and must end in .png\n",
+            png);
+    for (int i = 0; i < n; i++)
+      free(owned[i]);
+    return 2;
+  }
+  if (check_mode_output(png, "--compare", csvs, n)) {
+    for (int i = 0; i < n; i++)
+      free(owned[i]);
+    return 2;
+  }
   kpcn_status st = kpcn_train_plot_compare(png, title ? title : y, x, y, log_y, n, labels, csvs);
   for (int i = 0; i < n; i++)
     free(owned[i]);
@@ -248,6 +270,7 @@ static int average_main(int argc, char **argv) {
     fprintf(stderr, "kpcn-train --average: expected OUT.safetensors and at least one input\n");
     return 2;
   }
+  if (check_mode_output(argv[2], "--average", (const char *const *)argv + 3, argc - 3)) return 2;
   kpcn_model *m = NULL;
   kpcn_status st = kpcn_model_average((const char *const *)argv + 3, argc - 3, &m);
   if (save_model_copy(st, m, argv[2], "--average")) return 1;
@@ -266,6 +289,7 @@ static int set_eps_main(int argc, char **argv) {
     fprintf(stderr, "kpcn-train --set-eps: EPS '%s' is not a number in (0, 1)\n", argv[4]);
     return 2;
   }
+  if (check_mode_output(argv[2], "--set-eps", (const char *const *)argv + 3, 1)) return 2;
   kpcn_model *m = NULL;
   kpcn_status st = kpcn_model_load(argv[3], &m);
   if (st == KPCN_OK) st = kpcn_model_set_eps(m, (float)e);
@@ -288,6 +312,8 @@ static int graft_main(int argc, char **argv) {
     fprintf(stderr, "kpcn-train --graft: branch '%s' is not diffuse or specular\n", argv[4]);
     return 2;
   }
+  const char *const graft_in[2] = {argv[3], argv[5]};
+  if (check_mode_output(argv[2], "--graft", graft_in, 2)) return 2;
   kpcn_model *m = NULL, *from = NULL;
   kpcn_status st = kpcn_model_load(argv[3], &m);
   if (st == KPCN_OK) st = kpcn_model_load(argv[5], &from);
@@ -307,6 +333,7 @@ static int record_exposure_main(int argc, char **argv) {
     fprintf(stderr, "kpcn-train --record-exposure: expected OUT.safetensors MODEL STORE.kps\n");
     return 2;
   }
+  if (check_mode_output(argv[2], "--record-exposure", (const char *const *)argv + 3, 2)) return 2;
   kpcn_model *m = NULL;
   kpcn_patchstore *ps = NULL;
   double e = 0.0;
@@ -647,5 +674,7 @@ int main(int argc, char **argv) {
   kpcn_trainer_destroy(t);
   for (int i = 0; i < g_nval; i++)
     free(g_valn[i]), free(g_valr[i]);
-  return 0;
+  /* stopped by a signal: checkpointed, but not finished, which a script must be able to tell
+   * (128 + the signal, as kpcn-render and kpcn-dataset); a --time-limit stop is the run's plan */
+  return g_stop ? 128 + g_stop : 0;
 }

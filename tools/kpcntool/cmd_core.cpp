@@ -27,11 +27,13 @@ namespace IBA = OIIO::ImageBufAlgo;
 namespace kpcntool {
 
 bool read_image(ImageBuf &dst, const std::string &path, std::string &err) {
-  struct stat st;
-  if (stat(path.c_str(), &st) != 0) {
-    err = "cannot open '" + path + "': no such file";
+  const char *why = nullptr; // a FIFO or device would block or never end in OIIO's reader
+  FILE *probe = kpcn_fopen_input(path.c_str(), &why);
+  if (!probe) {
+    err = "cannot open '" + path + "': " + why;
     return false;
   }
+  std::fclose(probe);
   ImageBuf b(path);
   if (!b.init_spec(path, 0, 0)) {
     err = "cannot read '" + path + "': " + b.geterror();
@@ -67,10 +69,11 @@ bool cmd_output(Context &ctx, const Modifiers &, const std::vector<std::string> 
   const std::string ext = lower_ext(path); // a writable format: checked when parsed (main.cpp)
   // A deep copy: later commands may change the top.
   auto img = std::make_shared<const ImageBuf>(ctx.top());
-  ctx.outputs.push_back(
-      {"-o " + path, path, false, [img, ext](const std::string &tmp, std::string &e) {
-         return write_image(*img, tmp, ext, e);
-       }});
+  ctx.outputs.push_back({"-o " + path, path, false,
+                         [img, ext](const std::string &tmp, std::string &e) {
+                           return write_image(*img, tmp, ext, e);
+                         },
+                         true});
   return true;
 }
 
@@ -371,6 +374,10 @@ bool cmd_colormap(Context &ctx, const Modifiers &m, const std::vector<std::strin
     size_t k = (size_t)std::floor(0.99 * (double)(finite.size() - 1));
     std::nth_element(finite.begin(), finite.begin() + (long)k, finite.end());
     mx = finite[k];
+  }
+  if (m.str("max").empty() && finite.empty()) {
+    err = "every pixel of the image is NaN or Inf: nothing to scale the map by";
+    return false;
   }
   if (!(mx > 0.0) || !std::isfinite(mx)) {
     err = m.str("max").empty()

@@ -23,7 +23,8 @@ bool parse_exposure(const std::string &v, kpcn::ops::DenoiseOptions &opt, std::s
   const double e = std::strtod(v.c_str(), &end);
   // (float)e must stay > 0: 0 is the library's "auto"
   if (v.empty() || *end != '\0' || !(e > 0.0 && e < 1e30) || !((float)e > 0.0f)) {
-    err = "exposure must be auto, off or a number > 0 (got '" + v + "')";
+    err = "exposure must be auto, off or a number > 0 and < 1e30 that a float holds (got '" + v +
+          "')";
     return false;
   }
   opt.exposure = (float)e;
@@ -40,7 +41,7 @@ bool parse_firefly(const std::string &v, kpcn::ops::DenoiseOptions &opt, std::st
   char *end = nullptr;
   const double r = std::strtod(v.c_str(), &end);
   if (*end != '\0' || !(r >= 1.0 && r < 1e30)) {
-    err = "firefly must be off or a ratio >= 1 (got '" + v + "')";
+    err = "firefly must be off or a ratio in [1, 1e30) (got '" + v + "')";
     return false;
   }
   opt.firefly = (float)r;

@@ -52,6 +52,7 @@ struct Context {
     std::string path;
     bool is_dir = false;
     std::function<bool(const std::string &tmp, std::string &err)> write;
+    bool image = false; // an image file, read back whole after writing (see output.cpp)
   };
   std::vector<Output> outputs;
   // Extension: records a numeric result under a unique key (key, key_2, key_3 ...).

@@ -78,6 +78,35 @@ std::string json_string(const std::string &s) {
   return o + "\"";
 }
 
+// The files the steps write (-o, --patches:out=F.kps) and read (images, models), checked before
+// any work: an output must be writable as a new file renamed into place (not a device, FIFO
+// or directory, in an existing folder) and must not be one of the inputs.
+bool check_files(const std::vector<Step> &steps, std::string &err) {
+  std::vector<std::pair<std::string, std::string>> outs, ins; // (path, role)
+  for (const Step &st : steps) {
+    if (!st.cmd) {
+      ins.push_back({st.file, "input image"});
+      continue;
+    }
+    if (st.cmd->name == "o") outs.push_back({st.args[0], "-o"});
+    const std::string out = st.mods.str("out"), model = st.mods.str("model");
+    if (out.size() > 4 && out.compare(out.size() - 4, 4, ".kps") == 0) // as cmd_patches
+      outs.push_back({out, "out="});
+    if (!model.empty()) ins.push_back({model, "model"});
+  }
+  for (const auto &o : outs) {
+    kpcn_status s = kpcn_check_output_path(o.first.c_str(), o.second.c_str());
+    for (size_t k = 0; s == KPCN_OK && k < ins.size(); ++k)
+      s = kpcn_check_not_input(o.first.c_str(), o.second.c_str(), ins[k].first.c_str(),
+                               ins[k].second.c_str());
+    if (s != KPCN_OK) {
+      err = kpcn_last_error();
+      return false;
+    }
+  }
+  return true;
+}
+
 // Parses argv into steps; returns false with err on a usage error.
 bool parse(int argc, char **argv, std::vector<Step> &steps, std::string &err) {
   for (int i = 1; i < argc; ++i) {
@@ -140,7 +169,7 @@ bool parse(int argc, char **argv, std::vector<Step> &steps, std::string &err) {
     }
     steps.push_back(std::move(st));
   }
-  return true;
+  return check_files(steps, err);
 }
 
 void print_results(const kpcntool::Context &ctx) {

@@ -5,6 +5,8 @@
 #include <OpenImageIO/imageio.h>
 
 #include <cctype>
+#include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <system_error>
 #include <unistd.h>
@@ -68,12 +70,57 @@ static std::string bare_path(const Context::Output &o) {
 // Next to the output, unique per output (the same path may be queued twice: the later wins, as
 // if written in turn) and keeping the extension, by which image writers and --patches choose
 // the format.
+// A file output that is a symbolic link is written through (its target replaced), as
+// libkpcn's writers do. A name near the file-name limit gets a short hidden temporary
+// (".kpcn.tmpPID_I.ext") in the same folder.
+static std::string target_path(const Context::Output &o) {
+  std::error_code ec;
+  const std::string p = bare_path(o);
+  if (!o.is_dir && fs::is_symlink(p, ec)) {
+    fs::path t = fs::canonical(p, ec);
+    if (!ec) return t.string();
+  }
+  return p;
+}
+
 static std::string temp_path(const Context::Output &o, size_t index) {
-  std::string t =
-      bare_path(o) + ".tmp" + std::to_string((long)getpid()) + "_" + std::to_string(index);
+  const std::string p = target_path(o);
+  std::string t = ".tmp" + std::to_string((long)getpid()) + "_" + std::to_string(index);
   std::string e = raw_ext(o.path);
   if (!o.is_dir && !e.empty()) t += "." + e;
-  return t;
+  const size_t slash = p.find_last_of('/');
+  const size_t base = slash == std::string::npos ? p.size() : p.size() - slash - 1;
+  if (base + t.size() > 255) // NAME_MAX
+    return p.substr(0, slash == std::string::npos ? 0 : slash + 1) + ".kpcn" + t;
+  return p + t;
+}
+
+// Some image writers report no error when the disk fills (OIIO 2.4's PNG writer closes a
+// truncated file with success), so every written file is read back whole before it counts.
+static bool verify_written(const std::string &file, std::string &err) {
+  auto in = OIIO::ImageInput::open(file);
+  if (!in) {
+    err = "the written file cannot be read back (disk full?): " + OIIO::geterror();
+    return false;
+  }
+  std::vector<float> px((size_t)in->spec().image_pixels() * (size_t)in->spec().nchannels);
+  const bool ok = in->read_image(0, 0, 0, in->spec().nchannels, OIIO::TypeDesc::FLOAT, px.data());
+  if (!ok) err = "the written file is incomplete (disk full?): " + in->geterror();
+  return ok;
+}
+
+// Set while a file is being written: an image library that ends the process instead of
+// returning an error (libjpeg's default handler calls exit() when the disk is full) leaves
+// neither the temporary nor a silent exit behind.
+static std::string g_writing_what, g_writing_tmp;
+static void cleanup_at_exit() {
+  if (g_writing_tmp.empty()) return;
+  std::error_code ec;
+  fs::remove_all(g_writing_tmp, ec);
+  std::fprintf(stderr,
+               "kpcntool: error: %s: the image library ended the program while writing "
+               "it (disk full?); nothing was written\n",
+               g_writing_what.c_str());
 }
 
 // A directory output may merge into an existing directory (its files are replaced one by one).
@@ -87,7 +134,7 @@ static bool move_into_place(const Context::Output &o, const std::string &tmp, st
     }
     if (!ec) fs::remove(tmp, ec);
   } else {
-    fs::rename(tmp, path, ec);
+    fs::rename(tmp, target_path(o), ec);
   }
   if (ec) err = "cannot move '" + tmp + "' to '" + o.path + "': " + ec.message();
   return !ec;
@@ -112,7 +159,13 @@ bool commit_outputs(const std::vector<Context::Output> &outputs, std::string &fa
       return false;
     }
     tmp.push_back(temp_path(o, i));
-    if (!o.write(tmp.back(), err)) {
+    static const bool registered = std::atexit(cleanup_at_exit) == 0;
+    (void)registered;
+    g_writing_what = o.what;
+    g_writing_tmp = tmp.back();
+    const bool ok = o.write(tmp.back(), err) && (!o.image || verify_written(tmp.back(), err));
+    g_writing_tmp.clear();
+    if (!ok) {
       failed = o.what;
       err = "cannot write '" + o.path + "': " + err;
       clean();

@@ -14,6 +14,7 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -65,6 +66,27 @@ const char *kpcn_build_info(void);
 
 /* Number of threads a call will use for the request n (0 = all cores). */
 int kpcn_resolve_threads(int n);
+
+/* Files a tool reads and writes. Every writer in libkpcn (and kpcntool) writes a temporary
+ * file next to its output and renames it into place, so an output that is not a regular file
+ * would be replaced, not written into: a device (/dev/full), a FIFO or a socket is refused,
+ * and a symbolic link is followed (its target is replaced, the link kept).
+ *
+ * kpcn_check_output_path refuses, before any work, an output path that cannot be written that
+ * way: empty, a directory, an existing non-regular file, a dangling link, or one whose folder
+ * does not exist or is not writable. `what` names it in the message ("model", "-o"). */
+kpcn_status kpcn_check_output_path(const char *path, const char *what);
+/* KPCN_ERR_INVALID_ARGUMENT if output and input name the same existing file (by device and
+ * inode, so other spellings and hard links count), naming both roles: writing one would
+ * destroy the other. */
+kpcn_status kpcn_check_not_input(const char *output, const char *out_what, const char *input,
+                                 const char *in_what);
+/* fopen(path, "rb") for an input that must be a regular file: a FIFO is opened without
+ * blocking and refused, as are directories and devices (which would block or read forever).
+ * On failure returns NULL, keeps errno (ENOENT for a missing file) and points *why at the
+ * reason ("No such file or directory", "is a directory", "is not a regular file (a FIFO,
+ * device or socket)"). */
+FILE *kpcn_fopen_input(const char *path, const char **why);
 
 /* Upper bound for any image dimension and pixel count accepted by the library;
  * larger requests are rejected as "absurd" rather than attempted. */

@@ -1,10 +1,8 @@
-/* Thread-local error state, logging, checked allocation, atomic file helpers. */
+/* Thread-local error state, logging, checked allocation. */
 #define _GNU_SOURCE
 #include "core/internal.h"
 
-#include <errno.h>
 #include <omp.h>
-#include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -151,26 +149,3 @@ kpcn_status kpcn_check_size(int width, int height, const char *what) {
                      KPCN_MAX_DIM, (long long)KPCN_MAX_PIXELS);
   return KPCN_OK;
 }
-
-/* Unique per process AND per call: two threads (or two writers of one process) writing the
- * same path must not share a temp file, or one truncates the other's half-written data. */
-kpcn_status kpcn_temp_path(char *out, size_t outsz, const char *path) {
-  static atomic_ulong counter;
-  const unsigned long k = atomic_fetch_add(&counter, 1);
-  const int n = snprintf(out, outsz, "%s.tmp.%ld.%lu", path, (long)getpid(), k);
-  if (n < 0 || (size_t)n >= outsz)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "path too long for a temporary name: '%.64s...'",
-                     path);
-  return KPCN_OK;
-}
-
-kpcn_status kpcn_commit_file(const char *tmp, const char *path) {
-  if (rename(tmp, path) != 0) {
-    int e = errno;
-    unlink(tmp);
-    return kpcn_fail(KPCN_ERR_IO, "cannot rename '%s' to '%s': %s", tmp, path, strerror(e));
-  }
-  return KPCN_OK;
-}
-
-void kpcn_abort_file(const char *tmp) { unlink(tmp); }

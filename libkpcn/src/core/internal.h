@@ -31,9 +31,10 @@ uint64_t kpcn_physical_memory(void);
 /* Validates an image size: positive, <= KPCN_MAX_DIM each, <= KPCN_MAX_PIXELS total. */
 kpcn_status kpcn_check_size(int width, int height, const char *what);
 
-/* Writes `path` atomically: callers write to the temp name from kpcn_temp_path (unique per
- * call; an error if it does not fit outsz), then kpcn_commit_file renames it over path (or
- * kpcn_abort_file removes it). */
+/* Writes `path` atomically (core/files.c): callers write to the temp name from kpcn_temp_path
+ * (unique per call; an error if it does not fit outsz, or if path is a directory or another
+ * non-regular file), then kpcn_commit_file renames it over path, or over a symbolic link's
+ * target (kpcn_abort_file removes it). */
 kpcn_status kpcn_temp_path(char *out, size_t outsz, const char *path);
 kpcn_status kpcn_commit_file(const char *tmp, const char *path);
 void kpcn_abort_file(const char *tmp);

@@ -130,7 +130,7 @@ kpcn_status kpcn_patchstore_open(kpcn_patchstore **out, const char *path,
   kpcn_patchstore *ps = kpcn_calloc(1, sizeof *ps, "patch store");
   if (!ps) return KPCN_ERR_OUT_OF_MEMORY;
   snprintf(ps->path, sizeof ps->path, "%s", path);
-  int fd = open(path, O_RDONLY | O_CLOEXEC);
+  int fd = open(path, O_RDONLY | O_NONBLOCK | O_CLOEXEC); /* a FIFO: refused below, not waited on */
   if (fd < 0) {
     int e = errno;
     kpcn_patchstore_close(ps);

@@ -51,13 +51,13 @@ kpcn_status kpcn_exr_open_read(const char *path, exr_context_t *ctx) {
   if (!path || !*path) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "EXR read: empty file name");
   /* Check existence/readability ourselves so a missing file is an I/O error with errno text,
    * not a header-format error. */
+  const char *why;
+  FILE *f = kpcn_fopen_input(path, &why);
+  if (!f) return kpcn_fail(KPCN_ERR_IO, "cannot open '%s': %s", path, why);
   struct stat st;
-  if (stat(path, &st) != 0)
-    return kpcn_fail(KPCN_ERR_IO, "cannot open '%s': %s", path, strerror(errno));
-  if (S_ISDIR(st.st_mode)) return kpcn_fail(KPCN_ERR_IO, "cannot read '%s': is a directory", path);
-  FILE *f = fopen(path, "rb");
-  if (!f) return kpcn_fail(KPCN_ERR_IO, "cannot open '%s': %s", path, strerror(errno));
+  const int statted = fstat(fileno(f), &st) == 0;
   fclose(f);
+  if (!statted) return kpcn_fail(KPCN_ERR_IO, "cannot open '%s': %s", path, strerror(errno));
   if (st.st_size < 8)
     return kpcn_fail(KPCN_ERR_FORMAT, "'%s' is not an EXR file (%lld bytes)", path,
                      (long long)st.st_size);

@@ -368,8 +368,9 @@ static kpcn_status load_file(FILE *f, const char *path, kpcn_model **out) {
 kpcn_status kpcn_model_load(const char *path, kpcn_model **out) {
   if (!path || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_load: NULL argument");
   *out = NULL;
-  FILE *f = fopen(path, "rb");
-  if (!f) return kpcn_fail(KPCN_ERR_IO, "cannot open model '%s': %s", path, strerror(errno));
+  const char *why;
+  FILE *f = kpcn_fopen_input(path, &why);
+  if (!f) return kpcn_fail(KPCN_ERR_IO, "cannot open model '%s': %s", path, why);
   kpcn_status s = load_file(f, path, out);
   fclose(f);
   return s;

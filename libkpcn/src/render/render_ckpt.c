@@ -237,11 +237,11 @@ static const char *first_difference(const cJSON *a, const cJSON *b) {
 kpcn_status kpcn_render_ckpt_load(kpcn_render_ckpt *c, int *rows) {
   *rows = 0;
   if (!c->path) return KPCN_OK;
-  FILE *f = fopen(c->path, "rb");
+  const char *why;
+  FILE *f = kpcn_fopen_input(c->path, &why);
   if (!f) {
     if (errno == ENOENT) return KPCN_OK; /* nothing saved yet: a fresh start */
-    return kpcn_fail(KPCN_ERR_IO, "cannot open render checkpoint '%s': %s", c->path,
-                     strerror(errno));
+    return kpcn_fail(KPCN_ERR_IO, "cannot open render checkpoint '%s': %s", c->path, why);
   }
   kpcn_status st = KPCN_OK;
   char *hdr = NULL;

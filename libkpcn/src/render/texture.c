@@ -162,11 +162,21 @@ static kpcn_status load_exr(const char *path, const kpcn_bitmap_options *opt, kp
   t->height = img->height;
   for (size_t i = 0; i < np; ++i) {
     float rgb[3];
-    for (int c = 0; c < 3; ++c)
+    for (int c = 0; c < 3; ++c) {
       rgb[c] = kpcn_image_plane(img, ch[c])[i];
+      /* a NaN or Inf texel would put NaN into every path that reads it: named, not zeroed */
+      if (!isfinite(rgb[c])) {
+        const int w = img->width;
+        kpcn_image_destroy(img);
+        free(t->texels);
+        t->texels = NULL;
+        return kpcn_fail(KPCN_ERR_NONFINITE, "texture '%s': non-finite value at texel (%zu, %zu)",
+                         path, i % (size_t)w, i / (size_t)w);
+      }
+    }
     if (opt->scalar) rgb[0] = rgb[1] = rgb[2] = (rgb[0] + rgb[1] + rgb[2]) / 3.0f;
     for (int c = 0; c < 3; ++c)
-      t->texels[3 * i + c] = isfinite(rgb[c]) ? rgb[c] : 0.0f;
+      t->texels[3 * i + c] = rgb[c];
   }
   kpcn_image_destroy(img);
   return KPCN_OK;
@@ -174,8 +184,9 @@ static kpcn_status load_exr(const char *path, const kpcn_bitmap_options *opt, kp
 
 static kpcn_status load_pixels(const char *path, const kpcn_bitmap_options *opt, kpcn_texture *t) {
   if (ends_with_ci(path, ".exr")) return load_exr(path, opt, t);
-  FILE *f = fopen(path, "rb");
-  if (!f) return kpcn_fail(KPCN_ERR_IO, "texture '%s': cannot open file", path);
+  const char *why;
+  FILE *f = kpcn_fopen_input(path, &why);
+  if (!f) return kpcn_fail(KPCN_ERR_IO, "texture '%s': cannot open file: %s", path, why);
   int w = 0, h = 0, ch = 0;
   int hdr = stbi_is_hdr_from_file(f);
   fseek(f, 0, SEEK_SET);

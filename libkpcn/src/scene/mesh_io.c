@@ -44,8 +44,9 @@ static kpcn_status alloc_mesh(kpcn_mesh *m, uint64_t nv, uint64_t nt, int with_n
 }
 
 static kpcn_status load_wo3(const char *path, const char *jp, kpcn_mesh *m) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return kpcn_fail(KPCN_ERR_IO, "%s: cannot open mesh '%s': %s", jp, path, strerror(errno));
+  const char *why;
+  FILE *f = kpcn_fopen_input(path, &why);
+  if (!f) return kpcn_fail(KPCN_ERR_IO, "%s: cannot open mesh '%s': %s", jp, path, why);
   kpcn_status st = KPCN_OK;
   uint64_t nv = 0, nt = 0;
   float *vbuf = NULL;
@@ -91,9 +92,9 @@ done:
 }
 
 static kpcn_status load_assimp(const char *path, const char *jp, kpcn_mesh *m) {
-  FILE *probe = fopen(path, "rb");
-  if (!probe)
-    return kpcn_fail(KPCN_ERR_IO, "%s: cannot open mesh '%s': %s", jp, path, strerror(errno));
+  const char *why;
+  FILE *probe = kpcn_fopen_input(path, &why);
+  if (!probe) return kpcn_fail(KPCN_ERR_IO, "%s: cannot open mesh '%s': %s", jp, path, why);
   fclose(probe);
   const struct aiScene *sc =
       aiImportFile(path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |

@@ -681,8 +681,25 @@ kpcn_status kpcn_scene_load_json(const char *text, const char *base_dir, const c
     /* say so when the document itself was complete (error path only: parsed once more) */
     cJSON *prefix = cJSON_ParseWithOpts(text, NULL, 0);
     cJSON_Delete(prefix);
+    /* or when cJSON stopped at its nesting limit, which its error pointer does not tell */
+    int depth = 0, in_string = 0;
+    for (long k = 0; k < off; k++) {
+      const char ch = text[k];
+      if (in_string)
+        in_string = ch == '\\' ? (k++, 1) : ch != '"';
+      else if (ch == '"')
+        in_string = 1;
+      else
+        depth += (ch == '[' || ch == '{') - (ch == ']' || ch == '}');
+    }
+    char why[96] = "";
+    if (prefix)
+      snprintf(why, sizeof why, ": text after the end of the document");
+    else if (depth >= CJSON_NESTING_LIMIT)
+      snprintf(why, sizeof why, ": arrays and objects nested deeper than %d levels",
+               CJSON_NESTING_LIMIT);
     return kpcn_fail(KPCN_ERR_FORMAT, "scene '%s': invalid JSON near line %d (byte %ld)%s", name,
-                     line, off, prefix ? ": text after the end of the document" : "");
+                     line, off, why);
   }
   kpcn_scene *s = kpcn_calloc(1, sizeof(*s), "scene");
   if (!s) {
@@ -707,8 +724,9 @@ kpcn_status kpcn_scene_load_json(const char *text, const char *base_dir, const c
 kpcn_status kpcn_scene_load(const char *path, kpcn_scene **out) {
   if (!out || !path) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_scene_load: NULL argument");
   *out = NULL;
-  FILE *f = fopen(path, "rb");
-  if (!f) return kpcn_fail(KPCN_ERR_IO, "cannot open scene '%s': %s", path, strerror(errno));
+  const char *why;
+  FILE *f = kpcn_fopen_input(path, &why);
+  if (!f) return kpcn_fail(KPCN_ERR_IO, "cannot open scene '%s': %s", path, why);
   fseek(f, 0, SEEK_END);
   long n = ftell(f);
   fseek(f, 0, SEEK_SET);

@@ -226,9 +226,9 @@ static void ck_close(ck_file *c) {
  * closed again. */
 static kpcn_status ck_open(const char *path, ck_file *c) {
   memset(c, 0, sizeof *c);
-  c->f = fopen(path, "rb");
-  if (!c->f)
-    return kpcn_fail(KPCN_ERR_IO, "cannot open checkpoint '%s': %s", path, strerror(errno));
+  const char *why;
+  c->f = kpcn_fopen_input(path, &why);
+  if (!c->f) return kpcn_fail(KPCN_ERR_IO, "cannot open checkpoint '%s': %s", path, why);
   kpcn_status st = KPCN_OK;
   unsigned char len8[8];
   uint64_t hl = 0;

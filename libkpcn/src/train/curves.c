@@ -38,8 +38,9 @@ static double field(char **f, int n, int col) {
  * *n values each, malloc'ed). Missing cells are NaN; a missing column is an error. */
 static kpcn_status read_columns(const char *path, const char *xcol, const char *const *ycols,
                                 int ny, double **out, size_t *n_out) {
-  FILE *in = fopen(path, "r");
-  if (!in) return kpcn_fail(KPCN_ERR_IO, "cannot open CSV '%s': %s", path, strerror(errno));
+  const char *why;
+  FILE *in = kpcn_fopen_input(path, &why);
+  if (!in) return kpcn_fail(KPCN_ERR_IO, "cannot open CSV '%s': %s", path, why);
   char line[2048], *f[32];
   if (!fgets(line, sizeof line, in)) {
     fclose(in);

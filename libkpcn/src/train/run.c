@@ -30,7 +30,7 @@ static kpcn_status csv_open(const char *path, int resume, int64_t keep_iter, int
   char *kept = NULL;
   size_t klen = 0;
   if (resume) {
-    FILE *in = fopen(path, "r");
+    FILE *in = kpcn_fopen_input(path, NULL);
     if (in) {
       char line[1024];
       size_t cap = 1 << 16;

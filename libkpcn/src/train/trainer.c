@@ -130,6 +130,13 @@ static kpcn_status load_validation(kpcn_trainer *t) {
         memcpy(t->val_ref[i], ref->buf[KPCN_BUF_COLOR], n * sizeof(float));
       else
         st = kpcn_last_status();
+      /* the metrics would leave such pixels out silently, and --best would choose by them */
+      for (size_t k = 0; st == KPCN_OK && k < n; k++)
+        if (!isfinite(t->val_ref[i][k]))
+          st = kpcn_fail(KPCN_ERR_NONFINITE,
+                         "validation reference '%s': non-finite colour at pixel (%zu, %zu)",
+                         t->s.val_ref[i], k % (n / 3) % (size_t)ref->width,
+                         k % (n / 3) / (size_t)ref->width); /* planar: R, G, B planes */
     }
     kpcn_aov_destroy(ref);
     KPCN_TRY(st);
@@ -252,6 +259,17 @@ static kpcn_status check_output_paths(const kpcn_trainer *t) {
         return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s and %s are the same file '%s'", what[i],
                          what[j], path[j]);
     }
+  /* Every output checked now, not when it is first written (the plot after the last
+   * iteration): a missing folder or a device there would cost the whole run. The model's own
+   * path may not be empty; '' turns the others off. */
+  for (int i = 2; i < 7; i++) {
+    if (!path[i] || (i > 2 && !*path[i])) continue;
+    KPCN_TRY(kpcn_check_output_path(path[i], what[i]));
+    for (int v = 0; v < t->s.nval; v++) {
+      KPCN_TRY(kpcn_check_not_input(path[i], what[i], t->s.val_noisy[v], "a --val input"));
+      KPCN_TRY(kpcn_check_not_input(path[i], what[i], t->s.val_ref[v], "a --val reference"));
+    }
+  }
   return KPCN_OK;
 }
 
