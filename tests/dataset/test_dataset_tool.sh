@@ -166,7 +166,7 @@ sleep 1.2
 kill -TERM $pid
 wait $pid
 rc=$?
-ok '[ $rc -eq 130 ]' "interrupted run exits 130 (got $rc)"
+ok '[ $rc -eq 143 ]' "a run stopped by SIGTERM exits 143 (got $rc)"
 ls "$T"/d/renders/*/*.exr 2>/dev/null | grep -v part | sed "s|$T/d/||" | sort > "$T/done1"
 n1=$(wc -l < "$T/done1")
 ok '[ "$n1" -gt 0 ]' "some outputs after the kill ($n1)"
@@ -220,6 +220,12 @@ done
 rc=$?
 ok '[ $rc -ne 0 ] && grep -q "the renderer exited 0 without writing" "$T/err"' \
   "a renderer that writes nothing (rc $rc: $(head -n 2 "$T/err"))"
+printf '#!/bin/sh\nwhile [ $# -gt 0 ]; do [ "$1" = -o ] && echo garbage > "$2"; shift; done\n' > "$T/garbage.sh"
+chmod +x "$T/garbage.sh"
+"$DS" run "$T/t0" --jobs 1 --renderer "$T/garbage.sh" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -ne 0 ] && grep -q "is not a readable EXR" "$T/err" && [ -z "$(find "$T/t0/renders" -name "*.exr")" ]' \
+  "a renderer that writes garbage: no job counts as done (rc $rc: $(head -n 1 "$T/err"))"
 "$DS" run "$T/t0" --renderer "$T" > /dev/null 2> "$T/err"
 rc=$?
 ok '[ $rc -ne 0 ] && grep -q "is not an executable file" "$T/err"' "a directory as --renderer (rc $rc)"
@@ -285,13 +291,14 @@ ok '[ $rc -eq 2 ] && [ ! -e "$T/twice.kps" ] && grep -q "is given twice" "$T/err
 # the store may not replace a file it reads (the manifest, a render), nor be written where it
 # cannot be (checked before the renders are read)
 cp "$T/r/manifest.jsonl" "$T/manifest.bak"
-for o in "$T/r/manifest.jsonl" "$T/r/renders/cornell-box/v000_2spp.exr" "$T/nodir/x.kps" "$T/r"; do
+for o in "$T/r/manifest.jsonl" "$T/r/renders/cornell-box/v000_2spp.exr" "$T/nodir/x.kps" "$T/r" \
+  "$T/r/renders/cornell-wide/v000_4spp.exr" "$T/r/scenes/cornell-box/v001.json"; do
   "$DS" patches "$T/r" --size 8 --allow-partial -o "$o" 2> "$T/err"
   rc=$?
   ok '[ $rc -eq 2 ] && grep -Eq "is the same file as|folder .*nodir|is a directory" "$T/err"' \
     "patches -o $o refused (rc $rc: $(cat "$T/err"))"
 done
-ok 'cmp -s "$T/r/manifest.jsonl" "$T/manifest.bak" && [ -f "$T/r/renders/cornell-box/v000_2spp.exr" ]' \
+ok 'cmp -s "$T/r/manifest.jsonl" "$T/manifest.bak" && [ -f "$T/r/renders/cornell-box/v000_2spp.exr" ] && grep -q "{" "$T/r/scenes/cornell-box/v001.json"' \
   "the manifest and the render are intact"
 "$DS" patches "$T/r" "$T/nothing" --size 8 --allow-partial -o "$T/none.kps" 2> "$T/err"
 rc=$?
@@ -370,7 +377,7 @@ if [ -n "$REAL" ] && [ -x "$REAL" ]; then
   kill -TERM $pid
   wait $pid
   rc=$?
-  ok '[ $rc -eq 130 ] && [ -n "$(ls "$T"/ck/renders/*/*.ckpt 2>/dev/null)" ]' \
+  ok '[ $rc -eq 143 ] && [ -n "$(ls "$T"/ck/renders/*/*.ckpt 2>/dev/null)" ]' \
     "a stopped run keeps its checkpoints (rc $rc)"
   "$DS" run "$T/ck" --dry-run > "$T/dry.out" 2>&1
   ok 'grep -q "^would render .*ref.* (a checkpoint is there)$" "$T/dry.out"' \

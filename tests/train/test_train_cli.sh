@@ -163,6 +163,21 @@ for o in "-o $D/nodir/x.safetensors" "-o $D/y.safetensors --plot $D/nodir/y.png"
   grep -Eq "folder '$D/nodir'|is a directory|empty file name" "$D/err" || fail "unclear for $o: $(cat "$D/err")"
   [ -z "$(ls "$D" | grep -E '^y\.|^x\.')" ] || fail "files left for $o: $(ls "$D")"
 done
+# a plot under another extension, a plot without its CSV log, snapshots into a file, a NaN in
+# a validation input: refused before training
+for o in "--plot $D/p.exr:must end in .png" "--plot $D/p.png --csv '':which --csv '' turns off" \
+  "--snapshots $D/p.kps:exists and is not a directory"; do
+  if eval "\"$K\" --store \"$D/p.kps\" -o \"$D/y.safetensors\" --preset tiny --iters 50 --batch 2 --patch 16 ${o%%:*}" 2>"$D/err"; then
+    fail "accepted: ${o%%:*}"
+  fi
+  grep -qF -- "${o#*:}" "$D/err" || fail "unclear for ${o%%:*}: $(cat "$D/err")"
+  [ -z "$(ls "$D" | grep -E '^y\.')" ] || fail "files left for ${o%%:*}: $(ls "$D")"
+done
+oiiotool --pattern constant:color=0.5,nan,0.5 1x1 3 "$N" --paste +3+1 -o "$D/vnoisy.exr" || fail "NaN input"
+if "$K" --store "$D/p.kps" -o "$D/v.safetensors" --preset tiny --iters 50 --batch 2 --patch 16 \
+  --val "$D/vnoisy.exr,$TD/dataset/sample_ref.exr" 2>"$D/err"; then fail "NaN validation input accepted"; fi
+grep -q "validation input '$D/vnoisy.exr': 1 non-finite value" "$D/err" || fail "NaN input unclear: $(cat "$D/err")"
+[ ! -e "$D/v.safetensors" ] || fail "a model written with a NaN validation input"
 # a validation reference with a NaN is refused, naming the file and the pixel
 oiiotool --pattern constant:color=0.5,nan,0.5 1x1 3 "$TD/dataset/sample_ref.exr" --ch R,G,B \
   --paste +5+2 -o "$D/vref.exr" || fail "NaN reference"

@@ -11,6 +11,7 @@
 #include "kpcn/exr.h"
 
 #include <cjson/cJSON.h>
+#include <signal.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -39,6 +40,9 @@ static int spp_selected(const int *spps, int n, int spp) {
     if (spps[i] == spp) return 1;
   return 0;
 }
+
+static volatile sig_atomic_t g_patch_stop = 0; /* the signal that asked to stop, 0 if none */
+static void on_signal(int sig) { g_patch_stop = sig; }
 
 /* Rule 56's store takes 18 directories (session 51); each costs a manifest on the stack. */
 enum { MAX_DIRS = 64 };
@@ -226,7 +230,7 @@ int ds_cmd_patches(int argc, char **argv) {
     pairs = grown;
     collect_pairs(dirs[d], d, &m[d], split, spps, nspp, allow_partial, pairs, &np, &missing, &nrej);
   }
-  /* the store must not replace a file it reads: the manifest, the plan or a render */
+  /* the store must not replace a file of a dataset it reads: the manifest, the plan, */
   for (int d = 0; d < ndirs && rc == 0; d++) {
     char mf[DS_PATH], pf[DS_PATH];
     ds_join(mf, sizeof mf, dirs[d], "manifest.jsonl");
@@ -235,13 +239,16 @@ int ds_cmd_patches(int argc, char **argv) {
         kpcn_check_not_input(out, "-o", pf, "the plan") != KPCN_OK)
       rc = 2;
   }
-  for (int p = 0; p < np && rc == 0; p++)
-    for (int k = 0; k < 2 && rc == 0; k++) {
-      const ds_job *j = &m[pairs[p].dir].jobs[k ? pairs[p].ref : pairs[p].job];
-      char a[DS_PATH];
-      ds_join(a, sizeof a, dirs[pairs[p].dir], j->out);
-      if (kpcn_check_not_input(out, "-o", a, "a render it reads") != KPCN_OK) rc = 2;
-    }
+  /* nor any other file of the dataset (a render of another split or spp, a variant's scene) */
+  for (int d = 0; d < ndirs && rc == 0; d++)
+    for (int i = 0; i < m[d].n && rc == 0; i++)
+      for (int k = 0; k < 2 && rc == 0; k++) {
+        char a[DS_PATH];
+        ds_join(a, sizeof a, dirs[d], k ? m[d].jobs[i].scene_file : m[d].jobs[i].out);
+        if (kpcn_check_not_input(
+                out, "-o", a, k ? "a scene of the dataset" : "a render of the dataset") != KPCN_OK)
+          rc = 2;
+      }
   if (rc == 2) ds_err("patches: %s", kpcn_last_error());
   if (rc == 0 && ((missing && !allow_partial) || np == 0)) {
     if (np == 0)
@@ -296,7 +303,20 @@ int ds_cmd_patches(int argc, char **argv) {
   }
   kpcn_patch_stats tot = {0, 0, 0};
   double t0 = ds_now(), last_line = -1e300;
+  /* a stop between two pairs removes the unfinished store (its temporary can be gigabytes) */
+  struct sigaction sa, old_int, old_term;
+  memset(&sa, 0, sizeof sa);
+  sa.sa_handler = on_signal;
+  sigaction(SIGINT, &sa, &old_int);
+  sigaction(SIGTERM, &sa, &old_term);
   for (int p = 0; p < np && rc == 0; p++) {
+    if (g_patch_stop) {
+      if (ds_isatty()) fputc('\n', stderr);
+      ds_err("patches: stopped by signal %d after %d of %d pairs; nothing written",
+             (int)g_patch_stop, p, np);
+      rc = 128 + g_patch_stop;
+      break;
+    }
     const char *dir = dirs[pairs[p].dir];
     const ds_job *j = &m[pairs[p].dir].jobs[pairs[p].job], *r = &m[pairs[p].dir].jobs[pairs[p].ref];
     char a[DS_PATH], b[DS_PATH];
@@ -348,7 +368,9 @@ int ds_cmd_patches(int argc, char **argv) {
     ds_progress(&last_line, progress_every, p + 1 == np || rc != 0, p + 1, np, el,
                 el / (p + 1) * (np - p - 1), detail);
   }
-  if (ds_isatty()) fputc('\n', stderr);
+  sigaction(SIGINT, &old_int, NULL);
+  sigaction(SIGTERM, &old_term, NULL);
+  if (ds_isatty() && rc < 128) fputc('\n', stderr);
   if (rc == 0 && kpcn_patchstore_finish(w) != KPCN_OK) {
     ds_err("patches: %s", kpcn_last_error());
     rc = 1;

@@ -31,11 +31,8 @@ typedef struct run_opts {
   double checkpoint_every;
 } run_opts;
 
-static volatile sig_atomic_t g_stop = 0;
-static void on_signal(int s) {
-  (void)s;
-  g_stop = 1;
-}
+static volatile sig_atomic_t g_stop = 0; /* the signal that stopped the run, 0 if none */
+static void on_signal(int s) { g_stop = s; }
 
 static int find_renderer(run_opts *o, const char *given) {
   if (given) {
@@ -266,7 +263,13 @@ static int run_pool(const run_opts *o, const ds_manifest *m, const int *idx, int
       char out[DS_PATH];
       ds_join(out, sizeof out, o->dir, j->out);
       const int exit0 = WIFEXITED(status) && WEXITSTATUS(status) == 0;
-      const int written = exit0 && ds_exists(slots[k].part);
+      /* what a renderer wrote must at least be an EXR (a wrapper that exits 0 after writing
+       * garbage would otherwise count as done, and every later run skip the job) */
+      kpcn_exr_info_t info;
+      const int present = exit0 && ds_exists(slots[k].part);
+      const int written = present && kpcn_exr_info(slots[k].part, &info) == KPCN_OK;
+      char bad_exr[512] = "";
+      if (present && !written) snprintf(bad_exr, sizeof bad_exr, "%s", kpcn_last_error());
       const int renamed = written && rename(slots[k].part, out) == 0;
       const int rename_errno = errno;
       if (renamed) {
@@ -281,6 +284,9 @@ static int run_pool(const run_opts *o, const ds_manifest *m, const int *idx, int
           if (written) /* the rename failed */
             ds_err("run: job %s: cannot rename '%s' to '%s': %s", j->id, slots[k].part, out,
                    strerror(rename_errno));
+          else if (present)
+            ds_err("run: job %s failed: the renderer's output is not a readable EXR (%s); see %s",
+                   j->id, bad_exr, lp);
           else if (exit0)
             ds_err("run: job %s failed: the renderer exited 0 without writing '%s'; see %s", j->id,
                    slots[k].part, lp);
@@ -461,7 +467,8 @@ int ds_cmd_run(int argc, char **argv) {
       print_would_render(&o, &m.jobs[pv[i]]);
   } else if (npv) {
     counts pc = {0, 0, 0, 0, npv};
-    if (run_pool(&o, &m, pv, npv, &pc, t0) != 0) rc = 130;
+    if (run_pool(&o, &m, pv, npv, &pc, t0) != 0)
+      rc = g_stop > 1 ? 128 + g_stop : 1; /* 1: fork failed */
     if (ds_isatty()) fputc('\n', stderr);
     /* Failed previews surface below as failed jobs ("no usable preview"). */
   }
@@ -514,7 +521,8 @@ int ds_cmd_run(int argc, char **argv) {
     for (int i = 0; i < npending; i++)
       print_would_render(&o, &m.jobs[pending[i]]);
   } else if (rc == 0 && npending) {
-    if (run_pool(&o, &m, pending, npending, &c, t0) != 0) rc = 130;
+    if (run_pool(&o, &m, pending, npending, &c, t0) != 0)
+      rc = g_stop > 1 ? 128 + g_stop : 1; /* 1: fork failed */
     if (ds_isatty()) fputc('\n', stderr);
   }
   if (!o.dry_run)

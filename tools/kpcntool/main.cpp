@@ -78,16 +78,14 @@ std::string json_string(const std::string &s) {
   return o + "\"";
 }
 
-// The files the steps write (-o, --patches:out=F.kps) and read (images, models), checked before
-// any work: an output must be writable as a new file renamed into place (not a device, FIFO
-// or directory, in an existing folder) and must not be one of the inputs.
+// The files the steps write (-o, --patches:out=F.kps), checked before any work: an output must be
+// writable as a new file renamed into place (not a device, FIFO or directory, in an existing
+// folder) and must not be a model a step reads. An input image may be written over (an edit in
+// place, as with oiiotool): every image is read whole before any output is written.
 bool check_files(const std::vector<Step> &steps, std::string &err) {
-  std::vector<std::pair<std::string, std::string>> outs, ins; // (path, role)
+  std::vector<std::pair<std::string, std::string>> outs, ins; // (path, role): ins are models
   for (const Step &st : steps) {
-    if (!st.cmd) {
-      ins.push_back({st.file, "input image"});
-      continue;
-    }
+    if (!st.cmd) continue;
     if (st.cmd->name == "o") outs.push_back({st.args[0], "-o"});
     const std::string out = st.mods.str("out"), model = st.mods.str("model");
     if (out.size() > 4 && out.compare(out.size() - 4, 4, ".kps") == 0) // as cmd_patches

@@ -4,6 +4,7 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cstdio>
 #include <cstdlib>
@@ -96,27 +97,37 @@ static std::string temp_path(const Context::Output &o, size_t index) {
 }
 
 // Some image writers report no error when the disk fills (OIIO 2.4's PNG writer closes a
-// truncated file with success), so every written file is read back whole before it counts.
+// truncated file with success), so every image written other than EXR (whose writer reports
+// it) is read back whole, 64 rows at a time, before it counts.
 static bool verify_written(const std::string &file, std::string &err) {
+  if (lower_ext(file) == "exr") return true;
   auto in = OIIO::ImageInput::open(file);
   if (!in) {
     err = "the written file cannot be read back (disk full?): " + OIIO::geterror();
     return false;
   }
-  std::vector<float> px((size_t)in->spec().image_pixels() * (size_t)in->spec().nchannels);
-  const bool ok = in->read_image(0, 0, 0, in->spec().nchannels, OIIO::TypeDesc::FLOAT, px.data());
-  if (!ok) err = "the written file is incomplete (disk full?): " + in->geterror();
-  return ok;
+  const OIIO::ImageSpec &sp = in->spec();
+  std::vector<float> rows((size_t)sp.width * 64 * (size_t)sp.nchannels);
+  for (int y = sp.y; y < sp.y + sp.height; y += 64) {
+    const int y1 = std::min(y + 64, sp.y + sp.height);
+    if (!in->read_scanlines(0, 0, y, y1, 0, 0, sp.nchannels, OIIO::TypeDesc::FLOAT, rows.data())) {
+      err = "the written file is incomplete (disk full?): " + in->geterror();
+      return false;
+    }
+  }
+  return true;
 }
 
-// Set while a file is being written: an image library that ends the process instead of
+// Set while the outputs are being written: an image library that ends the process instead of
 // returning an error (libjpeg's default handler calls exit() when the disk is full) leaves
-// neither the temporary nor a silent exit behind.
-static std::string g_writing_what, g_writing_tmp;
+// neither a temporary (of this output or of those written before it) nor a silent exit behind.
+static std::string g_writing_what;
+static const std::vector<std::string> *g_writing_tmps = nullptr;
 static void cleanup_at_exit() {
-  if (g_writing_tmp.empty()) return;
+  if (!g_writing_tmps) return;
   std::error_code ec;
-  fs::remove_all(g_writing_tmp, ec);
+  for (const std::string &t : *g_writing_tmps)
+    fs::remove_all(t, ec);
   std::fprintf(stderr,
                "kpcntool: error: %s: the image library ended the program while writing "
                "it (disk full?); nothing was written\n",
@@ -162,9 +173,9 @@ bool commit_outputs(const std::vector<Context::Output> &outputs, std::string &fa
     static const bool registered = std::atexit(cleanup_at_exit) == 0;
     (void)registered;
     g_writing_what = o.what;
-    g_writing_tmp = tmp.back();
+    g_writing_tmps = &tmp;
     const bool ok = o.write(tmp.back(), err) && (!o.image || verify_written(tmp.back(), err));
-    g_writing_tmp.clear();
+    g_writing_tmps = nullptr;
     if (!ok) {
       failed = o.what;
       err = "cannot write '" + o.path + "': " + err;

@@ -6,6 +6,7 @@
 #include "kpcn/train.h"
 
 #include <ctype.h>
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -20,9 +21,21 @@
 #pragma GCC diagnostic ignored "-Wsign-compare"
 #endif
 #include <stb/stb_image_write.h>
+
 #if defined(__GNUC__)
 #pragma GCC diagnostic pop
 #endif
+
+/* stb's PNG bytes to a file, remembering a short write (stbi_write_png does not) */
+typedef struct png_sink {
+  FILE *f;
+  int ok;
+} png_sink;
+
+static void png_write(void *user, void *data, int size) {
+  png_sink *s = user;
+  if (s->ok && fwrite(data, 1, (size_t)size, s->f) != (size_t)size) s->ok = 0;
+}
 
 /* 5x7 glyphs, one byte per row, bit 4 = leftmost column. Lowercase letters are drawn
  * as uppercase (except those listed). */
@@ -265,11 +278,21 @@ kpcn_status kpcn_plot_png(const char *path, const kpcn_plot_settings *st,
     free(cv.px);
     return kpcn_last_status();
   }
-  int ok = stbi_write_png(tmp, cv.w, cv.h, 3, cv.px, cv.w * 3);
+  /* through a callback, not stbi_write_png: that one ignores fwrite's and fclose's errors and
+   * left an empty PNG behind on a full disk */
+  FILE *f = fopen(tmp, "wb");
+  int ok = f != NULL;
+  if (ok) {
+    png_sink sink = {f, 1};
+    ok = stbi_write_png_to_func(png_write, &sink, cv.w, cv.h, 3, cv.px, cv.w * 3) && sink.ok;
+    ok &= fflush(f) == 0 && !ferror(f);
+    ok &= fclose(f) == 0;
+  }
+  const int e = errno;
   free(cv.px);
   if (!ok) {
     kpcn_abort_file(tmp);
-    return kpcn_fail(KPCN_ERR_IO, "cannot write plot PNG '%s'", path);
+    return kpcn_fail(KPCN_ERR_IO, "cannot write plot PNG '%s': %s", path, strerror(e));
   }
   return kpcn_commit_file(tmp, path);
 }

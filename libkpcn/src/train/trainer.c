@@ -13,6 +13,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/stat.h>
 #include <time.h>
 
@@ -116,6 +117,14 @@ static kpcn_status load_validation(kpcn_trainer *t) {
   for (int i = 0; i < t->nval; i++) {
     kpcn_aov_set *ref = NULL;
     KPCN_TRY(kpcn_exr_read_aov(t->s.val_noisy[i], &t->val_aov[i]));
+    /* the denoiser refuses it at the first validation, after hours of training: now instead */
+    const char *nf = NULL;
+    const size_t nbad = kpcn_aov_count_nonfinite(t->val_aov[i], &nf);
+    if (nbad)
+      return kpcn_fail(KPCN_ERR_NONFINITE,
+                       "validation input '%s': %zu non-finite value(s) (NaN/Inf), the first in "
+                       "'%s'",
+                       t->s.val_noisy[i], nbad, nf ? nf : "?");
     KPCN_TRY(kpcn_exr_read_aov(t->s.val_ref[i], &ref));
     kpcn_status st = kpcn_aov_require(ref, KPCN_BUF_COLOR, 0, t->s.val_ref[i]);
     if (st == KPCN_OK &&
@@ -259,6 +268,15 @@ static kpcn_status check_output_paths(const kpcn_trainer *t) {
         return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s and %s are the same file '%s'", what[i],
                          what[j], path[j]);
     }
+  /* The plot is a PNG: under another extension it would be mislabelled. */
+  if (t->plot_path && *t->plot_path) {
+    const size_t n = strlen(t->plot_path);
+    if (n < 4 || strcasecmp(t->plot_path + n - 4, ".png") != 0)
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                       "the plot (--plot) '%s' is a PNG file and must "
+                       "end in .png",
+                       t->plot_path);
+  }
   /* Every output checked now, not when it is first written (the plot after the last
    * iteration): a missing folder or a device there would cost the whole run. The model's own
    * path may not be empty; '' turns the others off. */
@@ -343,6 +361,12 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   } while (0)
   if (!t->store_path || !t->out_path || !t->ckpt_path || !t->csv_path || !t->plot_path)
     GO(KPCN_ERR_OUT_OF_MEMORY);
+  /* a plot asked for by name is drawn from the CSV log: without the log it would silently
+   * not exist (the default plot simply goes with the log) */
+  if (s->plot_path && *s->plot_path && s->csv_path && !*s->csv_path)
+    GO(kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                 "the plot (--plot) '%s' is drawn from the CSV log, which --csv '' turns off",
+                 s->plot_path));
   GO(check_output_paths(t));
   /* architecture with the feature builder's inputs */
   t->arch = s->arch;
@@ -390,6 +414,10 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   if (t->snapshot_dir && mkdir(t->snapshot_dir, 0777) != 0 && errno != EEXIST)
     GO(kpcn_fail(KPCN_ERR_IO, "cannot create snapshot directory '%s': %s", t->snapshot_dir,
                  strerror(errno)));
+  struct stat sd; /* EEXIST also for a file of that name, which would fail at the first save */
+  if (t->snapshot_dir && (stat(t->snapshot_dir, &sd) != 0 || !S_ISDIR(sd.st_mode)))
+    GO(kpcn_fail(KPCN_ERR_IO, "snapshot directory '%s' exists and is not a directory",
+                 t->snapshot_dir));
   GO(setup_nets(t));
   {
     size_t pp = (size_t)t->P * t->P, N = (size_t)t->N;
