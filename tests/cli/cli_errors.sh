@@ -85,6 +85,11 @@ cp "$REF" model.png
 expect_fail "-o 'model.png' is the same file as model 'model.png'" "" "$NOISY" \
   --denoise:model=model.png -o model.png
 cmp -s "$REF" model.png && pass "the model is unchanged" || fail "model.png changed"
+cp "$TD/scenes/cornell-box/scene.json" scene.exr
+expect_fail "-o 'scene.exr' is the same file as the scene of --render 'scene.exr'" "" \
+  --render:res=8x8:spp=1 scene.exr -o scene.exr
+cmp -s "$TD/scenes/cornell-box/scene.json" scene.exr && pass "the scene is unchanged" || fail "scene.exr changed"
+rm -f scene.exr
 rm -f link.exr target.exr model.png
 # A file name at the 255-byte limit: its temporary gets a short name in the same folder.
 long=$(printf 'n%.0s' $(seq 1 251)).exr

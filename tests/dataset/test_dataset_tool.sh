@@ -50,6 +50,11 @@ ok '[ $rc -eq 1 ]' "missing scenes dir"
 "$DS" plan --scenes "$TD/scenes" --spp 4,x -o "$T/bad4" 2> /dev/null
 rc=$?
 ok '[ $rc -eq 2 ] && [ ! -e "$T/bad4" ]' "bad --spp, nothing written"
+for split in "train:0.5,,val:0.5" "train:0.5,val:0.5," ",train:1"; do
+  "$DS" plan --scenes "$TD/scenes" --split "$split" -o "$T/bad6" 2> "$T/err"
+  rc=$?
+  ok '[ $rc -eq 2 ] && [ ! -e "$T/bad6" ] && grep -q "has an empty item" "$T/err"' "plan --split $split refused (rc $rc)"
+done
 # a count twice would plan one job (one output file) twice; an empty item is a typo
 for spp in 2,2 4,2,4 1,,2 2, ,2; do
   "$DS" plan --scenes "$TD/scenes" --spp "$spp" -o "$T/bad5" 2> "$T/err"

@@ -102,6 +102,12 @@ static int assign_splits(base_scene *s, int n, const char *spec, uint64_t seed) 
       strcpy(s[i].split, "train");
     return 0;
   }
+  /* strtok_r below would skip an empty item ("train:0.5,,val:0.5", a trailing comma): a typo */
+  const size_t len = strlen(spec);
+  if (!len || spec[0] == ',' || spec[len - 1] == ',' || strstr(spec, ",,")) {
+    ds_err("--split: '%s' has an empty item (split:value items separated by single commas)", spec);
+    return -1;
+  }
   char buf[4096];
   snprintf(buf, sizeof buf, "%s", spec);
   char names[8][16];

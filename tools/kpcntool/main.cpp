@@ -80,8 +80,8 @@ std::string json_string(const std::string &s) {
 
 // The files the steps write (-o, --patches:out=F.kps), checked before any work: an output must be
 // writable as a new file renamed into place (not a device, FIFO or directory, in an existing
-// folder) and must not be a model a step reads. An input image may be written over (an edit in
-// place, as with oiiotool): every image is read whole before any output is written.
+// folder) and must not be a model or scene a step reads. An input image may be written over (an
+// edit in place, as with oiiotool): every image is read whole before any output is written.
 bool check_files(const std::vector<Step> &steps, std::string &err) {
   std::vector<std::pair<std::string, std::string>> outs, ins; // (path, role): ins are models
   for (const Step &st : steps) {
@@ -91,6 +91,7 @@ bool check_files(const std::vector<Step> &steps, std::string &err) {
     if (out.size() > 4 && out.compare(out.size() - 4, 4, ".kps") == 0) // as cmd_patches
       outs.push_back({out, "out="});
     if (!model.empty()) ins.push_back({model, "model"});
+    if (st.cmd->name == "render") ins.push_back({st.args[0], "the scene of --render"});
   }
   for (const auto &o : outs) {
     kpcn_status s = kpcn_check_output_path(o.first.c_str(), o.second.c_str());
