@@ -137,31 +137,6 @@ static int scene_key(const char *scene_path, uint64_t *out) {
   return 1;
 }
 
-/* path with its folder made canonical (realpath), for files that may not exist yet; the
- * text itself if the folder does not exist either. */
-static void canonical(const char *path, char *out, size_t n) {
-  const char *slash = strrchr(path, '/');
-  char dir[4096], real[4096];
-  snprintf(dir, sizeof dir, "%.*s", slash ? (int)(slash - path) + (slash == path) : 1,
-           slash ? path : ".");
-  if (realpath(dir, real))
-    snprintf(out, n, "%s/%s", real, slash ? slash + 1 : path);
-  else
-    snprintf(out, n, "%s", path);
-}
-
-/* 1 if a and b name the same file: the same inode when both exist, else the same canonical
- * path ("./out.exr" and "out.exr" before either is written). */
-static int same_file(const char *a, const char *b) {
-  struct stat sa, sb;
-  if (stat(a, &sa) == 0 && stat(b, &sb) == 0)
-    return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
-  char ca[8192], cb[8192];
-  canonical(a, ca, sizeof ca);
-  canonical(b, cb, sizeof cb);
-  return strcmp(ca, cb) == 0;
-}
-
 static int parse_int(const char *s, long lo, long hi, int *out) {
   char *end;
   long v = strtol(s, &end, 10);
@@ -322,7 +297,7 @@ int main(int argc, char **argv) {
             out_path);
     return 2;
   }
-  if (same_file(out_path, scene_path)) {
+  if (kpcn_same_file(out_path, scene_path)) {
     fprintf(stderr, "kpcn-render: -o '%s' is the scene file\n", out_path);
     return 2;
   }
@@ -333,9 +308,9 @@ int main(int argc, char **argv) {
     return 2;
   }
   if (rs.checkpoint &&
-      (same_file(rs.checkpoint, out_path) || same_file(rs.checkpoint, scene_path))) {
+      (kpcn_same_file(rs.checkpoint, out_path) || kpcn_same_file(rs.checkpoint, scene_path))) {
     fprintf(stderr, "kpcn-render: --checkpoint '%s' is the %s\n", rs.checkpoint,
-            same_file(rs.checkpoint, out_path) ? "output" : "scene file");
+            kpcn_same_file(rs.checkpoint, out_path) ? "output" : "scene file");
     return 2;
   }
   if (rs.checkpoint && !scene_key(scene_path, &rs.scene_key)) {

@@ -76,9 +76,12 @@ int kpcn_resolve_threads(int n);
  * way: empty, a directory, an existing non-regular file, a dangling link, or one whose folder
  * does not exist or is not writable. `what` names it in the message ("model", "-o"). */
 kpcn_status kpcn_check_output_path(const char *path, const char *what);
-/* KPCN_ERR_INVALID_ARGUMENT if output and input name the same existing file (by device and
- * inode, so other spellings and hard links count), naming both roles: writing one would
- * destroy the other. */
+/* 1 if a and b name the same file: by device and inode when both exist (other spellings, links
+ * and hard links count), else by their folders' real paths and their names ("./x" and "x"
+ * before either is written; the text as given when the folder does not exist). */
+int kpcn_same_file(const char *a, const char *b);
+/* KPCN_ERR_INVALID_ARGUMENT if output and input are the same file (kpcn_same_file), naming
+ * both roles: writing one would destroy the other. */
 kpcn_status kpcn_check_not_input(const char *output, const char *out_what, const char *input,
                                  const char *in_what);
 /* fopen(path, "rb") for an input that must be a regular file: a FIFO is opened without

@@ -113,11 +113,35 @@ kpcn_status kpcn_check_output_path(const char *path, const char *what) {
   return KPCN_OK;
 }
 
+/* path with its folder made canonical (realpath), for a file that may not exist yet; the text
+ * itself when the folder does not exist either. */
+static void canonical_path(const char *path, char *out, size_t n) {
+  const char *slash = strrchr(path, '/');
+  char dir[PATH_MAX], real[PATH_MAX];
+  if (!slash)
+    snprintf(dir, sizeof dir, ".");
+  else
+    snprintf(dir, sizeof dir, "%.*s", slash == path ? 1 : (int)(slash - path), path);
+  if (realpath(dir, real))
+    snprintf(out, n, "%s/%s", real, slash ? slash + 1 : path);
+  else
+    snprintf(out, n, "%s", path);
+}
+
+int kpcn_same_file(const char *a, const char *b) {
+  struct stat sa, sb;
+  if (!a || !b) return 0;
+  if (stat(a, &sa) == 0 && stat(b, &sb) == 0)
+    return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+  char ca[PATH_MAX + 256], cb[PATH_MAX + 256];
+  canonical_path(a, ca, sizeof ca);
+  canonical_path(b, cb, sizeof cb);
+  return strcmp(ca, cb) == 0;
+}
+
 kpcn_status kpcn_check_not_input(const char *output, const char *out_what, const char *input,
                                  const char *in_what) {
-  struct stat a, b;
-  if (!output || !input || stat(output, &a) != 0 || stat(input, &b) != 0) return KPCN_OK;
-  if (a.st_dev == b.st_dev && a.st_ino == b.st_ino)
+  if (kpcn_same_file(output, input))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
                      "%s '%s' is the same file as %s '%s': writing it would destroy the input",
                      out_what, output, in_what, input);

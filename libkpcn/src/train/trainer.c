@@ -227,30 +227,6 @@ static kpcn_status record_exposure(kpcn_trainer *t) {
   return KPCN_OK;
 }
 
-/* dir's real path + "/" + name, for a file that may not exist yet; 0 if its folder does not. */
-static int canonical_path(const char *p, char *out, size_t n) {
-  const char *slash = strrchr(p, '/');
-  char dir[PATH_MAX], real[PATH_MAX];
-  if (!slash)
-    snprintf(dir, sizeof dir, ".");
-  else
-    snprintf(dir, sizeof dir, "%.*s", slash == p ? 1 : (int)(slash - p), p);
-  if (!realpath(dir, real)) return 0;
-  snprintf(out, n, "%s/%s", real, slash ? slash + 1 : p);
-  return 1;
-}
-
-/* Same file? Existing files by device and inode (links, "./" and "../" spellings); a file
- * not yet written by its directory's real path and its name. */
-static int same_file(const char *a, const char *b) {
-  struct stat sa, sb;
-  if (stat(a, &sa) == 0 && stat(b, &sb) == 0)
-    return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
-  char ra[PATH_MAX + 256], rb[PATH_MAX + 256];
-  return canonical_path(a, ra, sizeof ra) && canonical_path(b, rb, sizeof rb) &&
-         strcmp(ra, rb) == 0;
-}
-
 /* The store and the initial model are read, the rest written: no two may be one file (a CSV
  * written over the patch store destroys it). */
 static kpcn_status check_output_paths(const kpcn_trainer *t) {
@@ -264,7 +240,7 @@ static kpcn_status check_output_paths(const kpcn_trainer *t) {
     for (int j = i + 1; j < 7; j++) {
       if (!path[i] || !path[j] || !*path[i] || !*path[j]) continue;
       if (i == 1 && j == 2) continue; /* fine-tuning a model in place is allowed */
-      if (same_file(path[i], path[j]))
+      if (kpcn_same_file(path[i], path[j]))
         return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s and %s are the same file '%s'", what[i],
                          what[j], path[j]);
     }
