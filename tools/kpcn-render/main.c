@@ -18,7 +18,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <strings.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
@@ -291,10 +290,8 @@ int main(int argc, char **argv) {
                     "kept there)\n");
     return 2;
   }
-  const size_t olen = strlen(out_path);
-  if (olen < 4 || strcasecmp(out_path + olen - 4, ".exr") != 0) {
-    fprintf(stderr, "kpcn-render: -o '%s': the output is an OpenEXR file and must end in .exr\n",
-            out_path);
+  if (kpcn_check_extension(out_path, ".exr", "-o", "OpenEXR") != KPCN_OK) {
+    fprintf(stderr, "kpcn-render: %s\n", kpcn_last_error());
     return 2;
   }
   if (kpcn_same_file(out_path, scene_path)) {

@@ -9,7 +9,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <strings.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -230,10 +229,8 @@ static int compare_main(int argc, char **argv) {
     fprintf(stderr, "kpcn-train --compare: no runs given\n");
     return 2;
   }
-  const size_t plen = strlen(png);
-  if (plen < 4 || strcasecmp(png + plen - 4, ".png") != 0) {
-    fprintf(stderr, "kpcn-train --compare: '%s': the plot is a PNG file and must end in .png\n",
-            png);
+  if (kpcn_check_extension(png, ".png", "the plot", "PNG") != KPCN_OK) {
+    fprintf(stderr, "kpcn-train --compare: %s\n", kpcn_last_error());
     for (int i = 0; i < n; i++)
       free(owned[i]);
     return 2;

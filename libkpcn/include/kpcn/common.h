@@ -76,6 +76,12 @@ int kpcn_resolve_threads(int n);
  * way: empty, a directory, an existing non-regular file, a dangling link, or one whose folder
  * does not exist or is not writable. `what` names it in the message ("model", "-o"). */
 kpcn_status kpcn_check_output_path(const char *path, const char *what);
+/* 1 if path ends in ext (".exr"; the path in any letter case). */
+int kpcn_has_extension(const char *path, const char *ext);
+/* KPCN_ERR_INVALID_ARGUMENT unless path ends in ext, e.g. "-o 'x.png' must end in .exr (it is
+ * written as OpenEXR)": a writer of one format does not follow the name. */
+kpcn_status kpcn_check_extension(const char *path, const char *ext, const char *what,
+                                 const char *format);
 /* 1 if a and b name the same file: by device and inode when both exist (other spellings, links
  * and hard links count), else by their folders' real paths and their names ("./x" and "x"
  * before either is written; the text as given when the folder does not exist). */

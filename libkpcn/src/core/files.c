@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -111,6 +112,18 @@ kpcn_status kpcn_check_output_path(const char *path, const char *what) {
     return kpcn_fail(KPCN_ERR_IO, "%s '%s': cannot write in folder '%s': %s", what, path, dir,
                      strerror(errno));
   return KPCN_OK;
+}
+
+int kpcn_has_extension(const char *path, const char *ext) {
+  const size_t n = path ? strlen(path) : 0, k = strlen(ext);
+  return n >= k && strcasecmp(path + n - k, ext) == 0;
+}
+
+kpcn_status kpcn_check_extension(const char *path, const char *ext, const char *what,
+                                 const char *format) {
+  if (kpcn_has_extension(path, ext)) return KPCN_OK;
+  return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s '%s' must end in %s (it is written as %s)", what,
+                   path ? path : "", ext, format);
 }
 
 /* path with its folder made canonical (realpath), for a file that may not exist yet; the text

@@ -126,17 +126,6 @@ static void finish_bitmap(kpcn_texture *t) {
       kv3_scale(kv3((float)(acc[0] / np), (float)(acc[1] / np), (float)(acc[2] / np)), t->scale);
 }
 
-static int ends_with_ci(const char *s, const char *suffix) {
-  size_t ls = strlen(s), lx = strlen(suffix);
-  if (lx > ls) return 0;
-  for (size_t i = 0; i < lx; ++i) {
-    char a = s[ls - lx + i], b = suffix[i];
-    if (a >= 'A' && a <= 'Z') a = (char)(a - 'A' + 'a');
-    if (a != b) return 0;
-  }
-  return 1;
-}
-
 /* EXR through the io module: channels R, G, B (or a single Y / luminance channel), linear. */
 static kpcn_status load_exr(const char *path, const kpcn_bitmap_options *opt, kpcn_texture *t) {
   kpcn_image *img = NULL;
@@ -183,7 +172,7 @@ static kpcn_status load_exr(const char *path, const kpcn_bitmap_options *opt, kp
 }
 
 static kpcn_status load_pixels(const char *path, const kpcn_bitmap_options *opt, kpcn_texture *t) {
-  if (ends_with_ci(path, ".exr")) return load_exr(path, opt, t);
+  if (kpcn_has_extension(path, ".exr")) return load_exr(path, opt, t);
   const char *why;
   FILE *f = kpcn_fopen_input(path, &why);
   if (!f) return kpcn_fail(KPCN_ERR_IO, "texture '%s': cannot open file: %s", path, why);

@@ -13,7 +13,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <strings.h>
 #include <sys/stat.h>
 #include <time.h>
 
@@ -245,14 +244,8 @@ static kpcn_status check_output_paths(const kpcn_trainer *t) {
                          what[j], path[j]);
     }
   /* The plot is a PNG: under another extension it would be mislabelled. */
-  if (t->plot_path && *t->plot_path) {
-    const size_t n = strlen(t->plot_path);
-    if (n < 4 || strcasecmp(t->plot_path + n - 4, ".png") != 0)
-      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                       "the plot (--plot) '%s' is a PNG file and must "
-                       "end in .png",
-                       t->plot_path);
-  }
+  if (t->plot_path && *t->plot_path)
+    KPCN_TRY(kpcn_check_extension(t->plot_path, ".png", "the plot (--plot)", "PNG"));
   /* Every output checked now, not when it is first written (the plot after the last
    * iteration): a missing folder or a device there would cost the whole run. The model's own
    * path may not be empty; '' turns the others off. */
