@@ -55,6 +55,20 @@ for split in "train:0.5,,val:0.5" "train:0.5,val:0.5," ",train:1"; do
   rc=$?
   ok '[ $rc -eq 2 ] && [ ! -e "$T/bad6" ] && grep -q "has an empty item" "$T/err"' "plan --split $split refused (rc $rc)"
 done
+# a split asked for with a share that rounds to no scene of the three is named, not left empty
+for split in "train:0.8,val:0.1" "train:0.01,val:0.5,test:0.49"; do
+  "$DS" plan --scenes "$TD/scenes" --split "$split" -o "$T/bad7" 2> "$T/err"
+  rc=$?
+  ok '[ $rc -eq 2 ] && [ ! -e "$T/bad7" ] && grep -q "split .* of 3 base scenes) gets no scene" "$T/err"' \
+    "plan --split $split: an empty split refused (rc $rc: $(cat "$T/err"))"
+done
+# sizes past int range wrapped to 16x8 through sscanf; blanks and signs are no number either
+for res in 4294967312x4294967304 " 16x16" +16x16 16x16x 16 -16x16; do
+  "$DS" plan --scenes "$TD/scenes" --resolution "$res" -o "$T/bad8" 2> "$T/err"
+  rc=$?
+  ok '[ $rc -eq 2 ] && [ ! -e "$T/bad8" ] && grep -q "for --resolution" "$T/err"' \
+    "plan --resolution '$res' refused (rc $rc)"
+done
 # a count twice would plan one job (one output file) twice; an empty item is a typo
 for spp in 2,2 4,2,4 1,,2 2, ,2; do
   "$DS" plan --scenes "$TD/scenes" --spp "$spp" -o "$T/bad5" 2> "$T/err"
@@ -159,6 +173,11 @@ for i in 0 1 2; do "$DS" run "$T/d" --list --shard $i/3 >> "$T/union"; done
 ok '[ $(wc -l < "$T/all") -eq 15 ]' "15 render jobs"
 ok '[ "$(sort "$T/all")" = "$(sort "$T/union")" ]' "shards cover every job"
 ok '[ -z "$(sort "$T/union" | uniq -d)" ]' "shards are disjoint"
+for shard in 4294967296/4294967298 3/3 -1/3 " 1/3" 1/0 1/3/4; do
+  "$DS" run "$T/d" --list --shard "$shard" > /dev/null 2> "$T/err"
+  rc=$?
+  ok '[ $rc -eq 2 ] && grep -q "for --shard" "$T/err"' "run --shard '$shard' refused (rc $rc)"
+done
 "$DS" run "$T/d" --shard 3/3 2> /dev/null
 rc=$?
 ok '[ $rc -eq 2 ]' "bad shard rejected"

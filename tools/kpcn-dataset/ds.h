@@ -2,6 +2,8 @@
 #ifndef KPCN_DATASET_TOOL_H
 #define KPCN_DATASET_TOOL_H
 
+#include "cli_parse.h"
+
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -57,7 +59,6 @@ int ds_exists(const char *path);
 void ds_join(char *out, size_t n, const char *a, const char *b);
 char *ds_slurp(const char *path, size_t *len);
 int ds_write_atomic(const char *path, const char *data, size_t len);
-int ds_parse_int(const char *s, long lo, long hi, int *out);
 /* A comma list of distinct integers in [1, hi] ("4,16,64"): no empty item, at most cap of
  * them. Returns how many, or -1. */
 int ds_parse_int_list(const char *s, long hi, int *out, int cap);

@@ -142,14 +142,14 @@ int ds_cmd_patches(int argc, char **argv) {
       ok = !strcmp(v, "f32") || !strcmp(v, "f16");
       want = " (f32 or f16)";
     } else if (!strcmp(a, "--size")) {
-      ok = ds_parse_int(v, 2, 4096, &ps.size);
+      ok = cli_parse_int(v, 2, 4096, &ps.size);
       want = " (an integer in [2, 4096])";
     } else if (!strcmp(a, "--per-image")) {
-      ok = ds_parse_int(v, 1, 1 << 20, &ps.count);
+      ok = cli_parse_int(v, 1, 1 << 20, &ps.count);
       per_image_given = 1;
       want = " (an integer in [1, 1048576])";
     } else if (!strcmp(a, "--stride")) {
-      ok = ds_parse_int(v, 1, 4096, &ps.stride);
+      ok = cli_parse_int(v, 1, 4096, &ps.stride);
       stride_given = 1;
       want = " (an integer in [1, 4096])";
     } else if (!strcmp(a, "--cull") || !strcmp(a, "--cull-tol") || !strcmp(a, "--cull-abs")) {
@@ -164,7 +164,7 @@ int ds_cmd_patches(int argc, char **argv) {
       ok = ds_parse_double(v, &progress_every) && progress_every >= 0;
       want = " (seconds >= 0)";
     } else if (!strcmp(a, "--seed")) {
-      ok = ds_parse_int(v, 0, 2147483647, &iv);
+      ok = cli_parse_int(v, 0, 2147483647, &iv);
       ps.seed = (uint64_t)iv;
       want = " (an integer in [0, 2147483647])";
     } else {

@@ -197,15 +197,25 @@ static int assign_splits(base_scene *s, int n, const char *spec, uint64_t seed) 
       order[i] = order[j];
       order[j] = t;
     }
-    int pos = 0;
+    int pos = 0, empty = -1;
     for (int k = nsplit - 1; k >= 1; k--) {
-      int cnt = (int)lround(frac[k] * n);
-      for (int c = 0; c < cnt && pos < n; c++)
+      int cnt = (int)lround(frac[k] * n), c = 0;
+      for (; c < cnt && pos < n; c++)
         strcpy(s[order[pos++]].split, names[k]);
+      if (c == 0 && frac[k] > 0) empty = k;
     }
+    if (pos == n && frac[0] > 0) empty = 0;
     while (pos < n)
       strcpy(s[order[pos++]].split, names[0]);
     free(order);
+    /* A split asked for with a share above 0 that gets no scene would leave its patch store
+     * or validation set empty, found only later by `patches` ("no finished val image pairs"). */
+    if (empty >= 0) {
+      ds_err("--split: split '%s' (%g of %d base scene%s) gets no scene; give it a larger "
+             "share, name its scenes (%s:sceneA+sceneB) or leave it out",
+             names[empty], frac[empty], n, n == 1 ? "" : "s", names[empty]);
+      return -1;
+    }
   }
   for (int i = 0; i < n; i++)
     if (!s[i].split[0]) {
@@ -570,27 +580,28 @@ int ds_cmd_plan(int argc, char **argv) {
     else if (!strcmp(a, "--spp"))
       spp_list = v;
     else if (!strcmp(a, "--variants")) {
-      ok = ds_parse_int(v, 0, DS_MAX_VARIANTS, &variants);
+      ok = cli_parse_int(v, 0, DS_MAX_VARIANTS, &variants);
       want = " (an integer in [0, 100000])";
     } else if (!strcmp(a, "--ref-spp")) {
-      ok = ds_parse_int(v, 1, DS_MAX_SPP, &ref_spp);
+      ok = cli_parse_int(v, 1, DS_MAX_SPP, &ref_spp);
       want = " (an integer in [1, 16777216])";
     } else if (!strcmp(a, "--albedo-footprint")) {
-      ok = ds_parse_int(v, 1, 16, &albedo_footprint);
+      ok = cli_parse_int(v, 1, 16, &albedo_footprint);
       want = " (an integer in [1, 16])";
     } else if (!strcmp(a, "--preview-spp")) {
-      ok = ds_parse_int(v, 1, 1 << 16, &preview_spp);
+      ok = cli_parse_int(v, 1, 1 << 16, &preview_spp);
       want = " (an integer in [1, 65536])";
     } else if (!strcmp(a, "--preview-scale")) {
-      ok = ds_parse_int(v, 1, 64, &preview_scale);
+      ok = cli_parse_int(v, 1, 64, &preview_scale);
       want = " (an integer in [1, 64])";
     } else if (!strcmp(a, "--seed")) {
       ok = ds_parse_u64(v, UINT64_MAX, &seed);
       want = " (a non-negative decimal integer below 2^64)";
     } else if (!strcmp(a, "--resolution")) {
-      char extra;
-      ok = sscanf(v, "%dx%d%c", &W, &H, &extra) == 2 && W > 0 && H > 0 && W <= DS_MAX_DIM &&
-           H <= DS_MAX_DIM;
+      static const long lo[2] = {1, 1}, hi[2] = {DS_MAX_DIM, DS_MAX_DIM};
+      int wh[2];
+      ok = cli_parse_int_list(v, 'x', 2, lo, hi, wh);
+      if (ok) W = wh[0], H = wh[1];
       want = " (WxH, each side in [1, 16384])";
     } else if (!strcmp(a, "--camera"))
       dst = &ps.camera;

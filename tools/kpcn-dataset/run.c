@@ -11,6 +11,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <libgen.h>
+#include <limits.h>
 #include <math.h>
 #include <signal.h>
 #include <stdlib.h>
@@ -360,10 +361,10 @@ int ds_cmd_run(int argc, char **argv) {
       int ok = 1;
       const char *want = ""; /* what the option takes, for the error */
       if (!strcmp(a, "--jobs") || !strcmp(a, "-j")) {
-        ok = ds_parse_int(v, 1, 1024, &o.jobs);
+        ok = cli_parse_int(v, 1, 1024, &o.jobs);
         want = " (an integer in [1, 1024])";
       } else if (!strcmp(a, "--threads-per-job")) {
-        ok = ds_parse_int(v, 0, 4096, &threads);
+        ok = cli_parse_int(v, 0, 4096, &threads);
         want = " (an integer in [0, 4096])";
       } else if (!strcmp(a, "--renderer"))
         renderer = v;
@@ -375,9 +376,10 @@ int ds_cmd_run(int argc, char **argv) {
         ok = ds_parse_double(v, &o.progress_every) && o.progress_every >= 0;
         want = " (seconds >= 0)";
       } else if (!strcmp(a, "--shard")) {
-        char extra;
-        ok = sscanf(v, "%d/%d%c", &o.shard_i, &o.shard_n, &extra) == 2 && o.shard_n >= 1 &&
-             o.shard_i >= 0 && o.shard_i < o.shard_n;
+        static const long lo[2] = {0, 1}, hi[2] = {INT_MAX - 1, INT_MAX};
+        int in[2];
+        ok = cli_parse_int_list(v, '/', 2, lo, hi, in) && in[0] < in[1];
+        if (ok) o.shard_i = in[0], o.shard_n = in[1];
         want = " (expected i/n with 0 <= i < n)";
       } else if (!strcmp(a, "--max-black") || !strcmp(a, "--max-background") ||
                  !strcmp(a, "--max-blown")) {

@@ -93,16 +93,6 @@ int ds_write_atomic(const char *path, const char *data, size_t len) {
   return 0;
 }
 
-int ds_parse_int(const char *s, long lo, long hi, int *out) {
-  char *end;
-  if (!s || !*s) return 0;
-  errno = 0;
-  long v = strtol(s, &end, 10);
-  if (*end || errno || v < lo || v > hi) return 0;
-  *out = (int)v;
-  return 1;
-}
-
 int ds_parse_int_list(const char *s, long hi, int *out, int cap) {
   int n = 0;
   if (!s || !*s) return -1;
@@ -113,7 +103,7 @@ int ds_parse_int_list(const char *s, long hi, int *out, int cap) {
     if (len == 0 || len >= sizeof item || n == cap) return -1; /* "4,,8", "4,", ",4" */
     memcpy(item, p, len);
     item[len] = 0;
-    if (!ds_parse_int(item, 1, hi, &out[n])) return -1;
+    if (!cli_parse_int(item, 1, hi, &out[n])) return -1;
     for (int k = 0; k < n; k++)
       if (out[k] == out[n]) return -1; /* twice: the same job planned (or a pair cut) twice */
     n++;

@@ -8,6 +8,7 @@
  * (2 for usage errors). With --checkpoint, SIGINT/SIGTERM save the finished rows there and
  * exit 128 + the signal, and --time-limit stops the same way after M minutes (exit 3); the
  * same command resumes, and the file is removed once the output is written. */
+#include "cli_parse.h"
 #include "kpcn/exr.h"
 #include "kpcn/render.h"
 #include "kpcn/scene.h"
@@ -136,32 +137,6 @@ static int scene_key(const char *scene_path, uint64_t *out) {
   return 1;
 }
 
-static int parse_int(const char *s, long lo, long hi, int *out) {
-  char *end;
-  long v = strtol(s, &end, 10);
-  if (*s == 0 || *end != 0 || v < lo || v > hi) return 0;
-  *out = (int)v;
-  return 1;
-}
-
-/* n integers in [lo[i], hi[i]] separated by sep ("16x16", "0,0,8,8"), digits only (no signs,
- * no spaces). strtol with a range check, not sscanf's %d: that wraps what does not fit an int
- * without a word, so 4294967312x4294967304 rendered as 16x8. */
-static int parse_int_list(const char *s, char sep, int n, const long *lo, const long *hi,
-                          int *out) {
-  for (int i = 0; i < n; i++) {
-    if (*s < '0' || *s > '9') return 0;
-    char *end;
-    errno = 0;
-    long v = strtol(s, &end, 10);
-    if (errno == ERANGE || v < lo[i] || v > hi[i]) return 0;
-    if (i + 1 < n ? *end != sep : *end != 0) return 0;
-    out[i] = (int)v;
-    s = end + 1;
-  }
-  return 1;
-}
-
 int main(int argc, char **argv) {
   const char *scene_path = NULL, *out_path = NULL;
   kpcn_render_settings rs = kpcn_render_settings_defaults();
@@ -179,7 +154,7 @@ int main(int argc, char **argv) {
     if (strcmp(a, "-o") == 0 || strcmp(a, "--output") == 0) {
       NEED_VALUE out_path = v;
     } else if (strcmp(a, "--spp") == 0) {
-      NEED_VALUE if (!parse_int(v, 1, 1 << 24, &rs.spp)) {
+      NEED_VALUE if (!cli_parse_int(v, 1, 1 << 24, &rs.spp)) {
         fprintf(stderr, "kpcn-render: --spp: expected an integer in [1, %d], got '%s'\n", 1 << 24,
                 v);
         return 2;
@@ -196,24 +171,24 @@ int main(int argc, char **argv) {
       }
       rs.seed = s;
     } else if (strcmp(a, "--threads") == 0) {
-      NEED_VALUE if (!parse_int(v, 0, 4096, &rs.nthreads)) {
+      NEED_VALUE if (!cli_parse_int(v, 0, 4096, &rs.nthreads)) {
         fprintf(stderr, "kpcn-render: --threads: expected an integer in [0, 4096], got '%s'\n", v);
         return 2;
       }
     } else if (strcmp(a, "--albedo-spp") == 0) {
-      NEED_VALUE if (!parse_int(v, 1, 1 << 24, &rs.albedo_spp)) {
+      NEED_VALUE if (!cli_parse_int(v, 1, 1 << 24, &rs.albedo_spp)) {
         fprintf(stderr, "kpcn-render: --albedo-spp: expected an integer in [1, %d], got '%s'\n",
                 1 << 24, v);
         return 2;
       }
     } else if (strcmp(a, "--albedo-footprint") == 0) {
-      NEED_VALUE if (!parse_int(v, 1, 16, &rs.albedo_footprint)) {
+      NEED_VALUE if (!cli_parse_int(v, 1, 16, &rs.albedo_footprint)) {
         fprintf(stderr,
                 "kpcn-render: --albedo-footprint: expected an integer in [1, 16], got '%s'\n", v);
         return 2;
       }
     } else if (strcmp(a, "--max-bounces") == 0) {
-      NEED_VALUE if (!parse_int(v, 0, 100000, &rs.max_bounces)) {
+      NEED_VALUE if (!cli_parse_int(v, 0, 100000, &rs.max_bounces)) {
         fprintf(stderr,
                 "kpcn-render: --max-bounces: expected an integer in [0, 100000], got '%s'\n", v);
         return 2;
@@ -221,7 +196,7 @@ int main(int argc, char **argv) {
     } else if (strcmp(a, "--resolution") == 0) {
       NEED_VALUE static const long lo[2] = {1, 1}, hi[2] = {KPCN_MAX_DIM, KPCN_MAX_DIM};
       int wh[2];
-      if (!parse_int_list(v, 'x', 2, lo, hi, wh)) {
+      if (!cli_parse_int_list(v, 'x', 2, lo, hi, wh)) {
         fprintf(stderr, "kpcn-render: --resolution: expected WxH with W, H in [1, %d], got '%s'\n",
                 KPCN_MAX_DIM, v);
         return 2;
@@ -232,7 +207,7 @@ int main(int argc, char **argv) {
                                    hi[4] = {KPCN_MAX_DIM - 1, KPCN_MAX_DIM - 1, KPCN_MAX_DIM,
                                             KPCN_MAX_DIM};
       int c4[4];
-      if (!parse_int_list(v, ',', 4, lo, hi, c4)) {
+      if (!cli_parse_int_list(v, ',', 4, lo, hi, c4)) {
         fprintf(stderr,
                 "kpcn-render: --crop: expected x,y,w,h with x, y in [0, %d) and w, h in [1, %d], "
                 "got '%s'\n",

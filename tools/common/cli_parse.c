@@ -1,0 +1,40 @@
+/* Strict option-value parsing shared by the C tools: cli_parse.h. */
+#include "cli_parse.h"
+
+#include <errno.h>
+#include <stdlib.h>
+
+/* Reads one integer at *s into *v and leaves *end after it; 0 unless it is digits in [lo, hi]
+ * (a leading '-' only where lo < 0: "-0" is no value of a non-negative option). */
+static int read_int(const char *s, long lo, long hi, long *v, const char **end) {
+  const char *d = *s == '-' && lo < 0 ? s + 1 : s;
+  if (*d < '0' || *d > '9') return 0;
+  char *e;
+  errno = 0;
+  long x = strtol(s, &e, 10);
+  if (errno == ERANGE || x < lo || x > hi) return 0;
+  *v = x;
+  *end = e;
+  return 1;
+}
+
+int cli_parse_int(const char *s, long lo, long hi, int *out) {
+  long v;
+  const char *end;
+  if (!s || !read_int(s, lo, hi, &v, &end) || *end) return 0;
+  *out = (int)v;
+  return 1;
+}
+
+int cli_parse_int_list(const char *s, char sep, int n, const long *lo, const long *hi, int *out) {
+  if (!s) return 0;
+  for (int i = 0; i < n; i++) {
+    long v;
+    const char *end;
+    if (!read_int(s, lo[i], hi[i], &v, &end)) return 0;
+    if (i + 1 < n ? *end != sep : *end != 0) return 0;
+    out[i] = (int)v;
+    s = end + 1;
+  }
+  return 1;
+}
