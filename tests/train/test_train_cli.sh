@@ -128,20 +128,23 @@ bad_usage "--set-eps must be the first argument" --set-eps "$M"
 bad_usage "--eps" --eps 0
 bad_usage "--freeze: 'both' is not diffuse or specular" --init "$M" --freeze both
 bad_usage "--freeze given for both branches" --init "$M" --freeze diffuse --freeze specular
-# --freeze: needs a model to start from (exit 1, nothing written); with one, the model says
-# which branch it kept (test_train_pipeline checks the weights bit for bit)
-if "$K" --store "$D/p.kps" -o "$D/z.safetensors" --iters 1 --freeze specular 2>"$D/err"; then
-  fail "--freeze without --init accepted"
-fi
-grep -q "needs a model to start from" "$D/err" || fail "--freeze error unclear: $(cat "$D/err")"
-[ ! -e "$D/z.safetensors" ] || fail "output written for --freeze without --init"
+# --freeze: needs a model to start from (a usage mistake: exit 2, nothing written); with one,
+# the model says which branch it kept (test_train_pipeline checks the weights bit for bit)
+bad_usage "needs a model to start from" --freeze specular
+# an output that cannot be written is a usage mistake too (exit 2, as in the other tools)
+bad_usage "folder '$D/nodir'" --plot "$D/nodir/u.png"
+bad_usage "must end in .png" --plot "$D/u.jpg"
+# --compare alone says what it takes, not that it must come first
+"$K" --compare 2>"$D/err"
+rc=$?
+[ $rc -eq 2 ] && grep -q "expected OUT.png LABEL=RUN.csv" "$D/err" || fail "--compare alone: rc $rc: $(cat "$D/err")"
 "$K" --store "$D/p.kps" -o "$D/z.safetensors" --init "$D/t.safetensors" --iters 1 --batch 2 \
   --patch 16 --freeze specular --csv '' --plot '' --ckpt '' --quiet || fail "train --freeze"
 grep -aq '"train.frozen":"specular"' "$D/z.safetensors" || fail "model lacks train.frozen"
 # an output that would overwrite the patch store is refused; the store is intact
-if "$K" --store "$D/p.kps" -o "$D/c.safetensors" --iters 1 --csv "$D/p.kps" 2>"$D/err"; then
-  fail "--csv over the store accepted"
-fi
+"$K" --store "$D/p.kps" -o "$D/c.safetensors" --iters 1 --csv "$D/p.kps" 2>"$D/err"
+rc=$?
+[ $rc -eq 2 ] || fail "--csv over the store: exit $rc (want 2)"
 grep -q "are the same file" "$D/err" || fail "store clash unclear: $(cat "$D/err")"
 "$T" "$N" "$TD/dataset/sample_ref.exr" --patches:size=16:count=6:cull=1:out="$D/p2.kps" || fail "patches 2"
 cmp -s "$D/p.kps" "$D/p2.kps" || fail "the store was changed"
@@ -157,9 +160,9 @@ grep -q "must end in .png" "$D/err" || fail "--compare extension unclear: $(cat 
 for o in "-o $D/nodir/x.safetensors" "-o $D/y.safetensors --plot $D/nodir/y.png" \
   "-o $D/y.safetensors --ckpt $D/nodir/y.ckpt" "-o $D/y.safetensors --csv $D" "-o ''"; do
   # shellcheck disable=SC2086
-  if eval "\"$K\" --store \"$D/p.kps\" --preset tiny --iters 50 --batch 2 --patch 16 $o" 2>"$D/err"; then
-    fail "accepted: $o"
-  fi
+  eval "\"$K\" --store \"$D/p.kps\" --preset tiny --iters 50 --batch 2 --patch 16 $o" 2>"$D/err"
+  rc=$?
+  [ $rc -eq 2 ] || fail "exit $rc (want 2) for: $o"
   grep -Eq "folder '$D/nodir'|is a directory|empty file name" "$D/err" || fail "unclear for $o: $(cat "$D/err")"
   [ -z "$(ls "$D" | grep -E '^y\.|^x\.')" ] || fail "files left for $o: $(ls "$D")"
 done

@@ -200,6 +200,10 @@ static int check_mode_output(const char *out, const char *mode, const char *cons
 }
 
 static int compare_main(int argc, char **argv) {
+  if (argc < 3) {
+    fprintf(stderr, "kpcn-train --compare: expected OUT.png LABEL=RUN.csv ... (see --help)\n");
+    return 2;
+  }
   const char *png = argv[2], *x = "elapsed_s", *y = "loss", *title = NULL;
   const char *labels[KPCN_PLOT_MAX_SERIES], *csvs[KPCN_PLOT_MAX_SERIES];
   char *owned[KPCN_PLOT_MAX_SERIES];
@@ -402,7 +406,7 @@ static int check_init_arch(const kpcn_train_settings *s, int preset, int layers,
 }
 
 int main(int argc, char **argv) {
-  if (argc >= 3 && !strcmp(argv[1], "--compare")) return compare_main(argc, argv);
+  if (argc >= 2 && !strcmp(argv[1], "--compare")) return compare_main(argc, argv);
   if (argc >= 2 && !strcmp(argv[1], "--record-exposure")) return record_exposure_main(argc, argv);
   if (argc >= 2 && !strcmp(argv[1], "--average")) return average_main(argc, argv);
   if (argc >= 2 && !strcmp(argv[1], "--set-eps")) return set_eps_main(argc, argv);
@@ -631,6 +635,15 @@ int main(int argc, char **argv) {
     int r = check_init_arch(&s, preset_given, layers > 0, channels > 0, conv > 0, kernel > 0,
                             dil != NULL);
     if (r) return r;
+  }
+  s.nval = g_nval;
+  s.val_noisy = (const char *const *)g_valn;
+  s.val_ref = (const char *const *)g_valr;
+  /* usage mistakes (an output in a missing folder, --freeze without --init, ...) exit 2
+   * before the store is read, as in the other tools */
+  if (kpcn_train_settings_check(&s) != KPCN_OK) {
+    fprintf(stderr, "kpcn-train: %s\n", kpcn_last_error());
+    return 2;
   }
   if (from_store && !val_from_store(s.store_path)) return 1;
   s.nval = g_nval;

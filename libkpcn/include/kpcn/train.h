@@ -297,6 +297,13 @@ void kpcn_train_settings_defaults(kpcn_train_settings *s);
 
 typedef struct kpcn_trainer kpcn_trainer;
 
+/* The checks kpcn_trainer_create makes before it reads anything: value ranges, option
+ * combinations (a frozen branch needs init_model or resume, a named plot needs the CSV log)
+ * and every output path (its folder exists, it is no directory, FIFO or device, and it is
+ * none of the inputs: the store, init_model, a validation image). Reads and writes nothing,
+ * so a front end can tell a usage mistake from a failure of the run (kpcn-train exits 2). */
+kpcn_status kpcn_train_settings_check(const kpcn_train_settings *s);
+
 /* Opens and validates the store (channels needed by the feature builder and the targets,
  * patch size >= P; a missing channel fails with KPCN_ERR_FORMAT naming it), loads the
  * validation images, creates the model (Xavier, seed) or loads init_model (its input list

@@ -228,9 +228,7 @@ static kpcn_status record_exposure(kpcn_trainer *t) {
 
 /* The store and the initial model are read, the rest written: no two may be one file (a CSV
  * written over the patch store destroys it). */
-static kpcn_status check_output_paths(const kpcn_trainer *t) {
-  const char *path[7] = {t->store_path, t->init_model, t->out_path, t->ckpt_path,
-                         t->csv_path,   t->plot_path,  t->best_path};
+static kpcn_status check_output_paths(const kpcn_train_settings *s, const char *const path[7]) {
   static const char *what[7] = {
       "the patch store (--store)", "the initial model (--init)", "the model (-o)",
       "the checkpoint (--ckpt)",   "the CSV log (--csv)",        "the plot (--plot)",
@@ -244,25 +242,24 @@ static kpcn_status check_output_paths(const kpcn_trainer *t) {
                          what[j], path[j]);
     }
   /* The plot is a PNG: under another extension it would be mislabelled. */
-  if (t->plot_path && *t->plot_path)
-    KPCN_TRY(kpcn_check_extension(t->plot_path, ".png", "the plot (--plot)", "PNG"));
+  if (path[5] && *path[5])
+    KPCN_TRY(kpcn_check_extension(path[5], ".png", "the plot (--plot)", "PNG"));
   /* Every output checked now, not when it is first written (the plot after the last
    * iteration): a missing folder or a device there would cost the whole run. The model's own
    * path may not be empty; '' turns the others off. */
   for (int i = 2; i < 7; i++) {
     if (!path[i] || (i > 2 && !*path[i])) continue;
     KPCN_TRY(kpcn_check_output_path(path[i], what[i]));
-    for (int v = 0; v < t->s.nval; v++) {
-      KPCN_TRY(kpcn_check_not_input(path[i], what[i], t->s.val_noisy[v], "a --val input"));
-      KPCN_TRY(kpcn_check_not_input(path[i], what[i], t->s.val_ref[v], "a --val reference"));
+    for (int v = 0; v < s->nval; v++) {
+      KPCN_TRY(kpcn_check_not_input(path[i], what[i], s->val_noisy[v], "a --val input"));
+      KPCN_TRY(kpcn_check_not_input(path[i], what[i], s->val_ref[v], "a --val reference"));
     }
   }
   return KPCN_OK;
 }
 
-kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s) {
-  if (!out || !s) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_trainer_create: NULL");
-  *out = NULL;
+kpcn_status kpcn_train_settings_check(const kpcn_train_settings *s) {
+  if (!s) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_train_settings_check: NULL");
   if (!s->store_path) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "no patch store given");
   if (!s->out_path) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "no output model path given");
   if (s->batch < 1 || s->batch > 256)
@@ -302,6 +299,35 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
                      s->frozen[0] ? "diffuse" : "specular");
   if (s->nval < 0 || (s->nval && (!s->val_noisy || !s->val_ref)))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "validation list is inconsistent");
+  /* a plot asked for by name is drawn from the CSV log: without the log it would silently
+   * not exist (the default plot simply goes with the log) */
+  if (s->plot_path && *s->plot_path && s->csv_path && !*s->csv_path)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "the plot (--plot) '%s' is drawn from the CSV log, which --csv '' turns off",
+                     s->plot_path);
+  /* the outputs as kpcn_trainer_create names them: unset ones are beside the model */
+  char *ckpt = s->ckpt_path ? NULL : with_suffix(s->out_path, ".ckpt");
+  char *csv = s->csv_path ? NULL : with_suffix(s->out_path, ".csv");
+  char *plot = s->plot_path ? NULL : with_suffix(s->out_path, ".png");
+  kpcn_status st = KPCN_ERR_OUT_OF_MEMORY;
+  if ((s->ckpt_path || ckpt) && (s->csv_path || csv) && (s->plot_path || plot)) {
+    const char *path[7] = {s->store_path,
+                           s->init_model,
+                           s->out_path,
+                           s->ckpt_path ? s->ckpt_path : ckpt,
+                           s->csv_path ? s->csv_path : csv,
+                           s->plot_path ? s->plot_path : plot,
+                           s->best_path && *s->best_path ? s->best_path : NULL};
+    st = check_output_paths(s, path);
+  }
+  free(ckpt), free(csv), free(plot);
+  return st;
+}
+
+kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s) {
+  if (!out || !s) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_trainer_create: NULL");
+  *out = NULL;
+  KPCN_TRY(kpcn_train_settings_check(s));
   kpcn_trainer *t = kpcn_calloc(1, sizeof *t, "trainer");
   if (!t) return kpcn_last_status();
   t->s = *s;
@@ -330,13 +356,6 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   } while (0)
   if (!t->store_path || !t->out_path || !t->ckpt_path || !t->csv_path || !t->plot_path)
     GO(KPCN_ERR_OUT_OF_MEMORY);
-  /* a plot asked for by name is drawn from the CSV log: without the log it would silently
-   * not exist (the default plot simply goes with the log) */
-  if (s->plot_path && *s->plot_path && s->csv_path && !*s->csv_path)
-    GO(kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                 "the plot (--plot) '%s' is drawn from the CSV log, which --csv '' turns off",
-                 s->plot_path));
-  GO(check_output_paths(t));
   /* architecture with the feature builder's inputs */
   t->arch = s->arch;
   {
