@@ -81,6 +81,8 @@ if [ -x "$KR" ]; then
   expect_fail "crop 30,0,8,8 lies outside the 32x24 image" x.exr \
     --render:res=32x24:crop=30,0,8,8 "$SC" -o x.exr
   expect_fail "res must be WxH" x.exr --render:res=32 "$SC" -o x.exr
+  expect_fail "res must be WxH" x.exr --render:res=4294967312x24 "$SC" -o x.exr
+  expect_fail "crop must be x,y,w,h" x.exr --render:res=32x24:crop=-0,0,8,8 "$SC" -o x.exr
 fi
 oiiotool "$REF" --cut 0,0,23,23 -o tile24.exr
 run_ok tile24.exr tile24.exr --mosaic:labels=a,b:fontsize=90 -o big.exr

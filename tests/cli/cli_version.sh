@@ -51,6 +51,19 @@ for t in "kpcntool $KT" "kpcn-render $KR" "kpcn-train $KTR" "kpcn-dataset $KD"; 
   if "$2" --help | grep -q -- "--version"; then pass "$1 --help lists --version"; else
     fail "$1 --help lacks --version"; fi
 done
+# kpcntool's single-dash forms are the same commands (kpcntool.md: -x and --x)
+if "$KT" -version >out1.txt 2>err.txt && "$KT" --version >out2.txt && cmp -s out1.txt out2.txt &&
+  [ ! -s err.txt ]; then pass "kpcntool -version"; else fail "kpcntool -version: $(cat err.txt)"; fi
+if "$KT" -help >out1.txt 2>err.txt && "$KT" --help >out2.txt && cmp -s out1.txt out2.txt; then
+  pass "kpcntool -help"; else fail "kpcntool -help: $(cat err.txt)"; fi
+# help asked for goes to stdout (exit 0), every kpcn-dataset command's too
+for c in plan run patches; do
+  if "$KD" $c --help >out.txt 2>err.txt && grep -q "usage: kpcn-dataset $c" out.txt && [ ! -s err.txt ]; then
+    pass "kpcn-dataset $c --help on stdout"
+  else
+    fail "kpcn-dataset $c --help: stdout '$(cat out.txt)', stderr '$(cat err.txt)'"
+  fi
+done
 # the other cap forms, once
 check kpcntool "$KT" avx2 DNNL_MAX_CPU_ISA=sse41
 check kpcntool "$KT" $native ONEDNN_MAX_CPU_ISA=ALL

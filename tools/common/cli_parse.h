@@ -1,4 +1,4 @@
-/* Strict number parsing for the command-line tools' option values (kpcn-render, kpcn-dataset).
+/* Strict number parsing for the command-line tools' option values (kpcn-render, kpcn-dataset, kpcntool --render).
  * Digits only, with a leading '-' only where the range allows negatives: no blanks, no
  * '+', nothing after the number, and a range check done on the long strtol returns. sscanf's %d
  * wraps what does not fit an int without a word (4294967312x4294967304 was read as 16x8), and
@@ -6,11 +6,19 @@
 #ifndef KPCN_TOOLS_CLI_PARSE_H
 #define KPCN_TOOLS_CLI_PARSE_H
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /* One integer in [lo, hi]: 1 and *out set, or 0 (out untouched). */
 int cli_parse_int(const char *s, long lo, long hi, int *out);
 
 /* n integers separated by the single character sep ("16x16", "0,0,8,8", "1/4"), integer i in
  * [lo[i], hi[i]]: 1 and out[0..n-1] set, or 0. */
 int cli_parse_int_list(const char *s, char sep, int n, const long *lo, const long *hi, int *out);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif

@@ -86,9 +86,10 @@ static void collect_pairs(const char *dir, int dir_index, const ds_manifest *m, 
   }
 }
 
-static void usage(void) {
+/* to stdout when --help asked for it, to stderr beside an error */
+static void usage(FILE *f) {
   fprintf(
-      stderr,
+      f,
       "usage: kpcn-dataset patches DATASET_DIR... -o OUT.kps [--split train] [--spp "
       "all|16,32,...]\n"
       "         [--size 65] [--per-image 100 | --stride S] [--cull 0.9] [--cull-tol 0.05]\n"
@@ -114,7 +115,7 @@ int ds_cmd_patches(int argc, char **argv) {
       continue;
     }
     if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
-      usage();
+      usage(stdout);
       return 0;
     }
     if (a[0] != '-') {
@@ -169,7 +170,7 @@ int ds_cmd_patches(int argc, char **argv) {
       want = " (an integer in [0, 2147483647])";
     } else {
       ds_err("patches: unknown option '%s'", a);
-      usage();
+      usage(stderr);
       return 2;
     }
     if (!ok) {
@@ -179,7 +180,7 @@ int ds_cmd_patches(int argc, char **argv) {
     i++;
   }
   if (!ndirs || !out) {
-    usage();
+    usage(stderr);
     return 2;
   }
   /* one or the other: which one won used to depend on their order on the command line */

@@ -530,8 +530,9 @@ static int plan_scene(plan_ctx *c, const base_scene *sc, int write) {
   return rc;
 }
 
-static void usage(void) {
-  fprintf(stderr,
+/* to stdout when --help asked for it, to stderr beside an error */
+static void usage(FILE *f) {
+  fprintf(f,
           "usage: kpcn-dataset plan --scenes DIR -o OUTDIR [--variants N] [--seed S]\n"
           "         [--spp 4,8,16,32,64] [--ref-spp 1024] [--resolution WxH]\n"
           "         [--split train:0.7,val:0.15,test:0.15 | train:a+b,val:c,test:d]\n"
@@ -560,13 +561,13 @@ int ds_cmd_plan(int argc, char **argv) {
     else if (!strcmp(a, "--force"))
       force = 1, takes = 0;
     else if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
-      usage();
+      usage(stdout);
       return 0;
     }
     if (!takes) continue;
     if (!v) {
       ds_err("plan: %s needs a value", a);
-      usage();
+      usage(stderr);
       return 2;
     }
     int ok = 1;
@@ -635,7 +636,7 @@ int ds_cmd_plan(int argc, char **argv) {
       ps.texture_dir = texture_dir;
     } else {
       ds_err("plan: unknown option '%s'", a);
-      usage();
+      usage(stderr);
       return 2;
     }
     if (dst) {
@@ -650,7 +651,7 @@ int ds_cmd_plan(int argc, char **argv) {
   }
   if (!scenes || !outdir) {
     ds_err("plan: --scenes and -o are required");
-    usage();
+    usage(stderr);
     return 2;
   }
   int spps[32];

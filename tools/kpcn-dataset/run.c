@@ -317,9 +317,10 @@ static void print_would_render(const run_opts *o, const ds_job *j) {
   printf("would render %s%s\n", j->id, ds_exists(ck) ? " (a checkpoint is there)" : "");
 }
 
-static void usage(void) {
+/* to stdout when --help asked for it, to stderr beside an error */
+static void usage(FILE *f) {
   fprintf(
-      stderr,
+      f,
       "usage: kpcn-dataset run DATASET_DIR [--jobs N] [--shard i/n] [--renderer PATH]\n"
       "         [--threads-per-job T] [--dry-run] [--list] [--progress-every 60]\n"
       "         [--checkpoint-every S]\n"
@@ -345,7 +346,7 @@ int ds_cmd_run(int argc, char **argv) {
     else if (!strcmp(a, "--list"))
       o.list = 1;
     else if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
-      usage();
+      usage(stdout);
       return 0;
     } else if (a[0] != '-') {
       if (o.dir) {
@@ -396,7 +397,7 @@ int ds_cmd_run(int argc, char **argv) {
         want = " (a luminance > 0)";
       } else {
         ds_err("run: unknown option '%s'", a);
-        usage();
+        usage(stderr);
         return 2;
       }
       if (!ok) {
@@ -407,7 +408,7 @@ int ds_cmd_run(int argc, char **argv) {
     }
   }
   if (!o.dir) {
-    usage();
+    usage(stderr);
     return 2;
   }
   ds_manifest m;

@@ -2,26 +2,14 @@
 // chain can render, denoise and measure without intermediate files.
 //   --render[:spp=N][:seed=S][:res=WxH][:crop=x,y,w,h][:albedo_spp=N][:footprint=K]
 //           [:color_only=1][:max_bounces=N] scene.json
+#include "cli_parse.h"
 #include "kpcn/ops_render.h"
 #include "kpcntool.h"
 
+#include <climits>
 #include <cstdio>
 
 namespace {
-
-// n non-negative integers separated by sep, digits only ("256x256", "0,0,64,64").
-bool parse_ints(const std::string &v, char sep, int n, int *out) {
-  size_t pos = 0;
-  for (int i = 0; i < n; i++) {
-    size_t end = i + 1 < n ? v.find(sep, pos) : v.size();
-    if (end == std::string::npos || end == pos || end - pos > 9) return false;
-    for (size_t k = pos; k < end; k++)
-      if (v[k] < '0' || v[k] > '9') return false;
-    out[i] = std::stoi(v.substr(pos, end - pos));
-    pos = end + 1;
-  }
-  return true;
-}
 
 bool run_render(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
                 const std::vector<std::string> &args, std::string &err) {
@@ -46,14 +34,16 @@ bool run_render(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
     return false;
   }
   int wh[2] = {0, 0}, c[4];
-  if (m.has("res") && (!parse_ints(m.str("res"), 'x', 2, wh) || wh[0] < 1 || wh[1] < 1)) {
+  static const long lo_wh[2] = {1, 1}, hi_wh[2] = {INT_MAX, INT_MAX};
+  static const long lo_c[4] = {0, 0, 1, 1}, hi_c[4] = {INT_MAX, INT_MAX, INT_MAX, INT_MAX};
+  if (m.has("res") && !cli_parse_int_list(m.str("res").c_str(), 'x', 2, lo_wh, hi_wh, wh)) {
     err = "res must be WxH with W, H >= 1 (got '" + m.str("res") + "')";
     return false;
   }
   o.width = wh[0], o.height = wh[1];
   OIIO::ROI roi;
   if (m.has("crop")) {
-    if (!parse_ints(m.str("crop"), ',', 4, c) || c[2] < 1 || c[3] < 1) {
+    if (!cli_parse_int_list(m.str("crop").c_str(), ',', 4, lo_c, hi_c, c)) {
       err = "crop must be x,y,w,h with w, h >= 1 (got '" + m.str("crop") + "')";
       return false;
     }

@@ -195,11 +195,12 @@ void print_results(const kpcntool::Context &ctx) {
 int main(int argc, char **argv) {
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
-    if (a == "--help" || a == "-h") {
+    // -x and --x are one command everywhere else on the command line (kpcntool.md)
+    if (a == "--help" || a == "-help" || a == "-h") {
       print_help();
       return 0;
     }
-    if (a == "--version") { // the library, its dependencies and the instruction set in use
+    if (a == "--version" || a == "-version") { // the library, its dependencies and the instruction set in use
       const int v = OIIO::openimageio_version();
       std::printf("kpcntool %s\n%s, OpenImageIO %d.%d.%d\n", KPCN_VERSION_STRING, kpcn_build_info(),
                   v / 10000, v / 100 % 100, v % 100);
