@@ -175,7 +175,11 @@ static void test_tool(void) {
   /* an albedo pass with fewer samples than the colour, or on a colour-only render: refused,
    * nothing written; a non-number: usage */
   expect_cli(exe, cornell, "--spp 8 --albedo-spp 4 --resolution 16x16", 1,
-             "albedo_spp: 4 is out of range");
+             "albedo_spp (--albedo-spp): 4 is below the render's 8 samples per pixel (as asked)");
+  expect_cli(exe, cornell, "--albedo-spp 4 --resolution 16x16", 1,
+             "is below the render's 64 samples per pixel (the scene's)");
+  /* checkpoint timing without a checkpoint would be ignored: refused */
+  expect_cli(exe, cornell, "--checkpoint-every 5", 2, "--checkpoint-every needs --checkpoint");
   expect_cli(exe, cornell, "--spp 2 --albedo-spp 8 --color-only --resolution 16x16", 1,
              "a colour-only render has no albedo buffer");
   expect_cli(exe, cornell, "--albedo-spp many", 2, "--albedo-spp: expected an integer");

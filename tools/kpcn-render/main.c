@@ -142,6 +142,7 @@ int main(int argc, char **argv) {
   kpcn_render_settings rs = kpcn_render_settings_defaults();
   int quiet = 0, half = 0;
   double time_limit_min = -1.0;
+  int every_given = 0;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i];
     const char *v = i + 1 < argc ? argv[i + 1] : NULL;
@@ -226,6 +227,7 @@ int main(int argc, char **argv) {
         return 2;
       }
       rs.checkpoint_every_s = sec;
+      every_given = 1;
     } else if (strcmp(a, "--time-limit") == 0) {
       NEED_VALUE char *end;
       time_limit_min = strtod(v, &end);
@@ -258,6 +260,11 @@ int main(int argc, char **argv) {
   }
   if (!scene_path || !out_path) {
     usage(stderr);
+    return 2;
+  }
+  if (every_given && !rs.checkpoint) { /* it would be ignored */
+    fprintf(stderr, "kpcn-render: --checkpoint-every needs --checkpoint (where the rows are "
+                    "saved)\n");
     return 2;
   }
   if (time_limit_min >= 0 && !rs.checkpoint) {

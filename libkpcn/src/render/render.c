@@ -220,9 +220,16 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   int spp = st.spp > 0 ? st.spp : scene->spp;
   if (st.spp < 0 || spp > (1 << 24))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "spp: %d is out of range [1, 2^24]", st.spp);
-  if (st.albedo_spp < 0 || st.albedo_spp > (1 << 24) || (st.albedo_spp > 0 && st.albedo_spp < spp))
+  if (st.albedo_spp < 0 || st.albedo_spp > (1 << 24))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "albedo_spp: %d is out of range (0, or spp = %d .. 2^24)", st.albedo_spp, spp);
+                     "albedo_spp (--albedo-spp): %d is out of range (0 = off, or 1 .. 2^24)",
+                     st.albedo_spp);
+  /* the render's spp may be the scene's, which the caller never typed: say where it is from */
+  if (st.albedo_spp > 0 && st.albedo_spp < spp)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "albedo_spp (--albedo-spp): %d is below the render's %d samples per pixel "
+                     "(%s); the albedo pass takes at least as many",
+                     st.albedo_spp, spp, st.spp > 0 ? "as asked" : "the scene's");
   if (st.albedo_spp > 0 && st.color_only)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
                      "albedo_spp: a colour-only render has no albedo buffer");
