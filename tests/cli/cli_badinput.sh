@@ -60,6 +60,14 @@ if $PY -c 'import json,sys; d=json.load(open(sys.argv[1]))["info"]; sys.exit(0 i
 else
   fail "--info --json: $(cat attr.json)"
 fi
+# two --info in one --json object: two keys (a repeated key would leave one image's info to
+# a JSON reader), the second suffixed as repeated metrics are
+"$KT" attr.exr --info "$REF" --info --json >attr2.json 2>&1
+if $PY -c 'import json,sys; d=json.load(open(sys.argv[1])); sys.exit(0 if sorted(d) == ["info", "info_2"] and d["info"]["kpcn:seed"] == [1,2,3] else 1)' attr2.json; then
+  pass "--info twice: info and info_2"
+else
+  fail "--info twice: $(cat attr2.json)"
+fi
 # A channel name with an escape sequence and a byte that is not UTF-8: printed escaped, never
 # raw (a damaged file must not drive the terminal or break the JSON's UTF-8).
 oiiotool --pattern constant:color=1 4x4 1 --chnames "$(printf '\033[31mR\377')" -o esc.exr

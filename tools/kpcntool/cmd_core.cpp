@@ -196,7 +196,7 @@ bool cmd_info(Context &ctx, const Modifiers &, const std::vector<std::string> &,
   }
   js << "}";
   if (ctx.json)
-    ctx.json_items.emplace_back("info", js.str());
+    ctx.add_json_item("info", js.str());
   else
     std::fputs(printable(txt.str(), true).c_str(), stdout);
   return true;

@@ -57,6 +57,10 @@ struct Context {
   std::vector<Output> outputs;
   // Extension: records a numeric result under a unique key (key, key_2, key_3 ...).
   void add_result(const std::string &key, double value);
+  // Extension: records a raw JSON result (--info) under a unique key, as add_result does.
+  void add_json_item(const std::string &key, std::string json);
+  // key, or key_2, key_3 ... : the first not yet taken by a result or a JSON item
+  std::string unique_key(const std::string &key) const;
   OIIO::ImageBuf pop();  // throws Error on an empty stack
   OIIO::ImageBuf &top(); // throws Error on an empty stack
   void push(OIIO::ImageBuf buf) { stack.push_back(std::move(buf)); }

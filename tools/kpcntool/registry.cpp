@@ -93,15 +93,23 @@ OIIO::ImageBuf &Context::top() {
   return stack.back();
 }
 
-void Context::add_result(const std::string &key, double value) {
+std::string Context::unique_key(const std::string &key) const {
   std::string k = key;
   for (int n = 2;; ++n) {
-    bool taken = std::any_of(results.begin(), results.end(),
-                             [&](const std::pair<std::string, double> &p) { return p.first == k; });
-    if (!taken) break;
+    auto same = [&](const auto &p) { return p.first == k; };
+    if (std::none_of(results.begin(), results.end(), same) &&
+        std::none_of(json_items.begin(), json_items.end(), same))
+      return k;
     k = key + "_" + std::to_string(n);
   }
-  results.emplace_back(k, value);
+}
+
+void Context::add_result(const std::string &key, double value) {
+  results.emplace_back(unique_key(key), value);
+}
+
+void Context::add_json_item(const std::string &key, std::string json) {
+  json_items.emplace_back(unique_key(key), std::move(json));
 }
 
 std::string printable(const std::string &s, bool keep_newlines) {
