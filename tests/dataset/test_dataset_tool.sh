@@ -330,6 +330,15 @@ ok '[ $rc -eq 1 ] && [ ! -e "$T/none.kps" ] && grep -q "nothing" "$T/err"' "a se
 "$DS" patches "$T/r" --size 64 --allow-partial -o "$T/r/big.kps" 2> "$T/err"
 rc=$?
 ok '[ $rc -eq 1 ] && [ ! -e "$T/r/big.kps" ] && grep -q "does not fit" "$T/err"' "patch larger than image"
+# no pair because of the options, not the renders: said so, with what the manifest has
+"$DS" patches "$T/r" --size 8 --spp 3 -o "$T/r/s3.kps" 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && [ ! -e "$T/r/s3.kps" ] && grep -q "no train render at --spp 3 (the train split.s noisy renders have spp 2,4)" "$T/err"' \
+  "patches --spp 3 names the spp the split has (rc $rc: $(cat "$T/err"))"
+"$DS" patches "$T/r" --size 8 --split nosuch -o "$T/r/s3.kps" 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && [ ! -e "$T/r/s3.kps" ] && grep -q "no noisy render in split .nosuch." "$T/err"' \
+  "patches --split nosuch says the split is not planned (rc $rc: $(cat "$T/err"))"
 # culling values must be finite (they go into the store's settings JSON)
 for bad in "--cull inf" "--cull nan" "--cull-tol -1" "--cull-abs 1e999"; do
   # shellcheck disable=SC2086

@@ -60,11 +60,11 @@ grep -aq '"kpcn.eps":"9.99999975e-05"' "$D/t.safetensors" || fail "trained model
 "$K" --store "$D/p.kps" -o "$D/i.safetensors" --init "$D/t.safetensors" --iters 1 --batch 2 \
   --patch 16 --eps 2e-4 --csv '' --plot '' --ckpt '' --quiet || fail "train --init --eps"
 grep -aq '"kpcn.eps":"0.000199999995"' "$D/i.safetensors" || fail "--init model lacks eps 2e-4"
-for bad in 0 1 -1e-3 abc 1e-3x; do
+for bad in 0 1 0.6 1e-10 -1e-3 abc 1e-3x; do
   "$K" --set-eps "$D/bad.safetensors" "$M" "$bad" 2>"$D/err"
   rc=$?
   [ $rc -eq 2 ] || fail "--set-eps $bad: exit $rc (want 2)"
-  grep -q "not a number in (0, 1)" "$D/err" || fail "--set-eps $bad unclear: $(cat "$D/err")"
+  grep -qF "not a number in [1e-9, 0.5]" "$D/err" || fail "--set-eps $bad unclear: $(cat "$D/err")"
   [ ! -e "$D/bad.safetensors" ] || fail "output written for --set-eps $bad"
 done
 "$K" --set-eps "$D/bad.safetensors" "$N" 1e-4 2>"$D/err" && fail "--set-eps of a non-model accepted"
@@ -119,6 +119,8 @@ bad_usage() {
 }
 bad_usage "at most 3 positive integers" --preset tiny --dilations 1,2,3,4
 bad_usage "at most 3 positive integers" --preset tiny --dilations 1,2,1x
+bad_usage "item 3 is not an integer in [1, 64]" --preset tiny --dilations 1,2,x
+bad_usage "item 1 is not an integer in [1, 64]" --preset tiny --dilations 65
 bad_usage "--ssim-window has no effect" --ssim-window 7
 bad_usage "the window must be odd" --loss2 ssim --ssim-window 4
 bad_usage "--layers asks for 5 hidden layers, the --init model" --init "$M" --layers 5

@@ -1,5 +1,6 @@
-/* Strict number parsing for the command-line tools' option values (kpcn-render, kpcn-dataset, kpcntool --render).
- * Digits only, with a leading '-' only where the range allows negatives: no blanks, no
+/* Strict number parsing for the command-line tools' option values (kpcn-render, kpcn-dataset,
+ * kpcntool --render). Digits only, with a leading '-' only where the range allows negatives: no
+ * blanks, no
  * '+', nothing after the number, and a range check done on the long strtol returns. sscanf's %d
  * wraps what does not fit an int without a word (4294967312x4294967304 was read as 16x8), and
  * strtol alone skips leading blanks. */

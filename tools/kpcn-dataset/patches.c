@@ -86,6 +86,36 @@ static void collect_pairs(const char *dir, int dir_index, const ds_manifest *m, 
   }
 }
 
+/* Why no pair was found, when the manifests say so: the split has no noisy job at all, or none
+ * at the asked spp (the message lists what there is). 0 when neither: the pairs exist but are
+ * not rendered or were rejected, which the caller's message says. */
+static int explain_no_pairs(const ds_manifest *m, int ndirs, const char *split,
+                            const char *spp_list, const int *spps, int nspp) {
+  int in_split = 0, have[32], nhave = 0;
+  for (int d = 0; d < ndirs; d++)
+    for (int i = 0; i < m[d].n; i++) {
+      const ds_job *j = &m[d].jobs[i];
+      if (j->kind != DS_NOISY || strcmp(j->split, split) != 0) continue;
+      in_split++;
+      int k = 0;
+      while (k < nhave && have[k] != j->spp)
+        k++;
+      if (k == nhave && nhave < 32) have[nhave++] = j->spp;
+      if (spp_selected(spps, nspp, j->spp)) return 0;
+    }
+  if (!in_split) {
+    ds_err("patches: the manifest%s plan%s no noisy render in split '%s'", ndirs > 1 ? "s" : "",
+           ndirs > 1 ? "" : "s", split);
+    return 1;
+  }
+  char list[32 * 12] = "";
+  for (int k = 0; k < nhave; k++)
+    snprintf(list + strlen(list), sizeof list - strlen(list), "%s%d", k ? "," : "", have[k]);
+  ds_err("patches: no %s render at --spp %s (the %s split's noisy renders have spp %s)", split,
+         spp_list, split, list);
+  return 1;
+}
+
 /* to stdout when --help asked for it, to stderr beside an error */
 static void usage(FILE *f) {
   fprintf(
@@ -252,7 +282,7 @@ int ds_cmd_patches(int argc, char **argv) {
       }
   if (rc == 2) ds_err("patches: %s", kpcn_last_error());
   if (rc == 0 && ((missing && !allow_partial) || np == 0)) {
-    if (np == 0)
+    if (np == 0 && !explain_no_pairs(m, ndirs, split, spp_list, spps, nspp))
       ds_err("patches: no finished %s image pairs in '%s'%s", split, dirs[0],
              ndirs > 1 ? " and the other directories" : "");
     if (missing && !allow_partial)

@@ -26,8 +26,9 @@ static void usage(FILE *f) {
         "                            function: new units get zero outgoing weights)\n"
         "  --kpa-passes N            apply the predicted kernels N times (1..3, default 1;\n"
         "                            with --init: the model's own unless given)\n"
-        "  --eps X                   the albedo epsilon of the diffuse demodulation (default\n"
-        "                            0.00316; with --init: the model's own unless given)\n"
+        "  --eps X                   the albedo epsilon of the diffuse demodulation, in\n"
+        "                            [1e-9, 0.5] (default 0.00316; with --init: the model's own\n"
+        "                            unless given)\n"
         "  --source-weight           predict a per-pixel source weight too (arch.source_weight;\n"
         "                            with --init: added with zero weights, same function)\n"
         "  --source-lr-scale X       the source score's weights learn at X times the rate\n"
@@ -45,7 +46,8 @@ static void usage(FILE *f) {
         "                            gradients and Adam\n"
         "  --val NOISY.exr,REF.exr   validation pair (repeatable); --val-from-store uses the\n"
         "                            store's sources of split 'val'\n"
-        "  --val-every N --ckpt-every N --log-every N (10)\n"
+        "  --val-every N --ckpt-every N   (default 0: only at the end and when stopped)\n"
+        "  --log-every N             CSV row every N iterations (10)\n"
         "  --ckpt PATH --csv PATH --plot PATH   (default MODEL.ckpt/.csv/.png; '' = none)\n"
         "  --best PATH               also write the model with the lowest validation relMSE\n"
         "  --best-by mean|geomean    which: mean (default) or geometric mean over the pairs\n"
@@ -286,8 +288,8 @@ static int set_eps_main(int argc, char **argv) {
   }
   char *end;
   double e = strtod(argv[4], &end);
-  if (end == argv[4] || *end || !(e > 0.0 && e < 1.0)) {
-    fprintf(stderr, "kpcn-train --set-eps: EPS '%s' is not a number in (0, 1)\n", argv[4]);
+  if (end == argv[4] || *end || !(e >= 1e-9 && e <= 0.5)) { /* --eps's range */
+    fprintf(stderr, "kpcn-train --set-eps: EPS '%s' is not a number in [1e-9, 0.5]\n", argv[4]);
     return 2;
   }
   if (check_mode_output(argv[2], "--set-eps", (const char *const *)argv + 3, 1)) return 2;
@@ -599,8 +601,10 @@ int main(int argc, char **argv) {
       char *end;
       long dv = strtol(p, &end, 10);
       if (end == p || dv < 1 || dv > 64) {
-        fprintf(stderr, "kpcn-train: --dilations '%s': need %d positive integers\n", dil,
-                s.arch.n_hidden + 1);
+        fprintf(stderr,
+                "kpcn-train: --dilations '%s': item %d is not an integer in [1, 64] (up to %d "
+                "items, one per conv layer; the rest are 1)\n",
+                dil, l + 1, s.arch.n_hidden + 1);
         return 2;
       }
       s.arch.dilation[l] = (int)dv;

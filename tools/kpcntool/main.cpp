@@ -200,7 +200,8 @@ int main(int argc, char **argv) {
       print_help();
       return 0;
     }
-    if (a == "--version" || a == "-version") { // the library, its dependencies and the instruction set in use
+    if (a == "--version" ||
+        a == "-version") { // the library, its dependencies and the instruction set in use
       const int v = OIIO::openimageio_version();
       std::printf("kpcntool %s\n%s, OpenImageIO %d.%d.%d\n", KPCN_VERSION_STRING, kpcn_build_info(),
                   v / 10000, v / 100 % 100, v % 100);
