@@ -307,6 +307,13 @@ static void test_determinism(void) {
     for (int t = 2; t <= 7; t += (t == 3 ? 4 : 1))
       CHECK(run((kpcn_metric)m, x, y, w, h, nch, 1, 2.0, t, NULL, NULL) == v1);
   }
+  /* a negative count is all cores, one past KPCN_MAX_THREADS is capped to it (100000 crashed
+   * inside OpenMP before session 58): the same figures */
+  CHECK(kpcn_resolve_threads(-5) == kpcn_resolve_threads(0));
+  CHECK(kpcn_resolve_threads(100000) == KPCN_MAX_THREADS);
+  CHECK(kpcn_resolve_threads(KPCN_MAX_THREADS) == KPCN_MAX_THREADS);
+  CHECK(run(KPCN_METRIC_SSIM, x, y, w, h, nch, 1, 2.0, -5, NULL, NULL) ==
+        run(KPCN_METRIC_SSIM, x, y, w, h, nch, 1, 2.0, 1, NULL, NULL));
   /* identical images: SSIM 1, errors 0, PSNR +inf */
   CHECK_NEAR(run(KPCN_METRIC_SSIM, x, x, w, h, nch, 0, 1.0, 0, NULL, NULL), 1.0, 1e-12);
   CHECK(run(KPCN_METRIC_RELMSE, x, x, w, h, nch, 0, 1.0, 0, NULL, NULL) == 0.0);

@@ -169,7 +169,7 @@ static void test_tool(void) {
   expect_cli(exe, bad, "", 1, "invalid JSON near line 1 (byte 16)");
   expect_cli(exe, cornell, "--spp zero", 2,
              "--spp: expected an integer in [1, 16777216], got 'zero'");
-  expect_cli(exe, cornell, "--threads 100000", 2, "--threads: expected an integer in [0, 4096]");
+  expect_cli(exe, cornell, "--threads 100000", 2, "--threads: expected an integer in [0, 1024]");
   expect_cli(exe, cornell, "--crop 0,0,999,999 --resolution 16x16", 1,
              "crop 0,0,999,999 lies outside the 16x16 image");
   /* an albedo pass with fewer samples than the colour, or on a colour-only render: refused,

@@ -320,11 +320,10 @@ static void print_would_render(const run_opts *o, const ds_job *j) {
 /* to stdout when --help asked for it, to stderr beside an error */
 static void usage(FILE *f) {
   fprintf(
-      f,
-      "usage: kpcn-dataset run DATASET_DIR [--jobs N] [--shard i/n] [--renderer PATH]\n"
-      "         [--threads-per-job T] [--dry-run] [--list] [--progress-every 60]\n"
-      "         [--checkpoint-every S]\n"
-      "         [--max-black 0.9] [--max-background 0.9] [--max-blown 0.5] [--blown-level 1]\n");
+      f, "usage: kpcn-dataset run DATASET_DIR [--jobs N] [--shard i/n] [--renderer PATH]\n"
+         "         [--threads-per-job T] [--dry-run] [--list] [--progress-every 60]\n"
+         "         [--checkpoint-every S]\n"
+         "         [--max-black 0.9] [--max-background 0.9] [--max-blown 0.5] [--blown-level 1]\n");
 }
 
 int ds_cmd_run(int argc, char **argv) {
@@ -365,8 +364,8 @@ int ds_cmd_run(int argc, char **argv) {
         ok = cli_parse_int(v, 1, 1024, &o.jobs);
         want = " (an integer in [1, 1024])";
       } else if (!strcmp(a, "--threads-per-job")) {
-        ok = cli_parse_int(v, 0, 4096, &threads);
-        want = " (an integer in [0, 4096])";
+        ok = cli_parse_int(v, 0, KPCN_MAX_THREADS, &threads);
+        want = " (an integer in [0, 1024])";
       } else if (!strcmp(a, "--renderer"))
         renderer = v;
       else if (!strcmp(a, "--checkpoint-every")) {

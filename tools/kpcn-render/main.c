@@ -172,8 +172,9 @@ int main(int argc, char **argv) {
       }
       rs.seed = s;
     } else if (strcmp(a, "--threads") == 0) {
-      NEED_VALUE if (!cli_parse_int(v, 0, 4096, &rs.nthreads)) {
-        fprintf(stderr, "kpcn-render: --threads: expected an integer in [0, 4096], got '%s'\n", v);
+      NEED_VALUE if (!cli_parse_int(v, 0, KPCN_MAX_THREADS, &rs.nthreads)) {
+        fprintf(stderr, "kpcn-render: --threads: expected an integer in [0, %d], got '%s'\n",
+                KPCN_MAX_THREADS, v);
         return 2;
       }
     } else if (strcmp(a, "--albedo-spp") == 0) {

@@ -1,5 +1,6 @@
 // Core kpcntool commands: -o, --threads, --json, --info, --ch, --ociodisplay, --colormap, --mosaic,
 // plus the shared read_image / write_image helpers (see kpcntool.h, docs/kpcntool.md).
+#include "cli_parse.h"
 #include "kpcntool.h"
 
 #include "kpcn/image.h"
@@ -79,10 +80,10 @@ bool cmd_output(Context &ctx, const Modifiers &, const std::vector<std::string> 
 
 bool cmd_threads(Context &ctx, const Modifiers &, const std::vector<std::string> &a,
                  std::string &err) {
-  char *end = nullptr;
-  long n = std::strtol(a[0].c_str(), &end, 10);
-  if (end == a[0].c_str() || *end || n < 0 || n > 4096) {
-    err = "thread count must be an integer in [0, 4096] (got '" + a[0] + "')";
+  int n;
+  if (!cli_parse_int(a[0].c_str(), 0, KPCN_MAX_THREADS, &n)) {
+    err = "thread count must be an integer in [0, " + std::to_string(KPCN_MAX_THREADS) +
+          "] (got '" + a[0] + "')";
     return false;
   }
   ctx.nthreads = (int)n;

@@ -7,7 +7,7 @@
  *    it names the file / channel / JSON path / argument that was wrong;
  *  - the library never prints and never calls exit(): diagnostics go through a
  *    caller-supplied kpcn_log_fn, long jobs report through kpcn_progress_fn;
- *  - thread counts are explicit: 0 means "all cores".
+ *  - thread counts are explicit: 0 means "all cores" (kpcn_resolve_threads below).
  */
 #ifndef KPCN_COMMON_H
 #define KPCN_COMMON_H
@@ -64,7 +64,14 @@ const char *kpcn_cpu_isa(void);
  * 3.13.5, OpenEXR 3.1.5" (oneDNN's and OpenEXR's as loaded, Embree's as built against). */
 const char *kpcn_build_info(void);
 
-/* Number of threads a call will use for the request n (0 = all cores). */
+/* Upper bound of every thread count: OpenMP cannot start many more threads than this (the
+ * metrics and the feature builder crashed asked for 100000, before session 58). */
+#define KPCN_MAX_THREADS 1024
+
+/* Number of threads a call will use for the request n: n itself for 1 .. KPCN_MAX_THREADS, all
+ * cores for 0 (or a negative n), and KPCN_MAX_THREADS for a larger n. Every nthreads argument
+ * and option field of libkpcn goes through it; the denoiser object (kpcn_denoiser_create) and
+ * the tools' --threads refuse counts outside [0, KPCN_MAX_THREADS] instead. */
 int kpcn_resolve_threads(int n);
 
 /* Files a tool reads and writes. Every writer in libkpcn (and kpcntool) writes a temporary

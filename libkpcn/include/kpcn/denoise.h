@@ -206,7 +206,7 @@ typedef struct kpcn_baseline_params {
 } kpcn_baseline_params;
 
 /* kpcn_denoiser_options.nthreads' upper bound (OpenMP aborts when it cannot start threads). */
-#define KPCN_DENOISE_MAX_THREADS 1024
+#define KPCN_DENOISE_MAX_THREADS KPCN_MAX_THREADS
 
 typedef struct kpcn_denoiser_options {
   int method;             /* kpcn_denoise_method */

@@ -70,6 +70,7 @@ void kpcn_log(kpcn_log_fn fn, void *user, kpcn_log_level level, const char *fmt,
 }
 
 int kpcn_resolve_threads(int n) {
+  if (n > KPCN_MAX_THREADS) return KPCN_MAX_THREADS;
   if (n > 0) return n;
   int p = omp_get_num_procs();
   return p > 0 ? p : 1;
