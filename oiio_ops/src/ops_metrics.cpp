@@ -28,22 +28,19 @@ static std::string size_str(const ROI &r) {
   return std::to_string(r.width()) + "x" + std::to_string(r.height());
 }
 
-// The channels compared when the caller names none. An AOV image (DESIGN.md §4: R,G,B beside
-// its auxiliary buffers) is compared on its colour: averaging variances, normals and depth into
-// one figure is never what "relMSE against the reference" means, and an RGB result (a denoised
-// image) could not be compared with its AOV reference at all. Any other reference: every one
-// of its channels (an RGBA or single-channel image as it is).
+// The channels compared when the caller names none: R,G,B for an AOV pair, else every channel
+// of the reference (an empty list), by libkpcn's one rule (kpcn_metric_default_rgb).
 static std::vector<std::string> default_channels(const ImageBuf &x, const ImageBuf &ref) {
-  const std::vector<std::string> rgb = {"R", "G", "B"};
-  auto has = [](const ImageBuf &b, const std::string &n) { return b.spec().channelindex(n) >= 0; };
-  auto is_aov = [&](const ImageBuf &b) {
-    for (const std::string &n : b.spec().channelnames)
-      if (n != "R" && n != "G" && n != "B" && n != "A") return true;
-    return false;
+  auto names = [](const ImageBuf &b) {
+    std::vector<const char *> n;
+    for (const std::string &s : b.spec().channelnames)
+      n.push_back(s.c_str());
+    return n;
   };
-  for (const std::string &n : rgb)
-    if (!has(x, n) || !has(ref, n)) return {};
-  return is_aov(ref) || is_aov(x) ? rgb : std::vector<std::string>{};
+  const std::vector<const char *> nx = names(x), ny = names(ref);
+  if (kpcn_metric_default_rgb(nx.data(), (int)nx.size(), ny.data(), (int)ny.size()))
+    return {"R", "G", "B"};
+  return {};
 }
 
 // Shared body of compare() and errormap(): map != nullptr requests the error image.

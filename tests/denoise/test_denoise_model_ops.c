@@ -120,7 +120,8 @@ static void test_exposure(void) {
   o.nthreads = KPCN_DENOISE_MAX_THREADS + 1;
   CHECK(run_opts(m, a, &o, NULL, oa) == KPCN_ERR_INVALID_ARGUMENT);
   CHECK(strstr(kpcn_last_error(), "nthreads") != NULL);
-  /* a NaN or Inf in any input buffer is refused, naming it, for the KPCN and the baselines */
+  /* a NaN or Inf in any input buffer is refused, naming it, for the KPCN and the baselines
+   * (run_opts's denoiser is the KPCN whatever o.method says: kpcn_denoiser_create for these) */
   kpcn_denoiser_options_defaults(&o);
   const float was = b->buf[KPCN_BUF_NORMAL][7];
   b->buf[KPCN_BUF_NORMAL][7] = NAN;
@@ -129,10 +130,13 @@ static void test_exposure(void) {
   o.method = KPCN_DENOISE_NLMEANS;
   b->buf[KPCN_BUF_NORMAL][7] = was;
   b->var[KPCN_BUF_COLOR][3] = INFINITY;
-  CHECK(run_opts(m, b, &o, NULL, ob) == KPCN_ERR_NONFINITE);
-  CHECK(strstr(kpcn_last_error(), "1 non-finite") != NULL);
-  scale_colour(a, 0.0f);
   kpcn_denoiser *d = NULL;
+  CHECK(kpcn_denoiser_create(&d, &o) == KPCN_OK);
+  CHECK(kpcn_denoiser_execute_aov(d, b, ob) == KPCN_ERR_NONFINITE);
+  CHECK(strstr(kpcn_last_error(), "1 non-finite") != NULL);
+  kpcn_denoiser_destroy(d);
+  d = NULL;
+  scale_colour(a, 0.0f);
   kpcn_denoiser_options_defaults(&o);
   CHECK(kpcn_denoiser_create_with_model(&d, m, &o) == KPCN_OK);
   CHECK(kpcn_denoiser_execute_aov(d, a, oa) == KPCN_OK);
@@ -158,6 +162,50 @@ static void test_exposure(void) {
   kpcn_aov_destroy(fresh);
   CHECK(strstr(kpcn_last_error(), "weights overflow") != NULL);
   kpcn_model_destroy(huge);
+  /* a negative albedo (a pixel filter's negative lobe) is refused for the KPCN, naming the
+   * least value and its pixel: at -eps it gave NaN blamed on the model */
+  fresh = synth_aov(29, 23, 9);
+  const size_t FP = kpcn_aov_plane_size(fresh);
+  fresh->buf[KPCN_BUF_ALBEDO][FP + 2 * 29 + 5] = -kpcn_model_arch(m)->eps; /* G at (5, 2) */
+  fresh->buf[KPCN_BUF_ALBEDO][7] = -1e-6f;
+  CHECK(run_opts(m, fresh, &o, NULL, ob) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "2 negative value(s)") != NULL);
+  CHECK(strstr(kpcn_last_error(), "in albedo.G at pixel (5, 2)") != NULL);
+  /* for the baselines the albedo is a guide, not a divisor: accepted */
+  o.method = KPCN_DENOISE_BILATERAL;
+  CHECK(kpcn_denoiser_create(&d, &o) == KPCN_OK);
+  CHECK(kpcn_denoiser_execute_aov(d, fresh, ob) == KPCN_OK);
+  kpcn_denoiser_destroy(d);
+  /* a baseline sigma whose 1 / (2 sigma^2) overflows is named, not a NaN result */
+  o.bilateral.sigma_normal = 1e-30f;
+  CHECK(kpcn_denoiser_create(&d, &o) == KPCN_OK);
+  CHECK(kpcn_denoiser_execute_aov(d, fresh, ob) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "sigma_normal 1e-30 is too small") != NULL);
+  kpcn_denoiser_destroy(d);
+  /* the buffer API: every missing buffer in one message, in set_buffer's names; strides that
+   * would make pixels or rows overlap refused */
+  kpcn_denoiser_options_defaults(&o);
+  CHECK(kpcn_denoiser_create_with_model(&d, m, &o) == KPCN_OK);
+  const int FW = fresh->width, FH = fresh->height;
+  float *inter = calloc((size_t)FW * FH * 3, sizeof(float));
+  CHECK(kpcn_denoiser_set_buffer(d, "diffuse", inter, FW, FH, 0, 0) == KPCN_OK);
+  CHECK(kpcn_denoiser_execute(d, ob, FW, FH, 0, 0) == KPCN_ERR_MISSING_CHANNEL);
+  CHECK(strstr(kpcn_last_error(),
+               "needs 11 more buffer(s): diffuse.var, specular, specular.var, albedo, albedo.var, "
+               "normal, normal.var, depth, depth.var, visibility, visibility.var") != NULL);
+  CHECK(kpcn_denoiser_set_buffer(d, "depth", inter, FW, FH, 2, 0) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "whole floats") != NULL);
+  CHECK(kpcn_denoiser_set_buffer(d, "normal", inter, FW, FH, 8, 0) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "pixel stride 8 bytes is less than a pixel's 12") != NULL);
+  CHECK(kpcn_denoiser_set_buffer(d, "normal", inter, FW, FH, 12, 12 * (FW - 1)) ==
+        KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "rows would overlap") != NULL);
+  CHECK(kpcn_denoiser_set_buffer_channel(d, "depth", 0, inter, FW, FH, 4, 0) == KPCN_OK);
+  CHECK(kpcn_denoiser_execute(d, ob, FW, FH, 8, 0) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "denoiser output") != NULL);
+  free(inter);
+  kpcn_denoiser_destroy(d);
+  kpcn_aov_destroy(fresh);
   free(oa);
   free(ob);
   free(oc);

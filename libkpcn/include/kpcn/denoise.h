@@ -261,21 +261,25 @@ typedef struct kpcn_denoiser kpcn_denoiser;
  * denoiser serves one execute at a time (use one per thread). */
 kpcn_status kpcn_denoiser_create(kpcn_denoiser **out, const kpcn_denoiser_options *opts);
 /* Creates a KPCN denoiser around an in-memory model (borrowed: it must outlive the
- * denoiser; used by training/evaluation and tests with randomly initialised models). */
+ * denoiser; used by training/evaluation and tests with randomly initialised models).
+ * opts->method and opts->model_path are ignored: it is always the KPCN on `model`. */
 kpcn_status kpcn_denoiser_create_with_model(kpcn_denoiser **out, kpcn_model *model,
                                             const kpcn_denoiser_options *opts);
-void kpcn_denoiser_destroy(kpcn_denoiser *d);
+void kpcn_denoiser_destroy(kpcn_denoiser *d); /* NULL: nothing; d is invalid afterwards */
 
 /* Sets an input buffer by NAME: "color", "diffuse", "specular", "albedo", "normal",
  * "depth", "visibility" (kpcn_buffer_channels(b) channels) or a variance "<name>.var"
  * (1 channel). ptr is borrowed and stays set: every later execute reads it, so it must stay
  * valid until it is unset (ptr NULL) or the denoiser is destroyed. Channel c of pixel
  * (x, y) is read at ((const char*)ptr + y*row_stride + x*pixel_stride)[c * sizeof(float)];
- * pixel_stride 0 = packed (nch*4 bytes), row_stride 0 = width*pixel_stride. For planar
- * data call once per channel with kpcn_denoiser_set_buffer_channel. ptr NULL unsets. */
+ * pixel_stride 0 = packed (nch*4 bytes), row_stride 0 = width*pixel_stride; strides must be
+ * whole floats, pixel_stride >= nch*4 and row_stride >= a row (else KPCN_ERR_INVALID_ARGUMENT:
+ * pixels would overlap). A ".var" is the variance of the pixel's mean (sample variance / n),
+ * averaged over the buffer's channels (docs/denoiser.md, "Feeding it from a renderer"). For
+ * planar data call once per channel with kpcn_denoiser_set_buffer_channel. ptr NULL unsets. */
 kpcn_status kpcn_denoiser_set_buffer(kpcn_denoiser *d, const char *name, const float *ptr,
                                      int width, int height, size_t pixel_stride, size_t row_stride);
-/* Sets channel `channel` of buffer `name` alone (planar inputs). */
+/* Sets channel `channel` of buffer `name` alone (planar inputs; pixel_stride 0 = one float). */
 kpcn_status kpcn_denoiser_set_buffer_channel(kpcn_denoiser *d, const char *name, int channel,
                                              const float *ptr, int width, int height,
                                              size_t pixel_stride, size_t row_stride);
@@ -283,8 +287,9 @@ kpcn_status kpcn_denoiser_set_buffer_channel(kpcn_denoiser *d, const char *name,
 void kpcn_denoiser_set_progress(kpcn_denoiser *d, kpcn_progress_fn fn, void *user);
 
 /* Denoises into out (RGB, 3 floats per pixel at out + y*row_stride + x*pixel_stride;
- * strides 0 = packed). width/height must match the inputs. Fails naming any missing
- * input buffer. */
+ * strides 0 = packed, checked as set_buffer's). width/height must match the inputs. Fails
+ * naming every missing input buffer at once; out may alias an input (inputs are copied
+ * first). */
 kpcn_status kpcn_denoiser_execute(kpcn_denoiser *d, float *out, int width, int height,
                                   size_t pixel_stride, size_t row_stride);
 

@@ -88,8 +88,16 @@ kpcn_status kpcn_metric_planar(kpcn_metric m, const float *x, const float *y, in
                                const kpcn_metric_options *opt, kpcn_metric_result *res,
                                float *errormap);
 
-/* Image form: compares the channels named in `channels` (nnames entries; NULL = every
- * channel of the reference y) of x and y, matched by name. Fails with
+/* Whether a comparison that names no channels compares R,G,B: both images have them and
+ * either is an AOV image (a channel other than R, G, B, A). Otherwise every channel of the
+ * reference. The one rule of kpcn_metric_image, the ImageBuf ops and kpcntool (metrics.md,
+ * "Channels"): a render against its reference is measured on its colour, not on an average
+ * with its variances, normals and depth. */
+int kpcn_metric_default_rgb(const char *const *xnames, int nx, const char *const *ynames, int ny);
+
+/* Image form: compares the channels named in `channels` (nnames entries; NULL with nnames 0 =
+ * the default above) of x and y, matched by name. A list without its length (or a length
+ * without a list) is KPCN_ERR_INVALID_ARGUMENT. Fails with
  * KPCN_ERR_SIZE_MISMATCH for different sizes or (without a channel list, when the names do
  * not match) different channel counts, KPCN_ERR_MISSING_CHANNEL naming a channel absent from
  * either image. If errormap is non-NULL it receives a new image (caller destroys) with one

@@ -195,6 +195,26 @@ static kpcn_status check_geom(const char *name, int width, int height) {
   return kpcn_check_size(width, height, name);
 }
 
+/* Strides in bytes, whole floats, a pixel holding its `pixel_bytes` (all its channels) and a
+ * row its width of pixels: smaller ones made pixels overlap, read or written without a word. */
+static kpcn_status check_strides(const char *name, int width, size_t pixel_stride,
+                                 size_t row_stride, size_t pixel_bytes) {
+  if (pixel_stride % sizeof(float) || row_stride % sizeof(float))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "'%s': strides must be whole floats (pixel %zu, row %zu bytes)", name,
+                     pixel_stride, row_stride);
+  if (pixel_stride < pixel_bytes)
+    return kpcn_fail(
+        KPCN_ERR_INVALID_ARGUMENT,
+        "'%s': pixel stride %zu bytes is less than a pixel's %zu: pixels would overlap", name,
+        pixel_stride, pixel_bytes);
+  if (row_stride < (size_t)(width - 1) * pixel_stride + pixel_bytes)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "'%s': row stride %zu bytes is less than a row's %zu: rows would overlap",
+                     name, row_stride, (size_t)(width - 1) * pixel_stride + pixel_bytes);
+  return KPCN_OK;
+}
+
 kpcn_status kpcn_denoiser_set_buffer_channel(kpcn_denoiser *d, const char *name, int channel,
                                              const float *ptr, int width, int height,
                                              size_t pixel_stride, size_t row_stride) {
@@ -213,6 +233,7 @@ kpcn_status kpcn_denoiser_set_buffer_channel(kpcn_denoiser *d, const char *name,
   KPCN_TRY(check_geom(name, width, height));
   if (pixel_stride == 0) pixel_stride = sizeof(float);
   if (row_stride == 0) row_stride = (size_t)width * pixel_stride;
+  KPCN_TRY(check_strides(name, width, pixel_stride, row_stride, sizeof(float)));
   sl->ptr = ptr;
   sl->width = width;
   sl->height = height;
@@ -230,6 +251,10 @@ kpcn_status kpcn_denoiser_set_buffer(kpcn_denoiser *d, const char *name, const f
   int nch = is_var ? 1 : kpcn_buffer_channels((kpcn_buffer)b);
   if (pixel_stride == 0) pixel_stride = (size_t)nch * sizeof(float);
   if (row_stride == 0 && width > 0) row_stride = (size_t)width * pixel_stride;
+  if (ptr) {
+    KPCN_TRY(check_geom(name, width, height));
+    KPCN_TRY(check_strides(name, width, pixel_stride, row_stride, (size_t)nch * sizeof(float)));
+  }
   for (int c = 0; c < nch; c++)
     KPCN_TRY(kpcn_denoiser_set_buffer_channel(d, name, c, ptr ? ptr + c : NULL, width, height,
                                               pixel_stride, row_stride));
@@ -406,9 +431,33 @@ static kpcn_status check_result(kpcn_status s, const float *out, size_t n) {
   if (bad)
     return kpcn_fail(KPCN_ERR_NONFINITE,
                      "denoise: the result holds %zu non-finite value(s) (NaN/Inf) from a finite "
-                     "input: the model's weights overflow (a damaged or diverged model?)",
+                     "input: values near the float limit in the input, or a model whose weights "
+                     "overflow (a damaged or diverged model?)",
                      bad);
   return KPCN_OK;
+}
+
+/* The KPCN divides the diffuse by albedo + eps: a negative albedo (a pixel filter with negative
+ * lobes, such as Lanczos or Mitchell) near -eps blows that up, and at -eps it is NaN, which
+ * check_result then blamed on the model. Refused, naming the least value and where it is. */
+static kpcn_status check_albedo(const kpcn_denoiser *d, const kpcn_aov_set *aov) {
+  const float *a = aov->buf[KPCN_BUF_ALBEDO];
+  if (!a) return KPCN_OK; /* kpcn_pipeline_require names it */
+  const size_t P = kpcn_aov_plane_size(aov);
+  size_t nneg = 0, at = 0;
+  for (size_t i = 0; i < 3 * P; i++)
+    if (a[i] < 0.0f) {
+      if (!nneg || a[i] < a[at]) at = i;
+      nneg++;
+    }
+  if (!nneg) return KPCN_OK;
+  const size_t px = at % P;
+  return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                   "denoise: the albedo holds %zu negative value(s), the least %g in albedo.%c at "
+                   "pixel (%zu, %zu): the KPCN divides the diffuse by albedo + %g, so clamp the "
+                   "albedo at 0 first (a pixel filter with negative lobes makes these)",
+                   nneg, (double)a[at], "RGB"[at / P], px % (size_t)aov->width,
+                   px / (size_t)aov->width, (double)kpcn_model_arch(d->model)->eps);
 }
 
 /* The exposure scale (measured on the input as given), the KPCN's firefly bound, then
@@ -426,13 +475,16 @@ static kpcn_status run_denoise(kpcn_denoiser *d, const kpcn_aov_set *aov, float 
                      "denoise: the input holds %zu non-finite value(s) (NaN/Inf), the first in "
                      "'%s'",
                      nbad, bad ? bad : "?");
+  if (d->opt.method == KPCN_DENOISE_KPCN) {
+    KPCN_TRY(kpcn_pipeline_require(aov)); /* before the exposure, whose message would be odd */
+    KPCN_TRY(check_albedo(d, aov));
+  }
   float sc;
   KPCN_TRY(exposure_scale(d, aov, &sc));
   d->stats.exposure_scale = sc;
   const size_t P = kpcn_aov_plane_size(aov);
   if (d->opt.method != KPCN_DENOISE_KPCN || d->opt.firefly == 0.0f)
     return check_result(run_ensemble(d, aov, sc, out), out, 3 * P);
-  KPCN_TRY(kpcn_pipeline_require(aov)); /* the pipeline's errors, not the bound's */
   kpcn_status s = KPCN_OK;
   kpcn_aov_set b = *aov;
   b.buf[KPCN_BUF_DIFFUSE] = dup_floats(aov->buf[KPCN_BUF_DIFFUSE], 3 * P, &s);
@@ -450,6 +502,28 @@ static kpcn_status run_denoise(kpcn_denoiser *d, const kpcn_aov_set *aov, float 
   return check_result(s, out, 3 * P);
 }
 
+/* Every buffer the KPCN reads, named as kpcn_denoiser_set_buffer spells them, in one message:
+ * one missing at a time took an embedder seven calls to learn the list. */
+static kpcn_status check_all_set(const kpcn_denoiser *d) {
+  if (d->opt.method != KPCN_DENOISE_KPCN) return KPCN_OK; /* the baselines name theirs */
+  static const kpcn_buffer need[] = {KPCN_BUF_DIFFUSE, KPCN_BUF_SPECULAR, KPCN_BUF_ALBEDO,
+                                     KPCN_BUF_NORMAL,  KPCN_BUF_DEPTH,    KPCN_BUF_VISIBILITY};
+  char list[256] = "";
+  int n = 0;
+  for (size_t i = 0; i < sizeof need / sizeof need[0]; i++)
+    for (int v = 0; v < 2; v++) {
+      const kpcn_buffer b = need[i];
+      if (v ? d->var[b].ptr != NULL : d->buf[b][0].ptr != NULL) continue;
+      snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s%s", n++ ? ", " : "",
+               kpcn_buffer_name(b), v ? ".var" : "");
+    }
+  if (!n) return KPCN_OK;
+  return kpcn_fail(KPCN_ERR_MISSING_CHANNEL,
+                   "denoiser_execute: the KPCN needs %d more buffer(s): %s (set with "
+                   "kpcn_denoiser_set_buffer; docs/denoiser.md, \"Feeding it from a renderer\")",
+                   n, list);
+}
+
 kpcn_status kpcn_denoiser_execute(kpcn_denoiser *d, float *out, int width, int height,
                                   size_t pixel_stride, size_t row_stride) {
   if (!d || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_execute: NULL argument");
@@ -458,6 +532,8 @@ kpcn_status kpcn_denoiser_execute(kpcn_denoiser *d, float *out, int width, int h
   memset(&d->stats, 0, sizeof d->stats);
   if (pixel_stride == 0) pixel_stride = 3 * sizeof(float);
   if (row_stride == 0) row_stride = (size_t)width * pixel_stride;
+  KPCN_TRY(check_strides("denoiser output", width, pixel_stride, row_stride, 3 * sizeof(float)));
+  KPCN_TRY(check_all_set(d));
   kpcn_aov_set *aov = NULL;
   float *rgb = NULL;
   kpcn_status s = assemble(d, width, height, &aov);

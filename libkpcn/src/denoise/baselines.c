@@ -29,14 +29,27 @@ typedef struct guide {
   float k2;
 } guide;
 
+/* 1 / (2 sigma^2) for a sigma > 0, refused where it overflows (a sigma of 1e-30 gave Inf
+ * weights, then NaN pixels, reported as a damaged model). */
+static kpcn_status inv_two_sq(float sigma, const char *what, const char *name, float *out) {
+  const float v = 0.5f / (sigma * sigma);
+  if (!isfinite(v))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "%s: %s %g is too small (1 / (2 %s^2) overflows a float)", what, name,
+                     (double)sigma, name);
+  *out = v;
+  return KPCN_OK;
+}
+
 static kpcn_status guide_init(guide *g, const kpcn_aov_set *aov, const kpcn_baseline_params *p,
                               const char *what) {
   memset(g, 0, sizeof *g);
   if (!p) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: parameters are NULL", what);
   if (p->radius < 0 || p->radius > 64)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: radius %d outside [0, 64]", what, p->radius);
-  if (!(p->k_color > 0.0f))
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: k_color must be > 0", what);
+  if (!(p->k_color > 0.0f) || !isfinite(p->k_color * p->k_color))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: k_color must be > 0 with a finite square",
+                     what);
   KPCN_TRY(kpcn_aov_require(aov, KPCN_BUF_COLOR, 1, what));
   g->W = aov->width;
   g->H = aov->height;
@@ -49,13 +62,13 @@ static kpcn_status guide_init(guide *g, const kpcn_aov_set *aov, const kpcn_base
     KPCN_TRY(kpcn_aov_require(aov, KPCN_BUF_NORMAL, 0, what));
     for (int c = 0; c < 3; c++)
       g->n[c] = aov->buf[KPCN_BUF_NORMAL] + c * P;
-    g->in = 0.5f / (p->sigma_normal * p->sigma_normal);
+    KPCN_TRY(inv_two_sq(p->sigma_normal, what, "sigma_normal", &g->in));
   }
   if (p->sigma_albedo > 0.0f) {
     KPCN_TRY(kpcn_aov_require(aov, KPCN_BUF_ALBEDO, 0, what));
     for (int c = 0; c < 3; c++)
       g->a[c] = aov->buf[KPCN_BUF_ALBEDO] + c * P;
-    g->ia = 0.5f / (p->sigma_albedo * p->sigma_albedo);
+    KPCN_TRY(inv_two_sq(p->sigma_albedo, what, "sigma_albedo", &g->ia));
   }
   if (p->sigma_depth > 0.0f) {
     kpcn_features_norm nm;
@@ -63,7 +76,7 @@ static kpcn_status guide_init(guide *g, const kpcn_aov_set *aov, const kpcn_base
     g->z = aov->buf[KPCN_BUF_DEPTH];
     g->zoff = nm.depth_offset;
     g->zscale = nm.depth_scale;
-    g->iz = 0.5f / (p->sigma_depth * p->sigma_depth);
+    KPCN_TRY(inv_two_sq(p->sigma_depth, what, "sigma_depth", &g->iz));
   }
   return KPCN_OK;
 }
@@ -230,9 +243,10 @@ kpcn_status kpcn_baseline_bilateral(const kpcn_aov_set *aov, const kpcn_baseline
   KPCN_TRY(guide_init(&g, aov, p, "bilateral filter"));
   if (!(p->sigma_spatial > 0.0f))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "bilateral filter: sigma_spatial must be > 0");
+  float is = 0.0f;
+  KPCN_TRY(inv_two_sq(p->sigma_spatial, "bilateral filter", "sigma_spatial", &is));
   /* a bilateral filter is the offset filter with 1x1 "patches" plus the spatial term */
-  return offset_filter(&g, p->radius, 0, 0.5f / (p->sigma_spatial * p->sigma_spatial),
-                       "bilateral filter", out, nthreads, prog);
+  return offset_filter(&g, p->radius, 0, is, "bilateral filter", out, nthreads, prog);
 }
 
 kpcn_status kpcn_baseline_nlmeans(const kpcn_aov_set *aov, const kpcn_baseline_params *p,

@@ -168,11 +168,37 @@ kpcn_status kpcn_metric_planar(kpcn_metric m, const float *x, const float *y, in
   return pointwise(m, x, y, w, h, nch, &opt, res, errormap);
 }
 
+static int has_name(const char *const *names, int n, const char *want) {
+  for (int i = 0; i < n; i++)
+    if (names[i] && !strcmp(names[i], want)) return 1;
+  return 0;
+}
+
+static int names_aov(const char *const *names, int n) {
+  for (int i = 0; i < n; i++)
+    if (names[i] && strcmp(names[i], "R") && strcmp(names[i], "G") && strcmp(names[i], "B") &&
+        strcmp(names[i], "A"))
+      return 1;
+  return 0;
+}
+
+int kpcn_metric_default_rgb(const char *const *xnames, int nx, const char *const *ynames, int ny) {
+  static const char *const rgb[3] = {"R", "G", "B"};
+  if (!xnames || !ynames) return 0;
+  for (int c = 0; c < 3; c++)
+    if (!has_name(xnames, nx, rgb[c]) || !has_name(ynames, ny, rgb[c])) return 0;
+  return names_aov(xnames, nx) || names_aov(ynames, ny);
+}
+
 /* Channel indices of the compared channels in x and y (see the header's matching rules). */
 static kpcn_status match_channels(const kpcn_image *x, const kpcn_image *y,
                                   const char *const *channels, int nnames, int *ix, int *iy,
                                   int *count, const char *what) {
-  if (channels && nnames > 0) {
+  static const char *const rgb[3] = {"R", "G", "B"};
+  if (!channels && kpcn_metric_default_rgb((const char *const *)x->names, x->nchannels,
+                                           (const char *const *)y->names, y->nchannels))
+    channels = rgb, nnames = 3;
+  if (channels) {
     for (int k = 0; k < nnames; ++k) {
       if (!channels[k])
         return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: channel name %d is NULL", what, k);
@@ -218,7 +244,12 @@ kpcn_status kpcn_metric_image(kpcn_metric m, const kpcn_image *x, const kpcn_ima
   if (x->width != y->width || x->height != y->height)
     return kpcn_fail(KPCN_ERR_SIZE_MISMATCH, "%s: image sizes differ (%dx%d vs %dx%d)", what,
                      x->width, x->height, y->width, y->height);
-  int maxn = (channels && nnames > 0) ? nnames : y->nchannels;
+  /* a list and its length go together: one without the other was silently "every channel" */
+  if (!channels != !nnames || nnames < 0)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "%s: channels %s with nnames %d (a list needs its length, NULL needs 0)", what,
+                     channels ? "given" : "NULL", nnames);
+  int maxn = channels ? nnames : y->nchannels > 3 ? y->nchannels : 3;
   if (maxn <= 0) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: no channels to compare", what);
   int *ix = kpcn_alloc(sizeof(int) * 2 * (size_t)maxn, "channel map");
   if (!ix) return kpcn_last_status();
