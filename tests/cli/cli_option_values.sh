@@ -8,8 +8,9 @@
 #   - kpcn-render, kpcn-dataset, kpcn-train: exit 2, the option named on stderr, no output;
 #   - kpcntool: modifier values are checked when their command runs (kpcntool.md "Errors and
 #     exit status"): exit 1, the modifier named after the echoed command, no -o file.
-# Each row first runs once with its good value (which must succeed and write the output, so
-# "no output" means something). The runs go in parallel, one folder each.
+# Each row's good value must succeed and write the output (so "no output" means something;
+# kpcntool's run together in four command lines), and every numeric option of each --help
+# (kpcntool: every modifier that takes a number) must have a row. The runs go in parallel.
 # usage: bash cli_option_values.sh KPCNTOOL KPCN_RENDER KPCN_TRAIN KPCN_DATASET TESTDATA WORKDIR
 set -u
 export LC_ALL=C
@@ -29,12 +30,12 @@ P32=4294967296
 # --- values -----------------------------------------------------------------------------------
 # 2^64 + G as text, G < 290448384 (bash arithmetic ends at 2^63-1): what strtoull wraps to G
 p64() { printf '18446744073%09d' $((709551616 + $1)); }
-# bad_values KIND G [core]: the malformed variants of the good value G, in BAD. KIND: i+ an
+# bad_values KIND G [short]: the malformed variants of the good value G, in BAD. KIND: i+ an
 # integer >= 0 (fits an int), i a signed one, l+ an integer >= 0 whose range passes 2^32,
 # s63 a seed in [0, 2^63-1], s64 a seed in [0, 2^64-1], f+ a finite number >= 0, f any
-# finite number. "core": the short set kpcntool's
-# modifiers of an already fully tested kind get (each kpcntool run costs ~0.2 s of loading):
-# the values sscanf/strtol/strtod/strtoull accept that a strict parser must not.
+# finite number. "short": for kpcntool's modifiers of a kind tested in full elsewhere, the
+# values strtol/strtod/strtoull take that a strict parser must not (a blank, a sign, hex, a
+# 32- or 64-bit wrap).
 bad_values() {
   local kind=$1 g=$2 set=${3:-full}
   case $kind:$set in
@@ -47,53 +48,48 @@ bad_values() {
     s64) BAD+=(-1) ;;
     esac
     ;;
-  i+:core) BAD=(" $g" "+$g" "$((g + P32))" -1) ;;
-  i:core) BAD=(" $g" "+$g" "$((g + P32))") ;;
-  l+:core | s63:core | s64:core) BAD=(" $g" "$(p64 "$g")" -1) ;;
+  i+:short | i:short) BAD=(" $g" "+$g" "$((g + P32))") ;;
+  s63:short | s64:short) BAD=(" $g" "$(p64 "$g")") ;;
   f+:full | f:full)
     BAD=("" " $g" "$g " "${g}x" "$(printf %a "$g")" nan inf 1e999)
     if [ "$kind" = f+ ]; then BAD+=(-1); else BAD+=(-inf); fi
     ;;
-  f+:core | f:core)
-    BAD=("" " $g" "$(printf %a "$g")" nan)
-    [ "$kind" = f ] || BAD+=(-1)
-    ;;
+  f+:short | f:short) BAD=(" $g" "$(printf %a "$g")") ;;
   esac
-  # values a row legitimately takes (SKIP, set by the caller for one row)
-  local keep=() v s
-  for v in "${BAD[@]}"; do
-    for s in "${SKIP[@]}"; do [ "$v" = "$s" ] && continue 2; done
-    keep+=("$v")
-  done
-  BAD=("${keep[@]}")
 }
-SKIP=()
 
 # --- running ----------------------------------------------------------------------------------
-# show CMD...: the command for a message, $TD and $WD abbreviated, odd values quoted
+# (No command substitutions below: ~1300 cases, each fork costs.)
+# show CMD...: W = the command for a message, $TD and $WD abbreviated, odd values quoted
 show() {
-  local s=${1##*/} a
+  local a
+  W=${1##*/}
   shift
   for a in "$@"; do
     a=${a//"$TD"/\$TD}
     a=${a//"$WD"/\$WD}
     case $a in '' | *[!A-Za-z0-9_./:=,+@%\$-]*) a="'$a'" ;; esac
-    s+=" $a"
+    W+=" $a"
   done
-  printf '%s' "$s"
 }
-# names NAME FILE [STRIP]: FILE, less the first STRIP in it, names NAME (not inside a longer word)
+# err ID: E = the case's stderr (its start)
+err() {
+  E=
+  IFS= read -r -d '' E <"e$1"
+  E=${E:0:300}
+}
+# names NAME FILE [STRIP]: FILE, less the first STRIP in it, names NAME (not inside a longer word:
+# for an option, not --spp in --ref-spp; for a kpcntool modifier, not spp in albedo_spp)
 names() {
-  local t
-  t=$(cat "$2")
+  local t='' b=A-Za-z0-9 re
+  IFS= read -r -d '' t <"$2"
   [ -z "${3:-}" ] || t=${t/"$3"/}
-  case $1 in
-  -*) printf '%s' "$t" | grep -qE -- "(^|[^A-Za-z0-9_-])$1([^A-Za-z0-9_-]|\$)" ;;
-  *) printf '%s' "$t" | grep -qE -- "(^|[^A-Za-z0-9])$1([^A-Za-z0-9]|\$)" ;;
-  esac
+  [[ $1 != -* ]] || b="A-Za-z0-9_-"
+  re="(^|[^$b])$1([^$b]|\$)"
+  [[ $t =~ $re ]]
 }
-made() { [ -n "$1" ] && [ -n "$(compgen -G "$1")" ]; }
-# args ID ARG...: ARGS with every @@ replaced by the case number ID (the case's file names)
+made() { [ -n "$1" ] && compgen -G "$1" >/dev/null; }
+# args ID ARG...: A = ARGS with every @@ replaced by the case number ID (the case's file names)
 args() {
   local id=$1 a
   shift
@@ -102,23 +98,25 @@ args() {
 }
 # one_bad ID RCS NAME OUT STRIP CMD...: print one line (ok or FAIL) for a value to refuse
 one_bad() {
-  local id=$1 rcs=$2 name=$3 out=${4//@@/$1} strip=$5 rc w m=no
+  local id=$1 rcs=$2 name=$3 out=${4//@@/$1} strip=$5 rc m=no
   shift 5
   args "$id" "$@"
   timeout 20 "${A[@]}" >/dev/null 2>"e$id" </dev/null
   rc=$?
-  w=$(show "${A[@]}")
+  show "${A[@]}"
   ! made "$out" || m=yes
   if [ $rc -eq 0 ]; then
-    echo "FAIL: accepted (exit 0, output written: $m): $w"
+    echo "FAIL: accepted (exit 0, output written: $m): $W"
   elif [[ " $rcs " != *" $rc "* ]]; then
-    echo "FAIL: exit $rc (expected $rcs): $w: $(head -c 300 "e$id")"
+    err "$id"
+    echo "FAIL: exit $rc (expected $rcs): $W: $E"
   elif ! names "$name" "e$id" "${strip//@@/$id}"; then
-    echo "FAIL: message does not name '$name': $w: $(head -c 300 "e$id")"
+    err "$id"
+    echo "FAIL: message does not name '$name': $W: $E"
   elif [ $m = yes ]; then
-    echo "FAIL: exit $rc but output '$out' written: $w"
+    echo "FAIL: exit $rc but output '$out' written: $W"
   else
-    echo "ok: exit $rc: $w"
+    echo "ok: exit $rc: $W"
   fi
 }
 # one_good ID OUT CMD...: the command succeeds and writes OUT
@@ -128,12 +126,14 @@ one_good() {
   args "$id" "$@"
   timeout 20 "${A[@]}" >/dev/null 2>"e$id" </dev/null
   rc=$?
+  show "${A[@]}"
   if [ $rc -ne 0 ]; then
-    echo "FAIL: good value refused (exit $rc): $(show "${A[@]}"): $(head -c 300 "e$id")"
+    err "$id"
+    echo "FAIL: good value refused (exit $rc): $W: $E"
   elif [ -n "$out" ] && ! made "$out"; then
-    echo "FAIL: good value wrote no '$out': $(show "${A[@]}")"
+    echo "FAIL: good value wrote no '$out': $W"
   else
-    echo "ok: good: $(show "${A[@]}")"
+    echo "ok: good: $W"
   fi
 }
 # Every case runs in the background (PAR at once) in this folder; its files are named with its
@@ -152,6 +152,7 @@ spawn() {
     wait -n
     running=$((running - 1))
   fi
+  return 0
 }
 # good OUT CMD...: must succeed and write OUT (a glob); each distinct command once
 good() {
@@ -163,7 +164,7 @@ good() {
 # bad RCS NAME OUT STRIP CMD...
 bad() { spawn one_bad "$@"; }
 
-# row BUILDER RCS OUT KIND OPT TEMPLATE G [core]: the option OPT's value is TEMPLATE with its
+# row BUILDER RCS OUT KIND OPT TEMPLATE G [short]: the option OPT's value is TEMPLATE with its
 # '@' replaced by G (good) or by each bad variant of G. BUILDER OPT VALUE sets CMD and STRIP;
 # OUT ('' = none), CMD and STRIP name the case's files with @@.
 row() {
@@ -177,7 +178,6 @@ row() {
     $build "$opt" "$pre$v$post"
     bad "$rcs" "${NAME:-$opt}" "$out" "$STRIP" "${CMD[@]}"
   done
-  SKIP=()
 }
 # literal BUILDER RCS OUT OPT VALUE...: these exact values are refused
 literal() {
@@ -201,6 +201,8 @@ if ! { "$KD" plan --scenes "$TD/dataset/scenes" -o plan0 --variants 0 --spp 4 --
 fi
 STRIP=
 
+# Tables: one row per option value, "KIND OPTION TEMPLATE GOOD" (kinds: bad_values; a list's
+# TEMPLATE holds each item in turn as @), then literal malformed lists.
 # --- kpcn-render ------------------------------------------------------------------------------
 TOOL=kpcn-render
 b_render() {
@@ -257,7 +259,7 @@ p f+ --split train:@,val:0.5 0.5
 p f+ --split train:0.5,val:@ 0.5
 literal b_plan 2 pl@@ --resolution 8x8x8 x8 8x 8 "8 x8" 4294967312x4294967304
 literal b_plan 2 pl@@ --spp ,4 4, 4,,8 "4, 8" "4 ,8" 4294967300
-literal b_plan 2 pl@@ --split "train:0.5,val: 0.5" "train:0.5,val:0.5 "
+literal b_plan 2 pl@@ --split "train:0.5,val:0.5 " "train:0.5, val:0.5"
 
 # --- kpcn-dataset run (--dry-run on the planned dataset: a value taken shows as exit 0) --------
 TOOL="kpcn-dataset run"
@@ -301,7 +303,8 @@ literal b_patches 2 p@@.kps --spp ,4 4, 4,,8 "4, 8" 4294967300
 TOOL=kpcn-train
 b_train() {
   local o=$1
-  CMD=("$KTR" --store "$WD/p.kps" -o m@@.safetensors --preset tiny --quiet --ckpt '' --csv '' --plot '')
+  CMD=("$KTR" --store "$WD/p.kps" -o m@@.safetensors --preset tiny --quiet --ckpt '' --csv ''
+    --plot '')
   [ "$o" = --iters ] || CMD+=(--iters 1)
   [ "$o" = --batch ] || CMD+=(--batch 1)
   [ "$o" = --patch ] || CMD+=(--patch 16)
@@ -327,7 +330,7 @@ t i+ --patch @ 16
 t l+ --iters @ 1
 t l+ --stage1-iters @ 1
 t i+ --threads @ 1
-t s63 --seed @ 1
+t s63 --seed @ 1 # 0 .. 9e18
 t l+ --val-every @ 1
 t l+ --ckpt-every @ 1
 t l+ --log-every @ 1
@@ -349,11 +352,11 @@ row b_seteps 2 x@@.safetensors f+ --set-eps @ 0.01
 # --- kpcntool ---------------------------------------------------------------------------------
 TOOL=kpcntool
 # KPRE (images) HEAD:KEY=VALUE KPOST -o o@@.exr; the message must name KEY after the echoed
-# command (which repeats every modifier). A kpcntool run costs ~0.2 s of loading, so each
-# documented kind of value (kpcntool.md: numbers, integers, seeds, the render seed, res/crop,
-# exposure/firefly) gets the full set once and every other modifier the core set; the
-# modifiers kpcntool.md says are shared (the metrics' with --l1's, --kernels' with
-# --denoise's) a few values each; the good values run together in a few command lines.
+# command (which repeats every modifier). A kpcntool run costs ~0.15 s of CPU (loading its
+# libraries), so the full set goes to one modifier of each kind kpcntool.md names (an integer,
+# a number, a seed, the render seed, res, exposure/firefly with their words) and every other
+# modifier gets the short set; those kpcntool.md says are shared (the metrics' with --l1's,
+# --kernels' with --denoise's) one value each; the good values run together in four lines.
 b_kt() {
   TESTED["kpcntool ${HEAD%%:*} $1"]=1
   CMD=("$KT" "${KPRE[@]}" "$HEAD:$1=$2" "${KPOST[@]}" -o o@@.exr)
@@ -378,65 +381,66 @@ good o@@.exr "$KT" --render:res=8x8:spp=1:seed=1:albedo_spp=2:footprint=2:max_bo
 KPOST=()
 KPRE=("$NOISY" "$REF")
 HEAD=--augment
-k s64 seed @ 1
-k s64 index @ 0 core
-k i+ shift @ 2 core
+kl seed "" " 1" "+1" 99999999999999999999 "$(p64 1)" -1 # seeds: 0 .. 2^64-1
+k s64 index @ 0 short
+k i+ shift @ 2 short
 HEAD=--l1
 k f+ range @ 1
-k f+ eps @ 0.01 core
-for c in mse relmse rell1 psnr ssim errormap; do
+k f+ eps @ 0.01 short
+for c in mse relmse rell1 psnr ssim errormap; do # one value each of the two, in turn
   HEAD=--$c
-  kl range " 1"
-  kl eps "$(printf %a 0.01)"
+  case $c in
+  mse | rell1 | ssim) rv=" 1" ev=$(printf %a 0.01) ;;
+  *) rv=$(printf %a 1) ev=" 0.01" ;;
+  esac
+  kl range "$rv"
+  kl eps "$ev"
 done
 HEAD=--mosaic
-k i+ n @ 2 core
-k i+ fontsize @ 16 core
+k i+ n @ 2 short
+k i+ fontsize @ 16 short
 HEAD=--patches:count=2
-k i+ size @ 16 core
+k i+ size @ 16 short
 HEAD=--patches:size=16
-k i+ count @ 2 core
-k i+ stride @ 16 core
+k i+ count @ 2 short
+k i+ stride @ 16 short
 HEAD=$P
-k s64 seed @ 1 core
-k f+ cull @ 0.5 core
-k f+ tol @ 0.05 core
-k f+ abs @ 0.01 core
+k s64 seed @ 1 short
+for m in cull tol abs; do k f+ $m @ 0.5 short; done
 KPRE=("$NOISY")
 HEAD=--colormap
-SKIP=("") # max= (empty): the 99th percentile, as without it
-k f+ max @ 1 core
+k f+ max @ 1 short # (max= empty: the 99th percentile, as without it)
 HEAD=$D
-k i+ tile @ 16 core
-k i+ ensemble @ 2 core
-k f+ exposure @ 0.5
-k f+ firefly @ 4
+k i+ tile @ 16 short
+k i+ ensemble @ 2 short
+kl exposure "" " 0.5" "0.5 " "$(printf %a 0.5)" nan inf -1 # auto|off|E > 0
+kl firefly "" " 4" "4x" "$(printf %a 4)" nan inf              # off|R >= 1
 HEAD=--kernels:model=$MODEL
 kl tile " 16"
 kl exposure "$(printf %a 0.5)"
 kl firefly ""
 HEAD=--rotate
-k f deg @ 90 core
+k f deg @ 90 short
 HEAD=--shift
 k i dx @ 1
-k i dy @ 1 core
+k i dy @ 1 short
 KPRE=()
 KPOST=("$SCENE")
 HEAD=--render:res=8x8
-k i+ spp @ 1 core
+k i+ spp @ 1 short
 HEAD=--render:res=8x8:spp=1
-k s63 seed @ 1
-k i+ albedo_spp @ 2 core
-k i+ footprint @ 2 core
-k i max_bounces @ 2 core # -1: the scene's
+kl seed " 1" 9223372036854775808 99999999999999999999 -1 # 0 .. 2^63-1
+k i+ albedo_spp @ 2 short
+k i+ footprint @ 2 short
+k i max_bounces @ 2 short # (-1: the scene's)
 kl max_bounces -2
 HEAD=--render:spp=1
 k i+ res @x8 8
-k i+ res 8x@ 8 core
+k i+ res 8x@ 8 short
 kl res 8x8x8 8 "8 x8" 4294967304x4294967304
 HEAD=--render:res=8x8:spp=1
-k i+ crop @,0,4,4 0 core
-kl crop "0, 0,4,4" "0,0,+4,4" "0,0,4,4294967300" 0,0,4 0,0,4,4, 4294967296,0,4,4
+k i+ crop @,0,4,4 0 short
+kl crop "0, 0,4,4" "0,0,+4,4" "0,0,4,4294967300" 0,0,4
 # 0|1 switches: exactly "0" or "1"
 for s in "--mirror all" "--augment oneof" "--augment mirror_v" "$D bf16" \
   "--render:res=8x8:spp=1 color_only" "--l1 allow_nonfinite" "$P importance"; do
@@ -449,10 +453,10 @@ done
 STRIP=
 b_threads() { CMD=("$KT" --threads "$2" "$NOISY" -o o@@.exr); }
 NAME="thread count"
-row b_threads "1 2" o@@.exr i+ --threads @ 1 core
+row b_threads "1 2" o@@.exr i+ --threads @ 1 short
 b_ch() { CMD=("$KT" "$REF" --ch "R,G,B,A=$2" -o o@@.exr); }
 NAME=channel
-row b_ch "1 2" o@@.exr f --ch @ 1 core
+row b_ch "1 2" o@@.exr f --ch @ 1 short
 NAME=
 
 # --- coverage: every option of each --help (kpcntool: every modifier) is in a table above or
@@ -460,7 +464,7 @@ NAME=
 untested=()
 # coverage TOOL "NON-NUMERIC OPTIONS" HELP-COMMAND...
 coverage() {
-  local tool=$1 skip=" $2 " o
+  local tool=$1 skip=" ${2//$'\n'/ } " o
   shift 2
   for o in $("$@" --help 2>&1 | grep -oE -- '--[a-z0-9-]+' | sort -u); do
     [[ $skip == *" $o "* ]] || [ -n "${TESTED[$tool $o]:-}" ] || untested+=("$tool $o")
@@ -473,7 +477,8 @@ coverage "kpcn-dataset patches" "--allow-partial --dtype --importance --split" "
 coverage kpcn-train "--average --best --best-by --bf16 --ckpt --compare --csv --freeze --graft
   --init --linear --loss --loss2 --no-colorswap --no-mirror --no-rotate --no-shift
   --normalize-exposure --plot --preset --quiet --record-exposure --resume --snapshots
-  --source-weight --staircase --store --title --val --val-from-store --version --x --y" "$KTR"
+  --source-weight --split --staircase --store --title --val --val-from-store --val-store
+  --version --x --y" "$KTR"
 # kpcntool: switches count once for every command; names and files take no number
 flags=" all bf16 allow_nonfinite mirror_v oneof importance color_only "
 words=" model method map perm channels display metric labels font dir out branch view config from looks "

@@ -168,6 +168,32 @@ for o in "-o $D/nodir/x.safetensors" "-o $D/y.safetensors --plot $D/nodir/y.png"
   grep -Eq "folder '$D/nodir'|is a directory|empty file name" "$D/err" || fail "unclear for $o: $(cat "$D/err")"
   [ -z "$(ls "$D" | grep -E '^y\.|^x\.')" ] || fail "files left for $o: $(ls "$D")"
 done
+# the validation inputs' own figures come first (what a model must beat), equal to kpcntool's;
+# a model worse than them gets a warning at the end: validated here on the reference itself
+# (noisy relMSE 0), which no model can beat
+R="$TD/dataset/sample_ref.exr"
+"$K" --store "$D/p.kps" -o "$D/vv.safetensors" --preset tiny --iters 2 --batch 2 --patch 16 \
+  --csv '' --plot '' --ckpt '' --val "$N,$R" --val "$R,$R" 2>"$D/log" || fail "train with --val"
+noisy=$(sed -n 's/.*validation inputs as rendered (noisy): relMSE \([^ ]*\) .*/\1/p' "$D/log")
+"$T" --json "$N" "$R" --relmse >"$D/nr.json" || fail "noisy relmse"
+want=$(/usr/bin/python3 -c 'import json,sys; print("%.4g" % (json.load(open(sys.argv[1]))["relmse"] / 2))' "$D/nr.json")
+[ -n "$noisy" ] && [ "$noisy" = "$want" ] || fail "noisy validation figure '$noisy', want '$want' (half of kpcntool's: the second pair is 0)"
+grep -q "the model is worse than its noisy inputs" "$D/log" || fail "no worse-than-noisy warning: $(cat "$D/log")"
+# --val-store: the full renders of another store's sources (vs.kps is cut from the sample pair,
+# so its one source gives the same noisy figure); the training store itself is refused,
+# and --val-from-store (a train store's own 'val' sources) says what replaced it
+"$T" "$N" "$R" --patches:size=16:count=6:cull=1:out="$D/vs.kps" || fail "patches for --val-store"
+"$K" --store "$D/p.kps" -o "$D/vv.safetensors" --preset tiny --iters 2 --batch 2 --patch 16 \
+  --csv '' --plot '' --ckpt '' --val-store "$D/vs.kps" 2>"$D/log" || fail "--val-store: $(cat "$D/log")"
+grep -q "validation inputs as rendered (noisy): relMSE $(printf '%.4g' "$(/usr/bin/python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["relmse"])' "$D/nr.json")") " "$D/log" ||
+  fail "--val-store did not validate on the sample pair: $(cat "$D/log")"
+bad_usage "is the training store" --val-store "$D/p.kps"
+bad_usage "--val-from-store is replaced by --val-store" --val-from-store
+# a training patch larger than the store's says which two options meet
+"$K" --store "$D/p.kps" -o "$D/vv.safetensors" --preset tiny --iters 1 --patch 32 2>"$D/err"
+rc=$?
+[ $rc -eq 1 ] && grep -q "train with --patch 16 or less, or cut the store with kpcn-dataset patches --size 33" "$D/err" ||
+  fail "--patch above the store's size: rc $rc: $(cat "$D/err")"
 # a plot under another extension, a plot without its CSV log, snapshots into a file, a NaN in
 # a validation input: refused before training
 for o in "--plot $D/p.exr:must end in .png" "--plot $D/p.png --csv '':which --csv '' turns off" \

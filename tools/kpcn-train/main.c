@@ -44,8 +44,9 @@ static void usage(FILE *f) {
         "  --bf16                    mixed precision: bf16 convolutions (about 2x the conv\n"
         "                            throughput where the CPU has AVX512_BF16), f32 weights,\n"
         "                            gradients and Adam\n"
-        "  --val NOISY.exr,REF.exr   validation pair (repeatable); --val-from-store uses the\n"
-        "                            store's sources of split 'val'\n"
+        "  --val NOISY.exr,REF.exr   validation pair (repeatable)\n"
+        "  --val-store VAL.kps       validate on the full renders another store was cut from\n"
+        "                            (e.g. kpcn-dataset patches --split val)\n"
         "  --val-every N --ckpt-every N   (default 0: only at the end and when stopped)\n"
         "  --log-every N             CSV row every N iterations (10)\n"
         "  --ckpt PATH --csv PATH --plot PATH   (default MODEL.ckpt/.csv/.png; '' = none)\n"
@@ -156,10 +157,13 @@ static int add_val(const char *noisy, const char *ref, size_t nlen) {
 }
 
 /* Validation pairs from the store's "val" sources (paths relative to the store's folder). */
+/* --val-store: every source of a validation store (the recipe's `patches --split val` store)
+ * becomes a --val pair, its paths relative to the store's folder (as kpcn-dataset records
+ * them). Returns 0 (message printed) on failure. */
 static int val_from_store(const char *store) {
   kpcn_patchstore *ps;
   if (kpcn_patchstore_open(&ps, store, NULL, 0) != KPCN_OK) {
-    fprintf(stderr, "kpcn-train: %s\n", kpcn_last_error());
+    fprintf(stderr, "kpcn-train: --val-store: %s\n", kpcn_last_error());
     return 0;
   }
   char dir[4096];
@@ -169,24 +173,22 @@ static int val_from_store(const char *store) {
     sl[1] = 0;
   else
     dir[0] = 0;
-  int ok = 1, found = 0;
+  int ok = 1;
   for (int i = 0; i < kpcn_patchstore_nsources(ps) && ok; i++) {
     const kpcn_patch_source *s = kpcn_patchstore_source(ps, i);
-    if (strcmp(s->split, "val") != 0) continue;
     char n[8192], r[8192];
     snprintf(n, sizeof n, "%s%s", s->noisy[0] == '/' ? "" : dir, s->noisy);
     snprintf(r, sizeof r, "%s%s", s->reference[0] == '/' ? "" : dir, s->reference);
     struct stat sb;
     if (stat(n, &sb) != 0 || stat(r, &sb) != 0) {
-      fprintf(stderr, "kpcn-train: validation source '%s' / '%s' of the store not found\n", n, r);
+      fprintf(stderr, "kpcn-train: --val-store: source '%s' / '%s' of '%s' not found\n", n, r,
+              store);
       ok = 0;
       break;
     }
     ok = add_val(n, r, strlen(n));
-    found++;
   }
   kpcn_patchstore_close(ps);
-  if (ok && !found) fprintf(stderr, "kpcn-train: warning: the store has no 'val' sources\n");
   return ok;
 }
 
@@ -418,7 +420,7 @@ int main(int argc, char **argv) {
   const char *preset = "cpu", *dil = NULL, *loss2 = NULL, *best_by = NULL;
   long long layers = -1, channels = -1, conv = -1, kernel = -1, ssim_win = -1, kpa_passes = -1, v;
   int source_weight = 0, preset_given = 0;
-  int from_store = 0;
+  const char *val_store = NULL; /* --val-store */
   double d, eps = 0;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i];
@@ -530,7 +532,18 @@ int main(int argc, char **argv) {
         return 2;
       }
     }
-    else if (!strcmp(a, "--val-from-store")) from_store = 1;
+    else if (!strcmp(a, "--val-store")) {
+      NEEDARG;
+      val_store = arg;
+    }
+    else if (!strcmp(a, "--val-from-store")) {
+      /* a store holds the one split it was cut from: its own 'val' sources would be images it
+       * trains on, and a train store has none (the option then validated on nothing) */
+      fprintf(stderr, "kpcn-train: --val-from-store is replaced by --val-store VAL.kps (a store "
+                      "holds one split, so the training store's 'val' sources are images it "
+                      "trains on, or none)\n");
+      return 2;
+    }
     else if (!strcmp(a, "--staircase")) s.adam.staircase = 1;
     else if (!strcmp(a, "--resume")) s.resume = 1;
     else if (!strcmp(a, "--bf16")) s.bf16 = 1;
@@ -649,7 +662,14 @@ int main(int argc, char **argv) {
     fprintf(stderr, "kpcn-train: %s\n", kpcn_last_error());
     return 2;
   }
-  if (from_store && !val_from_store(s.store_path)) return 1;
+  if (val_store && s.store_path && kpcn_same_file(val_store, s.store_path)) {
+    fprintf(stderr,
+            "kpcn-train: --val-store '%s' is the training store: it would validate on "
+            "the images it trains on\n",
+            val_store);
+    return 2;
+  }
+  if (val_store && !val_from_store(val_store)) return 1;
   s.nval = g_nval;
   s.val_noisy = (const char *const *)g_valn;
   s.val_ref = (const char *const *)g_valr;

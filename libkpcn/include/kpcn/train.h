@@ -316,6 +316,10 @@ void kpcn_trainer_destroy(kpcn_trainer *t);
 kpcn_status kpcn_trainer_step(kpcn_trainer *t, double *loss);
 /* Full-image validation of the current model over the validation pairs. */
 kpcn_status kpcn_trainer_validate(kpcn_trainer *t, kpcn_val_result *out);
+/* The same figures for the validation inputs as rendered (their colour against the
+ * references): what a model must beat. kpcn_trainer_run logs them before it starts and warns
+ * at the end when the model's geometric-mean relMSE is above them. */
+kpcn_status kpcn_trainer_validate_noisy(kpcn_trainer *t, kpcn_val_result *out);
 /* Atomic checkpoint / restore (the arch, batch, patch and seed must match the trainer). */
 kpcn_status kpcn_trainer_save_checkpoint(kpcn_trainer *t, const char *path);
 kpcn_status kpcn_trainer_load_checkpoint(kpcn_trainer *t, const char *path);

@@ -33,8 +33,11 @@ kpcn_status kt_batch_setup(kpcn_trainer *t) {
   t->nch = kpcn_patchstore_nchannels(t->ps);
   if (t->P > t->S)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "training patch size %d is larger than the patch store's %d ('%s')", t->P,
-                     t->S, t->store_path);
+                     "training patch size %d (kpcn-train --patch, default 64) is larger than "
+                     "the patch store's %d ('%s'): train with --patch %d or less, or cut the "
+                     "store with kpcn-dataset patches --size %d or more (one pixel more than "
+                     "the training patch leaves room for the random shift)",
+                     t->P, t->S, t->store_path, t->S, t->P + 1);
   for (int b = 0; b < KPCN_BUF_COUNT; b++) {
     t->ch_var[b] = -1;
     for (int c = 0; c < 3; c++)

@@ -146,6 +146,18 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
   int64_t last_it = t->iter, nacc = 0, last_val_it = -1, start_it = t->iter;
   int stop = 0;
   kpcn_status st = KPCN_OK;
+  /* the inputs' own figures first: a validation relMSE means little without them */
+  kpcn_val_result noisy;
+  if (t->nval) {
+    if ((st = kpcn_trainer_validate_noisy(t, &noisy)) != KPCN_OK) {
+      if (csv) fclose(csv);
+      return st;
+    }
+    kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_INFO,
+             "validation inputs as rendered (noisy): relMSE %.4g (geometric mean %.4g)  SSIM "
+             "%.4f  PSNR %.2f dB",
+             noisy.relmse, noisy.relmse_geo, noisy.ssim, noisy.psnr);
+  }
   while (t->iter < t->s.iters && st == KPCN_OK) {
     double elapsed = t->elapsed_prev + (kt_now() - t0);
     if (t->s.time_limit_s > 0 && kt_now() - t0 >= t->s.time_limit_s) {
@@ -230,6 +242,12 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
   }
   if (csv) fclose(csv);
   if (st != KPCN_OK) return st;
+  if (t->nval && t->have_val && t->last_val.relmse_geo > noisy.relmse_geo)
+    kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_WARNING,
+             "the model is worse than its noisy inputs on the validation pairs (relMSE geometric "
+             "mean %.4g against %.4g as rendered): train longer, on more data, or fine-tune a "
+             "trained model (--init; docs/training.md, \"Train your own\")",
+             t->last_val.relmse_geo, noisy.relmse_geo);
   double elapsed = t->elapsed_prev + (kt_now() - t0);
   KPCN_TRY(checkpoint(t, elapsed));
   KPCN_TRY(save_model(t, elapsed, t->out_path));

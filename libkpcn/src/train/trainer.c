@@ -571,6 +571,31 @@ static kpcn_status trainer_step(kpcn_trainer *t, double *loss) {
   return KPCN_OK;
 }
 
+/* relMSE, SSIM and PSNR of one validation image (planar RGB) against pair i's reference,
+ * added to acc[3] and (relMSE's log) to *acc_log. */
+static kpcn_status add_val_figures(const kpcn_trainer *t, int i, const float *img,
+                                   const kpcn_metric_options *mo, double acc[3], double *acc_log) {
+  static const kpcn_metric ms[3] = {KPCN_METRIC_RELMSE, KPCN_METRIC_SSIM, KPCN_METRIC_PSNR};
+  const kpcn_aov_set *a = t->val_aov[i];
+  for (int m = 0; m < 3; m++) {
+    kpcn_metric_result r;
+    KPCN_TRY(kpcn_metric_planar(ms[m], img, t->val_ref[i], a->width, a->height, 3, mo, &r, NULL));
+    acc[m] += r.value;
+    /* a denoised image equal to its reference would give log 0: 1e-30 keeps it finite (and
+     * far below any real figure) */
+    if (m == 0) *acc_log += log(fmax(r.value, 1e-30));
+  }
+  return KPCN_OK;
+}
+
+static void val_means(const kpcn_trainer *t, const double acc[3], double acc_log,
+                      kpcn_val_result *out) {
+  out->relmse = acc[0] / t->nval;
+  out->ssim = acc[1] / t->nval;
+  out->psnr = acc[2] / t->nval;
+  out->relmse_geo = exp(acc_log / t->nval);
+}
+
 kpcn_status kpcn_trainer_validate(kpcn_trainer *t, kpcn_val_result *out) {
   if (!t->nval) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "no validation images given");
   kpcn_denoiser_options o;
@@ -592,25 +617,41 @@ kpcn_status kpcn_trainer_validate(kpcn_trainer *t, kpcn_val_result *out) {
       break;
     }
     st = kpcn_denoiser_execute_aov(d, a, den);
-    static const kpcn_metric ms[3] = {KPCN_METRIC_RELMSE, KPCN_METRIC_SSIM, KPCN_METRIC_PSNR};
-    for (int m = 0; m < 3 && st == KPCN_OK; m++) {
-      kpcn_metric_result r;
-      st = kpcn_metric_planar(ms[m], den, t->val_ref[i], a->width, a->height, 3, &mo, &r, NULL);
-      acc[m] += r.value;
-      /* a denoised image equal to its reference would give log 0: 1e-30 keeps it finite
-       * (and far below any real figure) */
-      if (m == 0) acc_log += log(fmax(r.value, 1e-30));
-    }
+    if (st == KPCN_OK) st = add_val_figures(t, i, den, &mo, acc, &acc_log);
     free(den);
     if (st != KPCN_OK) kpcn_fail_context("validating on '%s'", t->s.val_noisy[i]);
   }
   kpcn_denoiser_destroy(d);
   KPCN_TRY(st);
-  t->last_val.relmse = acc[0] / t->nval;
-  t->last_val.ssim = acc[1] / t->nval;
-  t->last_val.psnr = acc[2] / t->nval;
-  t->last_val.relmse_geo = exp(acc_log / t->nval);
+  val_means(t, acc, acc_log, &t->last_val);
   t->have_val = 1;
   if (out) *out = t->last_val;
+  return KPCN_OK;
+}
+
+kpcn_status kpcn_trainer_validate_noisy(kpcn_trainer *t, kpcn_val_result *out) {
+  if (!t || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "validate_noisy: NULL argument");
+  if (!t->nval) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "no validation images given");
+  kpcn_metric_options mo;
+  kpcn_metric_options_defaults(&mo);
+  mo.nthreads = t->nt;
+  double acc[3] = {0, 0, 0}, acc_log = 0;
+  for (int i = 0; i < t->nval; i++) {
+    const kpcn_aov_set *a = t->val_aov[i];
+    const size_t P = kpcn_aov_plane_size(a);
+    const float *col = a->buf[KPCN_BUF_COLOR];
+    float *sum = NULL;
+    if (!col) { /* the colour is diffuse + specular (the trainer's inputs have both) */
+      sum = kpcn_alloc(3 * P * sizeof(float), "validation colour");
+      if (!sum) return kpcn_last_status();
+      for (size_t k = 0; k < 3 * P; k++)
+        sum[k] = a->buf[KPCN_BUF_DIFFUSE][k] + a->buf[KPCN_BUF_SPECULAR][k];
+      col = sum;
+    }
+    kpcn_status st = add_val_figures(t, i, col, &mo, acc, &acc_log);
+    free(sum);
+    if (st != KPCN_OK) return kpcn_fail_context("measuring the noisy '%s'", t->s.val_noisy[i]);
+  }
+  val_means(t, acc, acc_log, out);
   return KPCN_OK;
 }
