@@ -38,7 +38,7 @@ expect_fail "modifier 'ensemble' applies only to the KPCN, not method=bilateral"
   --denoise:method=bilateral:ensemble=8
 expect_fail "exposure must be auto, off or a number > 0 and < 1e30 that a float holds (got '1e-50')" "" "$NOISY" \
   --denoise:model=m.safetensors:exposure=1e-50
-expect_fail "channel 'A': the constant 'nan' is not a finite float" "" "$REF" --ch R,G,B,A=nan
+expect_fail "channel 'A': the constant 'nan' is not a finite decimal float" "" "$REF" --ch R,G,B,A=nan
 expect_fail "channel name 'X' appears twice" "" "$REF" --ch X=R,X=G
 expect_fail "modifier 'range' must be positive" "" "$REF" "$REF" --psnr:range=-1
 expect_fail "modifier 'display' must be srgb or linear (got 'rec2020')" "" "$REF" "$REF" --ssim:display=rec2020

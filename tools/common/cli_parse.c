@@ -2,6 +2,8 @@
 #include "cli_parse.h"
 
 #include <errno.h>
+#include <limits.h>
+#include <math.h>
 #include <stdlib.h>
 
 /* Reads one integer at *s into *v and leaves *end after it; 0 unless it is digits in [lo, hi]
@@ -19,10 +21,47 @@ static int read_int(const char *s, long lo, long hi, long *v, const char **end) 
 }
 
 int cli_parse_int(const char *s, long lo, long hi, int *out) {
-  long v;
-  const char *end;
-  if (!s || !read_int(s, lo, hi, &v, &end) || *end) return 0;
+  long long v;
+  if (!cli_parse_ll(s, lo, hi, &v)) return 0;
   *out = (int)v;
+  return 1;
+}
+
+int cli_parse_ll(const char *s, long long lo, long long hi, long long *out) {
+  if (!s) return 0;
+  const char *d = *s == '-' && lo < 0 ? s + 1 : s;
+  if (*d < '0' || *d > '9') return 0;
+  char *end;
+  errno = 0;
+  long long v = strtoll(s, &end, 10);
+  if (errno == ERANGE || *end || v < lo || v > hi) return 0;
+  *out = v;
+  return 1;
+}
+
+int cli_parse_double(const char *s, double *out) {
+  if (!s) return 0;
+  /* [+-] digits [. digits] [eE [+-] digits], at least one digit before the exponent */
+  const char *p = s;
+  int digits = 0;
+  if (*p == '+' || *p == '-') p++;
+  for (; *p >= '0' && *p <= '9'; p++)
+    digits++;
+  if (*p == '.')
+    for (p++; *p >= '0' && *p <= '9'; p++)
+      digits++;
+  if (!digits) return 0;
+  if (*p == 'e' || *p == 'E') {
+    p++;
+    if (*p == '+' || *p == '-') p++;
+    if (*p < '0' || *p > '9') return 0;
+    while (*p >= '0' && *p <= '9')
+      p++;
+  }
+  if (*p) return 0;
+  const double v = strtod(s, NULL);
+  if (!isfinite(v)) return 0; /* 1e999 */
+  *out = v;
   return 1;
 }
 

@@ -13,6 +13,11 @@ extern "C" {
 
 /* One integer in [lo, hi]: 1 and *out set, or 0 (out untouched). */
 int cli_parse_int(const char *s, long lo, long hi, int *out);
+int cli_parse_ll(const char *s, long long lo, long long hi, long long *out);
+
+/* A finite decimal number, [+-]digits[.digits][e[+-]digits]: 1 and *out set, or 0. strtod
+ * alone also takes leading blanks, hexadecimal ("0x8p-4"), "inf" and "nan". */
+int cli_parse_double(const char *s, double *out);
 
 /* n integers separated by the single character sep ("16x16", "0,0,8,8", "1/4"), integer i in
  * [lo[i], hi[i]]: 1 and out[0..n-1] set, or 0. */

@@ -62,8 +62,6 @@ int ds_write_atomic(const char *path, const char *data, size_t len);
 /* A comma list of distinct integers in [1, hi] ("4,16,64"): no empty item, at most cap of
  * them. Returns how many, or -1. */
 int ds_parse_int_list(const char *s, long hi, int *out, int cap);
-/* Finite numbers only (no inf/nan). */
-int ds_parse_double(const char *s, double *out);
 /* Decimal digits only, value <= hi (no sign, no blanks, no overflow). */
 int ds_parse_u64(const char *s, uint64_t hi, uint64_t *out);
 uint64_t ds_hash(const char *s, uint64_t seed);

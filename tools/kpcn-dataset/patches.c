@@ -184,15 +184,15 @@ int ds_cmd_patches(int argc, char **argv) {
       stride_given = 1;
       want = " (an integer in [1, 4096])";
     } else if (!strcmp(a, "--cull") || !strcmp(a, "--cull-tol") || !strcmp(a, "--cull-abs")) {
-      /* Finite (ds_parse_double): they are recorded in the store's settings JSON, which has
+      /* Finite (cli_parse_double): they are recorded in the store's settings JSON, which has
        * no inf. --cull above 1 disables culling. */
       double *dst = !strcmp(a, "--cull")       ? &ps.cull
                     : !strcmp(a, "--cull-tol") ? &ps.cull_tol
                                                : &ps.cull_abs;
-      ok = ds_parse_double(v, dst) && *dst >= 0;
+      ok = cli_parse_double(v, dst) && *dst >= 0;
       want = " (a finite number >= 0)";
     } else if (!strcmp(a, "--progress-every")) {
-      ok = ds_parse_double(v, &progress_every) && progress_every >= 0;
+      ok = cli_parse_double(v, &progress_every) && progress_every >= 0;
       want = " (seconds >= 0)";
     } else if (!strcmp(a, "--seed")) {
       ok = cli_parse_int(v, 0, 2147483647, &iv);

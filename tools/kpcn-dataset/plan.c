@@ -9,6 +9,7 @@
 #include <dirent.h>
 #include <errno.h>
 #include <limits.h>
+#include <ctype.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -128,6 +129,13 @@ static int assign_splits(base_scene *s, int n, const char *spec, uint64_t seed) 
     }
     *colon = 0;
     const char *val = colon + 1;
+    /* a split name is a word: " val" (from "train:0.5, val:0.5") would be another split than
+     * the "val" every later step asks for */
+    for (const char *c = tok; *c; c++)
+      if (!isalnum((unsigned char)*c) && *c != '_' && *c != '-') {
+        ds_err("--split: split name '%s' may hold only letters, digits, '_' and '-'", tok);
+        return -1;
+      }
     /* Each split is named once: a second "train:" would silently take the first's place
      * (fractions) or merge with it (names). */
     for (int k = 0; k < nsplit; k++)
@@ -137,7 +145,7 @@ static int assign_splits(base_scene *s, int n, const char *spec, uint64_t seed) 
       }
     snprintf(names[nsplit], 16, "%s", tok);
     double f;
-    int isf = ds_parse_double(val, &f);
+    int isf = cli_parse_double(val, &f);
     if (fractions >= 0 && isf != fractions) {
       ds_err("--split: mix of fractions and scene names in '%s'", spec);
       return -1;
@@ -611,17 +619,17 @@ int ds_cmd_plan(int argc, char **argv) {
     else if (!strcmp(a, "--material"))
       dst = &ps.material;
     else if (!strcmp(a, "--bsdf-swap")) {
-      ok = ds_parse_double(v, &ps.bsdf_swap) && ps.bsdf_swap >= 0 && ps.bsdf_swap <= 1;
+      ok = cli_parse_double(v, &ps.bsdf_swap) && ps.bsdf_swap >= 0 && ps.bsdf_swap <= 1;
       want = " (a probability in [0, 1])";
     } else if (!strcmp(a, "--light"))
       dst = &ps.light;
     else if (!strcmp(a, "--env"))
       dst = &ps.env;
     else if (!strcmp(a, "--texture-swap")) {
-      ok = ds_parse_double(v, &ps.texture_swap) && ps.texture_swap >= 0 && ps.texture_swap <= 1;
+      ok = cli_parse_double(v, &ps.texture_swap) && ps.texture_swap >= 0 && ps.texture_swap <= 1;
       want = " (a probability in [0, 1])";
     } else if (!strcmp(a, "--texture-bitmap")) {
-      ok = ds_parse_double(v, &ps.texture_bitmap) && ps.texture_bitmap >= 0 &&
+      ok = cli_parse_double(v, &ps.texture_bitmap) && ps.texture_bitmap >= 0 &&
            ps.texture_bitmap <= 1;
       want = " (a probability in [0, 1])";
     } else if (!strcmp(a, "--texture-dir")) {
@@ -640,7 +648,7 @@ int ds_cmd_plan(int argc, char **argv) {
       return 2;
     }
     if (dst) {
-      ok = ds_parse_double(v, dst) && *dst >= 0;
+      ok = cli_parse_double(v, dst) && *dst >= 0;
       want = " (a finite number >= 0)";
     }
     if (!ok) {

@@ -369,11 +369,11 @@ int ds_cmd_run(int argc, char **argv) {
       } else if (!strcmp(a, "--renderer"))
         renderer = v;
       else if (!strcmp(a, "--checkpoint-every")) {
-        ok = ds_parse_double(v, &o.checkpoint_every) && o.checkpoint_every >= 0 &&
+        ok = cli_parse_double(v, &o.checkpoint_every) && o.checkpoint_every >= 0 &&
              o.checkpoint_every <= 1e9;
         want = " (seconds in [0, 1e9]; 0 = no checkpoints)";
       } else if (!strcmp(a, "--progress-every")) {
-        ok = ds_parse_double(v, &o.progress_every) && o.progress_every >= 0;
+        ok = cli_parse_double(v, &o.progress_every) && o.progress_every >= 0;
         want = " (seconds >= 0)";
       } else if (!strcmp(a, "--shard")) {
         static const long lo[2] = {0, 1}, hi[2] = {INT_MAX - 1, INT_MAX};
@@ -388,11 +388,11 @@ int ds_cmd_run(int argc, char **argv) {
         double *dst = !strcmp(a, "--max-black")        ? &o.max_black
                       : !strcmp(a, "--max-background") ? &o.max_background
                                                        : &o.max_blown;
-        ok = ds_parse_double(v, dst) && *dst >= 0 && *dst <= 1;
+        ok = cli_parse_double(v, dst) && *dst >= 0 && *dst <= 1;
         want = " (a fraction of pixels in [0, 1])";
       } else if (!strcmp(a, "--blown-level")) {
         /* A luminance: at 0 or below every lit pixel counts as blown out. */
-        ok = ds_parse_double(v, &o.blown_level) && o.blown_level > 0;
+        ok = cli_parse_double(v, &o.blown_level) && o.blown_level > 0;
         want = " (a luminance > 0)";
       } else {
         ds_err("run: unknown option '%s'", a);

@@ -112,17 +112,6 @@ int ds_parse_int_list(const char *s, long hi, int *out, int cap) {
   }
 }
 
-/* Finite only: strtod also reads "inf" and "nan" (and 1e999 as inf), which no option means
- * and which would reach the scene files and JSON settings as null. */
-int ds_parse_double(const char *s, double *out) {
-  char *end;
-  if (!s || !*s) return 0;
-  double v = strtod(s, &end);
-  if (*end || !isfinite(v)) return 0;
-  *out = v;
-  return 1;
-}
-
 /* Decimal digits only: strtoull would take "-1" as 2^64-1, skip leading blanks and
  * saturate past 2^64 with nothing but errno to tell. */
 int ds_parse_u64(const char *s, uint64_t hi, uint64_t *out) {

@@ -220,9 +220,8 @@ int main(int argc, char **argv) {
     } else if (strcmp(a, "--checkpoint") == 0) {
       NEED_VALUE rs.checkpoint = v;
     } else if (strcmp(a, "--checkpoint-every") == 0) {
-      NEED_VALUE char *end;
-      double sec = strtod(v, &end);
-      if (end == v || *end != 0 || !(sec >= 0 && sec <= 1e9)) {
+      NEED_VALUE double sec;
+      if (!cli_parse_double(v, &sec) || !(sec >= 0 && sec <= 1e9)) {
         fprintf(stderr, "kpcn-render: --checkpoint-every: expected seconds in [0, 1e9], got '%s'\n",
                 v);
         return 2;
@@ -230,9 +229,8 @@ int main(int argc, char **argv) {
       rs.checkpoint_every_s = sec;
       every_given = 1;
     } else if (strcmp(a, "--time-limit") == 0) {
-      NEED_VALUE char *end;
-      time_limit_min = strtod(v, &end);
-      if (end == v || *end != 0 || !(time_limit_min >= 0 && time_limit_min <= 1e9)) {
+      NEED_VALUE if (!cli_parse_double(v, &time_limit_min) ||
+                     !(time_limit_min >= 0 && time_limit_min <= 1e9)) {
         fprintf(stderr, "kpcn-render: --time-limit: expected minutes in [0, 1e9], got '%s'\n", v);
         return 2;
       }

@@ -2,6 +2,7 @@
  * See docs/training.md. Exit status: 0 done (or stopped cleanly and checkpointed), 1 error,
  * 2 bad usage. */
 #include "kpcn/dataset.h"
+#include "cli_parse.h"
 #include "kpcn/train.h"
 
 #include <errno.h>
@@ -119,10 +120,8 @@ static int progress_cb(void *u, const kpcn_train_progress *p) {
 }
 
 static int parse_ll(const char *s, long long lo, long long hi, long long *out, const char *opt) {
-  char *end;
-  errno = 0;
-  long long v = strtoll(s, &end, 10);
-  if (errno || end == s || *end || v < lo || v > hi) {
+  long long v = 0;
+  if (!cli_parse_ll(s, lo, hi, &v)) {
     fprintf(stderr, "kpcn-train: %s: '%s' is not an integer in [%lld, %lld]\n", opt, s, lo, hi);
     return 0;
   }
@@ -131,9 +130,8 @@ static int parse_ll(const char *s, long long lo, long long hi, long long *out, c
 }
 
 static int parse_d(const char *s, double lo, double hi, double *out, const char *opt) {
-  char *end;
-  double v = strtod(s, &end);
-  if (end == s || *end || !(v >= lo && v <= hi)) {
+  double v = 0;
+  if (!cli_parse_double(s, &v) || !(v >= lo && v <= hi)) {
     fprintf(stderr, "kpcn-train: %s: '%s' is not a number in [%g, %g]\n", opt, s, lo, hi);
     return 0;
   }
@@ -288,9 +286,8 @@ static int set_eps_main(int argc, char **argv) {
     fprintf(stderr, "kpcn-train --set-eps: expected OUT.safetensors MODEL EPS\n");
     return 2;
   }
-  char *end;
-  double e = strtod(argv[4], &end);
-  if (end == argv[4] || *end || !(e >= 1e-9 && e <= 0.5)) { /* --eps's range */
+  double e = 0;
+  if (!cli_parse_double(argv[4], &e) || !(e >= 1e-9 && e <= 0.5)) { /* --eps's range */
     fprintf(stderr, "kpcn-train --set-eps: EPS '%s' is not a number in [1e-9, 0.5]\n", argv[4]);
     return 2;
   }
@@ -612,7 +609,8 @@ int main(int argc, char **argv) {
     const char *p = dil;
     for (int l = 0; l <= s.arch.n_hidden; l++) {
       char *end;
-      long dv = strtol(p, &end, 10);
+      /* digits only: strtol would also take a blank or a sign before them */
+      long dv = *p >= '0' && *p <= '9' ? strtol(p, &end, 10) : (end = (char *)p, 0);
       if (end == p || dv < 1 || dv > 64) {
         fprintf(stderr,
                 "kpcn-train: --dilations '%s': item %d is not an integer in [1, 64] (up to %d "

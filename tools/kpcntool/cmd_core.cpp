@@ -220,14 +220,18 @@ bool cmd_ch(Context &ctx, const Modifiers &, const std::vector<std::string> &a, 
     int idx = src.spec().channelindex(from);
     float v = 0.f;
     if (idx < 0) {
+      double d = 0;
+      const bool number = cli_parse_double(from.c_str(), &d); // decimal and finite only
       char *end = nullptr;
-      v = std::strtof(from.c_str(), &end);
-      if (eq == std::string::npos || end == from.c_str() || *end) {
+      std::strtof(from.c_str(), &end); // what strtof reads as a number: " 1", hex, inf, nan
+      if (eq == std::string::npos || (!number && (end == from.c_str() || *end))) {
         err = img_desc(src) + " has no channel '" + from + "'";
         return false;
       }
-      if (!std::isfinite(v)) {
-        err = "channel '" + newname + "': the constant '" + from + "' is not a finite float";
+      v = (float)d;
+      if (!number || !std::isfinite(v)) {
+        err =
+            "channel '" + newname + "': the constant '" + from + "' is not a finite decimal float";
         return false;
       }
     }

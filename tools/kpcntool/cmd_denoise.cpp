@@ -7,6 +7,7 @@
 //            [:firefly=..]
 #include "kpcn/oiio_convert.h"
 #include "kpcn/ops_denoise.h"
+#include "cli_parse.h"
 #include "kpcntool.h"
 
 #include <cstdlib>
@@ -19,10 +20,9 @@ bool parse_exposure(const std::string &v, kpcn::ops::DenoiseOptions &opt, std::s
     opt.exposure = v == "auto" ? 0.0f : KPCN_EXPOSURE_AS_RENDERED;
     return true;
   }
-  char *end = nullptr;
-  const double e = std::strtod(v.c_str(), &end);
+  double e = 0;
   // (float)e must stay > 0: 0 is the library's "auto"
-  if (v.empty() || *end != '\0' || !(e > 0.0 && e < 1e30) || !((float)e > 0.0f)) {
+  if (!cli_parse_double(v.c_str(), &e) || !(e > 0.0 && e < 1e30) || !((float)e > 0.0f)) {
     err = "exposure must be auto, off or a number > 0 and < 1e30 that a float holds (got '" + v +
           "')";
     return false;
@@ -31,16 +31,16 @@ bool parse_exposure(const std::string &v, kpcn::ops::DenoiseOptions &opt, std::s
   return true;
 }
 
-// firefly=off or a ratio >= 1 (default: kpcn_denoiser_options' own).
-bool parse_firefly(const std::string &v, kpcn::ops::DenoiseOptions &opt, std::string &err) {
-  if (v.empty()) return true;
+// firefly=off or a ratio >= 1 (absent: kpcn_denoiser_options' own).
+bool parse_firefly(const kpcntool::Modifiers &m, kpcn::ops::DenoiseOptions &opt, std::string &err) {
+  if (!m.has("firefly")) return true;
+  const std::string v = m.str("firefly");
   if (v == "off") {
     opt.firefly = 0.0f;
     return true;
   }
-  char *end = nullptr;
-  const double r = std::strtod(v.c_str(), &end);
-  if (*end != '\0' || !(r >= 1.0 && r < 1e30)) {
+  double r = 0;
+  if (!cli_parse_double(v.c_str(), &r) || !(r >= 1.0 && r < 1e30)) {
     err = "firefly must be off or a ratio in [1, 1e30) (got '" + v + "')";
     return false;
   }
@@ -58,8 +58,7 @@ bool parse_kpcn_options(const kpcntool::Modifiers &m, kpcn::ops::DenoiseOptions 
     return false;
   }
   opt.tile = (int)tile;
-  return parse_exposure(m.str("exposure", "auto"), opt, err) &&
-         parse_firefly(m.str("firefly", ""), opt, err);
+  return parse_exposure(m.str("exposure", "auto"), opt, err) && parse_firefly(m, opt, err);
 }
 
 bool run_denoise(kpcntool::Context &ctx, const kpcntool::Modifiers &m,

@@ -1,4 +1,5 @@
 // kpcntool command registry and the small Context/Modifiers helpers (see kpcntool.h).
+#include "cli_parse.h"
 #include "kpcntool.h"
 
 #include <algorithm>
@@ -38,11 +39,8 @@ std::vector<const Command *> all_commands() {
 double Modifiers::num(const std::string &k, double def) const {
   auto it = kv.find(k);
   if (it == kv.end()) return def;
-  const char *s = it->second.c_str();
-  char *end = nullptr;
-  errno = 0;
-  double v = std::strtod(s, &end);
-  if (end == s || *end != 0 || errno == ERANGE || !std::isfinite(v))
+  double v = 0;
+  if (!cli_parse_double(it->second.c_str(), &v)) // decimal only: no blanks, hex, inf or nan
     throw Error("modifier '" + k + "' needs a finite number (got '" + it->second + "')");
   return v;
 }
@@ -50,14 +48,11 @@ double Modifiers::num(const std::string &k, double def) const {
 long Modifiers::integer(const std::string &k, long def) const {
   auto it = kv.find(k);
   if (it == kv.end()) return def;
-  const char *s = it->second.c_str();
-  char *end = nullptr;
-  errno = 0;
-  long v = std::strtol(s, &end, 10);
-  if (end == s || *end != 0 || errno == ERANGE || v < INT_MIN || v > INT_MAX)
+  long long v = 0;
+  if (!cli_parse_ll(it->second.c_str(), INT_MIN, INT_MAX, &v)) // digits, a '-' at most
     throw Error("modifier '" + k + "' needs an integer in [" + std::to_string(INT_MIN) + ", " +
                 std::to_string(INT_MAX) + "] (got '" + it->second + "')");
-  return v;
+  return (long)v;
 }
 
 uint64_t Modifiers::u64(const std::string &k, uint64_t def) const {
