@@ -58,6 +58,11 @@ run_ok mosaic.exr --info
 grep -qF "768x256, 3 channels" out.txt && pass "mosaic size" || fail "mosaic: $(cat out.txt)"
 run_ok "$NOISY" --ch R,G,B "$REF" --mosaic:n=2 --info
 grep -qF "512x256" out.txt && pass "mosaic n=2" || fail "$(cat out.txt)"
+# a label wider than its tile is cut off by the next tile: said, naming it (256-px tiles fit
+# "ref" at the default size, not a 60-character label)
+run_ok "$REF" "$REF" --mosaic:labels=ref,$(printf 'w%.0s' $(seq 60)) -o wide.exr
+grep -q "warning: --mosaic: label 'w*' needs [0-9]* px at fontsize 16, its 256-px tile has 252" err.txt &&
+  ! grep -q "label 'ref'" err.txt && pass "wide label warned" || fail "wide label: $(cat err.txt)"
 # A missing font only costs the labels: warning, exit 0, mosaic written.
 run_ok "$REF" "$REF" --mosaic:labels=a,b:font=NoSuchFont -o nofont.exr
 grep -q "warning: --mosaic: labels not drawn" err.txt && [ -f nofont.exr ] && pass "font fallback" ||

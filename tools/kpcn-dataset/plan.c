@@ -774,9 +774,10 @@ int ds_cmd_plan(int argc, char **argv) {
     printf("planned %d scenes:", nsc);
     for (int i = 0; i < nsc; i++)
       printf(" %s(%s)", sc[i].name, sc[i].split);
-    printf("\n%d jobs (%d noisy, %d reference, %d preview), %.3g camera samples -> "
-           "%s/manifest.jsonl\n",
-           c.m.n, cnt[DS_NOISY], cnt[DS_REFERENCE], cnt[DS_PREVIEW], c.samples, outdir);
+    char mp[DS_PATH];
+    ds_join(mp, sizeof mp, outdir, "manifest.jsonl");
+    printf("\n%d jobs (%d noisy, %d reference, %d preview), %.3g camera samples -> %s\n", c.m.n,
+           cnt[DS_NOISY], cnt[DS_REFERENCE], cnt[DS_PREVIEW], c.samples, mp);
   }
   track_free(&c.made);
   ds_manifest_free(&c.m);

@@ -43,10 +43,11 @@ int ds_exists(const char *path) {
 }
 
 void ds_join(char *out, size_t n, const char *a, const char *b) {
-  if (b[0] == '/' || !a[0])
+  const size_t la = strlen(a);
+  if (b[0] == '/' || !la)
     snprintf(out, n, "%s", b);
-  else
-    snprintf(out, n, "%s/%s", a, b);
+  else /* "ds/" + "x": one slash, not "ds//x" in messages */
+    snprintf(out, n, "%s%s%s", a, a[la - 1] == '/' ? "" : "/", b);
 }
 
 char *ds_slurp(const char *path, size_t *len) {

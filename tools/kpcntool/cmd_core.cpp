@@ -468,6 +468,14 @@ bool cmd_mosaic(Context &ctx, const Modifiers &m, const std::vector<std::string>
                    dst.geterror().c_str());
       warned = true;
     }
+    /* the next tile is pasted over whatever runs past this one: say so, not a silent "nlmea" */
+    const OIIO::ROI ts =
+        labels.empty() || warned ? OIIO::ROI() : IBA::text_size(labels[i], (int)fontsize, font);
+    if (ts.defined() && 4 + ts.width() > b.spec().width)
+      std::fprintf(stderr,
+                   "kpcntool: warning: --mosaic: label '%s' needs %d px at fontsize %ld, its "
+                   "%d-px tile has %d: it is cut off (lower fontsize)\n",
+                   labels[i].c_str(), ts.width(), fontsize, b.spec().width, b.spec().width - 4);
     x += b.spec().width;
   }
   ctx.stack.resize(base);
