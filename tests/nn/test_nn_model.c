@@ -393,6 +393,35 @@ static void test_roundtrip(blob *good) {
   CHECK(kpcn_model_load(kt_tmpfile("does-not-exist.safetensors"), &r) == KPCN_ERR_IO);
 }
 
+/* kpcn_model_load_memory on a file's bytes: the same model as kpcn_model_load, bit for bit;
+ * damaged bytes refused as the file reader refuses them, naming "(memory)" */
+static void test_memory(const blob *good) {
+  const char *path = kt_tmpfile("mem.safetensors");
+  spit(path, good->p, good->n);
+  kpcn_model *f = NULL, *m = NULL;
+  CHECK(kpcn_model_load(path, &f) == KPCN_OK);
+  CHECK(kpcn_model_load_memory(good->p, good->n, &m) == KPCN_OK);
+  if (f && m) {
+    const kpcn_arch *a = kpcn_model_arch(f);
+    CHECK(memcmp(a, kpcn_model_arch(m), sizeof *a) == 0);
+    for (int b = 0; b < 2; b++)
+      for (int l = 0; l <= a->n_hidden; l++) {
+        kpcn_layer_view v, w;
+        kpcn_model_layer(f, (kpcn_branch)b, l, &v);
+        kpcn_model_layer(m, (kpcn_branch)b, l, &w);
+        CHECK(memcmp(v.weight, w.weight, (size_t)v.out_ch * v.in_ch * v.size * v.size * 4) == 0);
+        CHECK(memcmp(v.bias, w.bias, (size_t)v.out_ch * 4) == 0);
+      }
+  }
+  kpcn_model_destroy(f);
+  kpcn_model_destroy(m);
+  m = (kpcn_model *)(uintptr_t)1;
+  CHECK(kpcn_model_load_memory(good->p, good->n - 10, &m) == KPCN_ERR_FORMAT && !m);
+  CHECK(strstr(kpcn_last_error(), "(memory)") != NULL);
+  CHECK(kpcn_model_load_memory(good->p, 5, &m) == KPCN_ERR_FORMAT);
+  CHECK(kpcn_model_load_memory(NULL, 100, &m) == KPCN_ERR_INVALID_ARGUMENT);
+}
+
 static void test_malformed(const blob *good) {
   const char *p = kt_tmpfile("bad.safetensors");
   uint64_t hl = hlen(good);
@@ -481,6 +510,7 @@ int main(void) {
   test_init();
   blob good = {0, 0};
   test_roundtrip(&good);
+  if (good.p) test_memory(&good);
   if (good.p) test_malformed(&good);
   free(good.p);
   return kt_summary("test_nn_model");

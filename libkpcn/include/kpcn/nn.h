@@ -187,6 +187,10 @@ kpcn_status kpcn_model_layer(kpcn_model *m, kpcn_branch b, int layer, kpcn_layer
  * tensor, KPCN_ERR_IO for open/read failures. */
 kpcn_status kpcn_model_save(const kpcn_model *m, const char *path);
 kpcn_status kpcn_model_load(const char *path, kpcn_model **out);
+/* The same from a safetensors file's bytes in memory (a model built into an application's
+ * binary; the bytes are only read, and may be freed after the call). Errors name "(memory)"
+ * where kpcn_model_load names the file. kpcn_denoiser_create_with_model denoises with it. */
+kpcn_status kpcn_model_load_memory(const void *data, size_t size, kpcn_model **out);
 /* The file's name of one layer's weight or bias tensor ("diffuse.conv3.bias"). */
 void kpcn_model_tensor_name(char *buf, size_t n, kpcn_branch b, int layer, int is_bias);
 

@@ -365,6 +365,21 @@ static kpcn_status load_file(FILE *f, const char *path, kpcn_model **out) {
   return KPCN_OK;
 }
 
+kpcn_status kpcn_model_load_memory(const void *data, size_t size, kpcn_model **out) {
+  if (!data || !out)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_load_memory: NULL argument");
+  *out = NULL;
+  if (size < 8)
+    return kpcn_fail(KPCN_ERR_FORMAT,
+                     "model in memory: %zu bytes is too short for a safetensors file", size);
+  /* the file reader over the bytes (read-only: fmemopen never writes in "rb") */
+  FILE *f = fmemopen((void *)data, size, "rb");
+  if (!f) return kpcn_fail(KPCN_ERR_IO, "model in memory: fmemopen failed: %s", strerror(errno));
+  kpcn_status s = load_file(f, "(memory)", out);
+  fclose(f);
+  return s;
+}
+
 kpcn_status kpcn_model_load(const char *path, kpcn_model **out) {
   if (!path || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_model_load: NULL argument");
   *out = NULL;
