@@ -149,6 +149,94 @@ static void test_aovs(const kpcn_scene *s) {
   kpcn_aov_destroy(a);
 }
 
+/* integrator.min_bounces as Tungsten counts it: light that reaches the camera over fewer than
+ * min_bounces surfaces is dropped. With one sample sequence for every setting, per pixel:
+ *   min 0 - min 1 = the emitters seen directly (what max_bounces 0 renders),
+ *   min 1 - min 2 = the direct lighting (max_bounces 1 less max_bounces 0),
+ * and min_bounces past the last surface gives black, the features unchanged. */
+/* The cornell box with integrator.min_bounces set (NULL on failure). */
+static kpcn_scene *with_min_bounces(int k) {
+  cJSON *doc = rt_read_json(CORNELL);
+  if (!doc) return NULL;
+  cJSON_ReplaceItemInObject(cJSON_GetObjectItem(doc, "integrator"), "min_bounces",
+                            cJSON_CreateNumber(k));
+  kpcn_scene *s = NULL;
+  if (rt_load(doc, KPCN_TESTDATA "/scenes/cornell-box", &s) != KPCN_OK) s = NULL;
+  cJSON_Delete(doc);
+  return s;
+}
+
+static void test_min_bounces(const kpcn_scene *s) {
+  const int W = 24, spp = 4;
+  kpcn_aov_set *m[3] = {NULL, NULL, NULL},
+               *b0 = rt_render(s, spp, 5, 0, W, W, KPCN_LIGHTS_SCENE, 0),
+               *b1 = rt_render(s, spp, 5, 0, W, W, KPCN_LIGHTS_SCENE, 1), *none = NULL;
+  for (int k = 0; k < 4; k++) {
+    kpcn_scene *sk = with_min_bounces(k < 3 ? k : 9); /* 9: past max_bounces 6 */
+    CHECK(sk != NULL);
+    if (!sk) continue;
+    kpcn_aov_set *r = rt_render(sk, spp, 5, 0, W, W, KPCN_LIGHTS_SCENE, 6);
+    if (k < 3)
+      m[k] = r;
+    else
+      none = r;
+    kpcn_scene_destroy(sk);
+  }
+  CHECK(m[0] && m[1] && m[2] && b0 && b1 && none);
+  if (m[0] && m[1] && m[2] && b0 && b1 && none) {
+    const size_t n = 3 * kpcn_aov_plane_size(m[0]);
+    const float *c0 = m[0]->buf[KPCN_BUF_COLOR], *c1 = m[1]->buf[KPCN_BUF_COLOR],
+                *c2 = m[2]->buf[KPCN_BUF_COLOR], *e = b0->buf[KPCN_BUF_COLOR],
+                *d = b1->buf[KPCN_BUF_COLOR];
+    double worst = 0, direct = 0, emit = 0;
+    int black = 1;
+    for (size_t i = 0; i < n; i++) {
+      worst = fmax(worst, fabs((c0[i] - c1[i]) - e[i]) / (1.0 + e[i]));
+      worst = fmax(worst, fabs((c1[i] - c2[i]) - (d[i] - e[i])) / (1.0 + d[i]));
+      direct += d[i] - e[i], emit += e[i];
+      black &= none->buf[KPCN_BUF_COLOR][i] == 0.0f;
+    }
+    printf("min_bounces: worst decomposition error %.2e (emitters %.3g, direct %.3g in all)\n",
+           worst, emit, direct);
+    CHECK(worst < 1e-5);
+    CHECK(emit > 0 && direct > 0); /* the identities are about something */
+    CHECK(black);
+    CHECK(memcmp(none->buf[KPCN_BUF_ALBEDO], m[0]->buf[KPCN_BUF_ALBEDO], sizeof(float) * n) == 0);
+  }
+  for (int k = 0; k < 3; k++)
+    kpcn_aov_destroy(m[k]);
+  kpcn_aov_destroy(b0), kpcn_aov_destroy(b1), kpcn_aov_destroy(none);
+}
+
+/* A mesh without "smooth" is flat-shaded, as in Tungsten (smooth was the default until
+ * session 58): the same image as "smooth": false, another than "smooth": true. */
+static void test_mesh_smooth_default(void) {
+  const char *dir = KPCN_TESTDATA "/scenes/envmap-lighting";
+  cJSON *doc = rt_read_json(KPCN_TESTDATA "/scenes/envmap-lighting/scene.json");
+  CHECK(doc != NULL);
+  if (!doc) return;
+  cJSON *mesh = cJSON_GetArrayItem(cJSON_GetObjectItem(doc, "primitives"), 1);
+  CHECK(mesh && cJSON_GetObjectItem(mesh, "smooth") != NULL);
+  kpcn_aov_set *img[3] = {NULL, NULL, NULL}; /* absent, false, true */
+  for (int k = 0; k < 3 && mesh; k++) {
+    cJSON_DeleteItemFromObject(mesh, "smooth");
+    if (k) cJSON_AddBoolToObject(mesh, "smooth", k == 2);
+    kpcn_scene *sc = NULL;
+    CHECK(rt_load(doc, dir, &sc) == KPCN_OK);
+    if (sc) img[k] = rt_render(sc, 2, 3, 0, 32, 24, KPCN_LIGHTS_SCENE, -1);
+    kpcn_scene_destroy(sc);
+  }
+  CHECK(img[0] && img[1] && img[2]);
+  if (img[0] && img[1] && img[2]) {
+    const size_t n = sizeof(float) * 3 * kpcn_aov_plane_size(img[0]);
+    CHECK(memcmp(img[0]->buf[KPCN_BUF_COLOR], img[1]->buf[KPCN_BUF_COLOR], n) == 0);
+    CHECK(memcmp(img[0]->buf[KPCN_BUF_NORMAL], img[2]->buf[KPCN_BUF_NORMAL], n) != 0);
+  }
+  for (int k = 0; k < 3; k++)
+    kpcn_aov_destroy(img[k]);
+  cJSON_Delete(doc);
+}
+
 /* mean of colour over the image and the standard deviation of that mean */
 static void image_mean(const kpcn_aov_set *a, double *m, double *sd) {
   size_t plane = kpcn_aov_plane_size(a);
@@ -355,6 +443,8 @@ int main(void) {
   if (!cb) return kt_summary("render_core");
   test_determinism(cb);
   test_aovs(cb);
+  test_min_bounces(cb);
+  test_mesh_smooth_default();
   test_split(KPCN_TESTDATA "/scenes/glossy-mirror/scene.json");
   test_estimators(CORNELL, 32, 32, 256);
   test_estimators(KPCN_TESTDATA "/scenes/sky-plastics/scene.json", 32, 24, 128);

@@ -237,6 +237,18 @@ static void test_scene_values(void) {
   expect_fail("huge environment",
               "{\"primitives\":[{\"type\":\"infinite_sphere\",\"emission\":[1,1,2e15]}]}",
               "primitives[0].emission", "maximum");
+  /* Tungsten's own primitives kpcn lacks are named by type, not by their first field */
+  expect_fail("skydome", "{\"primitives\":[{\"type\":\"skydome\",\"temperature\":5777}]}",
+              "unsupported primitive type 'skydome'", NULL);
+  expect_fail("point light", "{\"primitives\":[{\"type\":\"point\",\"power\":10}]}",
+              "unsupported primitive type 'point'", NULL);
+  /* the camera: a scale in its transform, or the old fields beside it, were dropped silently */
+  expect_fail("camera scale", CAM("\"type\":\"pinhole\",\"transform\":{\"scale\":[1,2,1]}"),
+              "camera.transform: a scale is not supported", "y axis has length 2");
+  expect_fail("camera both",
+              CAM("\"type\":\"pinhole\",\"transform\":{\"position\":[0,0,0]},"
+                  "\"position\":[0,1,0]"),
+              "camera.position: given beside camera.transform", NULL);
   /* malformed documents */
   expect_fail("text after the document", "{\"primitives\":[" LIGHT "]} garbage", "invalid JSON",
               "text after the end");

@@ -217,7 +217,9 @@ typedef struct path_state {
 /* Radiance of the escaped ray of path L (environment), with its MIS weight. */
 static void shade_miss(const kpcn_render_ctx *ctx, path_state *L) {
   const kpcn_scene *s = ctx->scene;
-  if (s->env) {
+  /* integrator.min_bounces, as Tungsten: light reaching the camera over fewer surfaces than
+   * that is not counted (L->bounce surfaces were hit before this miss) */
+  if (s->env && L->bounce >= ctx->min_bounces) {
     kpcn_vec3 Le = kpcn_envmap_eval(s->env, L->d);
     float w = 1.0f;
     if (!L->prev_delta) {
@@ -248,7 +250,7 @@ static void shade_hit(const kpcn_render_ctx *ctx, path_state *L, unsigned geom_i
   kpcn_hit_fill(s, p, L->o, d, t, prim_id, bu, bv, &h);
   L->path_len += h.t;
   L->alive = 0;
-  if (p->emissive) {
+  if (p->emissive && L->bounce >= ctx->min_bounces) { /* L->bounce surfaces before this one */
     kpcn_vec3 Le = kpcn_prim_emission(p, &h, d);
     if (!kv3_is_zero(Le)) {
       float w = 1.0f;
@@ -315,6 +317,10 @@ static void shade_hit(const kpcn_render_ctx *ctx, path_state *L, unsigned geom_i
         L->add_d = kv3_mul(L->tp_d, L->nee.c_tot);
         L->add_s = kv3_mul(L->tp_s, L->nee.c_tot);
       }
+      /* the light reached through this shadow ray has crossed L->bounce + 1 surfaces: below
+       * min_bounces it is not counted, but the ray is still traced (the visibility AOV, and
+       * the same sample sequence as without min_bounces) */
+      if (L->bounce + 1 < ctx->min_bounces) L->add_d = L->add_s = kv3s(0.0f);
     }
   } else if (at_feature && !ctx->color_only && s->nlights > 0) {
     /* light sampling is off (BSDF-only): still trace one shadow ray for the visibility AOV,

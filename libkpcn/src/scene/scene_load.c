@@ -288,7 +288,6 @@ static kpcn_status parse_primitive_into_slot(kpcn_scene *s, const cJSON *pj, int
                                  "sample",
                                  "cone_angle",
                                  NULL};
-  KPCN_TRY(check_fields(pj, path, common));
   if (strcmp(type, "quad") == 0)
     p->type = KPCN_PRIM_QUAD;
   else if (strcmp(type, "cube") == 0)
@@ -306,6 +305,9 @@ static kpcn_status parse_primitive_into_slot(kpcn_scene *s, const cJSON *pj, int
                      "%s.type: unsupported primitive type '%s' (quad, cube, sphere, disk, mesh, "
                      "infinite_sphere)",
                      path, type);
+  /* fields after the type: a Tungsten skydome or point light is named as the unsupported type
+   * it is, not by its first field ("temperature", "power") */
+  KPCN_TRY(check_fields(pj, path, common));
   /* type-specific fields present on the wrong type are errors too */
   const char *mesh_only[] = {"file", "smooth", "backface_culling", "recompute_normals"};
   for (int i = 0; i < 4; i++)
@@ -336,7 +338,8 @@ static kpcn_status parse_primitive_into_slot(kpcn_scene *s, const cJSON *pj, int
     join_path(full, sizeof(full), s->base_dir, file);
     snprintf(sub, sizeof(sub), "%s.file", path);
     KPCN_TRY(kpcn_mesh_load(full, sub, &p->mesh));
-    p->mesh.smooth = 1;
+    p->mesh.smooth =
+        0; /* Tungsten's default: flat unless "smooth": true (was 1 until session 58) */
     KPCN_TRY(get_bool(pj, "smooth", path, &p->mesh.smooth));
     KPCN_TRY(require_bool(pj, "backface_culling", path, 0));
     int recompute = 0;
@@ -514,11 +517,28 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera.aperture_size: %g is negative", ap);
   const cJSON *tj = cJSON_GetObjectItemCaseSensitive(cj, "transform");
   if (tj) {
+    static const char *const old_keys[3] = {"position", "lookAt", "up"};
+    for (int k = 0; k < 3; k++)
+      if (cJSON_GetObjectItemCaseSensitive(cj, old_keys[k]))
+        return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                         "camera.%s: given beside camera.transform, which sets the view (give "
+                         "one of the two)",
+                         old_keys[k]);
     kpcn_xform x;
     KPCN_TRY(kpcn_xform_parse(tj, "camera.transform", &x));
     pos = kpcn_xform_point(&x, kv3s(0));
     dir = kpcn_xform_column(&x, 2);
     up = kpcn_xform_column(&x, 1);
+    /* the camera takes a position and an orientation: a scale would stretch the view in
+     * Tungsten, and was dropped here without a word */
+    for (int k = 0; k < 3; k++) {
+      const float len = kv3_length(kpcn_xform_column(&x, k));
+      if (!(fabsf(len - 1.0f) <= 1e-3f))
+        return kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                         "camera.transform: a scale is not supported (its %c axis has length %g; "
+                         "the camera takes position and orientation only)",
+                         "xyz"[k], (double)len);
+    }
   } else { /* Tungsten's older camera fields */
     const char *keys[3] = {"position", "lookAt", "up"};
     kpcn_vec3 look = kv3_add(pos, dir);
