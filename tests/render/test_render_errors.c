@@ -242,6 +242,10 @@ static void test_scene_values(void) {
               "unsupported primitive type 'skydome'", NULL);
   expect_fail("point light", "{\"primitives\":[{\"type\":\"point\",\"power\":10}]}",
               "unsupported primitive type 'point'", NULL);
+  expect_fail("bsdf list", "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":[\"a\",\"b\"]}]}",
+              "a list of bsdfs (one per mesh material group) is not supported", NULL);
+  expect_fail("media null", "{\"media\":null,\"primitives\":[" LIGHT "]}",
+              "media: expected an array", NULL);
   /* the camera: a scale in its transform, or the old fields beside it, were dropped silently */
   expect_fail("camera scale", CAM("\"type\":\"pinhole\",\"transform\":{\"scale\":[1,2,1]}"),
               "camera.transform: a scale is not supported", "y axis has length 2");

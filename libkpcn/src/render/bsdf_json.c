@@ -405,6 +405,11 @@ kpcn_status kpcn_bsdf_parse(kpcn_material_lib *lib, const cJSON *node, const cha
   if (!node) return kpcn_fail(KPCN_ERR_FORMAT, "%s: missing bsdf", path);
   if (cJSON_IsString(node)) return lookup_name(lib, node->valuestring, path, out);
   if (cJSON_IsObject(node)) return parse_object(lib, node, path, out);
+  if (cJSON_IsArray(node)) /* Tungsten's per-material-group meshes */
+    return kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                     "%s: a list of bsdfs (one per mesh material group) is not supported: give "
+                     "one bsdf name or object",
+                     path);
   return kpcn_fail(KPCN_ERR_FORMAT, "%s: expected a bsdf name or a bsdf object", path);
 }
 

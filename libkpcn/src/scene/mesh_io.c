@@ -163,7 +163,8 @@ kpcn_status kpcn_mesh_load(const char *path, const char *jp, kpcn_mesh *m) {
     st = load_assimp(path, jp, m);
   else
     st = kpcn_fail(KPCN_ERR_UNSUPPORTED,
-                   "%s: unsupported mesh format '%s' (wo3, obj, ply, gltf, glb)", jp, path);
+                   "%s: unsupported mesh format '%s' (wo3, obj, ply, gltf, glb, fbx, dae)", jp,
+                   path);
   if (st == KPCN_OK) {
     for (int i = 0; i < 3 * m->nverts; i++)
       if (!isfinite(m->pos[i])) {

@@ -644,7 +644,9 @@ static kpcn_status parse_document(kpcn_scene *s, const cJSON *root) {
                                 "integrator", "renderer", NULL};
   KPCN_TRY(check_fields(root, "(root)", known));
   const cJSON *media = cJSON_GetObjectItemCaseSensitive(root, "media");
-  if (media && (!cJSON_IsArray(media) || cJSON_GetArraySize(media) != 0))
+  if (media && !cJSON_IsArray(media))
+    return kpcn_fail(KPCN_ERR_FORMAT, "media: expected an array (of media)");
+  if (media && cJSON_GetArraySize(media) != 0)
     return kpcn_fail(KPCN_ERR_UNSUPPORTED, "media: participating media are not supported");
   KPCN_TRY(kpcn_material_lib_create(s->base_dir, &s->mats));
   const cJSON *bsdfs = cJSON_GetObjectItemCaseSensitive(root, "bsdfs");
