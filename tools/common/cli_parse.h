@@ -1,9 +1,9 @@
-/* Strict number parsing for the command-line tools' option values (kpcn-render, kpcn-dataset,
- * kpcntool --render). Digits only, with a leading '-' only where the range allows negatives: no
- * blanks, no
- * '+', nothing after the number, and a range check done on the long strtol returns. sscanf's %d
+/* Strict parsing of the command-line tools' numeric option values (kpcn-render, kpcn-dataset,
+ * kpcn-train, kpcntool's modifiers): integers are digits, with a '-' only where the range
+ * allows negatives, and are range-checked as 64-bit values; numbers are plain decimals. No
+ * blanks, no '+' on integers, no hexadecimal, inf or nan, nothing after the value. sscanf's %d
  * wraps what does not fit an int without a word (4294967312x4294967304 was read as 16x8), and
- * strtol alone skips leading blanks. */
+ * strtol/strtod alone skip leading blanks. */
 #ifndef KPCN_TOOLS_CLI_PARSE_H
 #define KPCN_TOOLS_CLI_PARSE_H
 

@@ -1,8 +1,8 @@
 /* kpcn-train — trains the two-branch KPCN on a patch store (seed ch. 4.4-6).
  * See docs/training.md. Exit status: 0 done (or stopped cleanly and checkpointed), 1 error,
  * 2 bad usage. */
-#include "kpcn/dataset.h"
 #include "cli_parse.h"
+#include "kpcn/dataset.h"
 #include "kpcn/train.h"
 
 #include <errno.h>
@@ -154,7 +154,6 @@ static int add_val(const char *noisy, const char *ref, size_t nlen) {
   return 1;
 }
 
-/* Validation pairs from the store's "val" sources (paths relative to the store's folder). */
 /* --val-store: every source of a validation store (the recipe's `patches --split val` store)
  * becomes a --val pair, its paths relative to the store's folder (as kpcn-dataset records
  * them). Returns 0 (message printed) on failure. */
