@@ -249,6 +249,8 @@ static void test_scene_values(void) {
   /* the camera: a scale in its transform, or the old fields beside it, were dropped silently */
   expect_fail("camera scale", CAM("\"type\":\"pinhole\",\"transform\":{\"scale\":[1,2,1]}"),
               "camera.transform: a scale is not supported", "y axis has length 2");
+  expect_fail("camera mirror", CAM("\"type\":\"pinhole\",\"transform\":{\"scale\":[-1,1,1]}"),
+              "camera.transform: a mirroring transform", NULL);
   expect_fail("camera both",
               CAM("\"type\":\"pinhole\",\"transform\":{\"position\":[0,0,0]},"
                   "\"position\":[0,1,0]"),

@@ -539,6 +539,11 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
                          "the camera takes position and orientation only)",
                          "xyz"[k], (double)len);
     }
+    /* a mirror (scale -1, or a left-handed matrix) would flip the image in Tungsten */
+    if (kv3_dot(kv3_cross(kpcn_xform_column(&x, 0), up), dir) < 0.0f)
+      return kpcn_fail(KPCN_ERR_UNSUPPORTED,
+                       "camera.transform: a mirroring transform (left-handed axes) is not "
+                       "supported");
   } else { /* Tungsten's older camera fields */
     const char *keys[3] = {"position", "lookAt", "up"};
     kpcn_vec3 look = kv3_add(pos, dir);
