@@ -41,6 +41,19 @@ bool read_image(ImageBuf &dst, const std::string &path, std::string &err) {
     return false;
   }
   const ImageSpec &sp = b.spec();
+  /* a deep image reads as a flat one here, and the operations then crashed inside OIIO */
+  if (sp.deep) {
+    err = "'" + path + "' is a deep image: deep images are not supported";
+    return false;
+  }
+  /* the other parts of a multi-part EXR (a Blender multilayer file's passes) are not read:
+   * say so, rather than a "missing buffer" later */
+  if (b.nsubimages() > 1)
+    std::fprintf(stderr,
+                 "kpcntool: warning: '%s' holds %d parts (subimages); only the first, with %d "
+                 "channels, is read (kpcn reads single-part files: merge the passes into one "
+                 "part first)\n",
+                 path.c_str(), b.nsubimages(), sp.nchannels);
   if (sp.width <= 0 || sp.height <= 0 || sp.depth != 1 || sp.nchannels <= 0 ||
       sp.width > KPCN_MAX_DIM || sp.height > KPCN_MAX_DIM ||
       (int64_t)sp.width * sp.height > KPCN_MAX_PIXELS) {
