@@ -101,8 +101,14 @@ static MetricResult run(const ImageBuf &x, const ImageBuf &ref, Metric m, const 
   o.nthreads = nthreads;
   kpcn_metric_result res{};
   kpcn_image *em = nullptr;
-  kpcn_status s = kpcn_metric_image((kpcn_metric)m, ix.get(), iy.get(), nullptr, 0, &o, &res,
-                                    map ? &em : nullptr);
+  // the list chosen above, passed on: without it the C default would take R,G,B again from
+  // an explicit R,G,B,Z (both images hold a channel other than R,G,B,A)
+  std::vector<const char *> names;
+  for (const std::string &c : chans)
+    names.push_back(c.c_str());
+  kpcn_status s =
+      kpcn_metric_image((kpcn_metric)m, ix.get(), iy.get(), names.empty() ? nullptr : names.data(),
+                        (int)names.size(), &o, &res, map ? &em : nullptr);
   if (s != KPCN_OK) {
     r.error = kpcn_last_error();
     r.nonfinite = res.nonfinite;

@@ -27,6 +27,15 @@ run_ok "$NOISY" "$REF" --relmse "$REF" "$REF" --relmse --ssim:channels=G --json
 cp out.txt chain.json
 near "$(json_get chain.json relmse)" 0.010623011681784552 1e-7 && near "$(json_get chain.json relmse_2)" 0 0 \
   && near "$(json_get chain.json ssim)" 1 1e-12 && pass "chaining" || fail "chaining: $(cat chain.json)"
+# An explicit list is compared as given, past the AOV default's R,G,B: relMSE is the mean
+# over the channels, so R,G,B,Z's is (3 RGB + Z) / 4 (session 58: an explicit list holding
+# R,G,B was cut back to them)
+AOVN="$TD/dataset/sample_noisy.exr" AOVR="$TD/dataset/sample_ref.exr"
+run_ok "$AOVN" "$AOVR" --relmse:channels=R,G,B,Z --relmse --relmse:channels=Z --json
+cp out.txt list.json
+want=$($PY -c 'import json,sys; d=json.load(open(sys.argv[1])); print((3*d["relmse_2"]+d["relmse_3"])/4)' list.json)
+near "$(json_get list.json relmse)" "$want" 1e-12 && pass "explicit channel list" ||
+  fail "channels=R,G,B,Z: $(cat list.json), want relmse $want"
 # PSNR of identical images is +inf -> JSON null.
 run_ok "$REF" "$REF" --psnr --json
 grep -q '"psnr": null' out.txt && pass "psnr inf -> null" || fail "psnr: $(cat out.txt)"
