@@ -237,6 +237,51 @@ static void test_mesh_smooth_default(void) {
   cJSON_Delete(doc);
 }
 
+/* recompute_normals keeps creases hard, as Tungsten: a cube of 8 shared vertices, smooth with
+ * recomputed normals, shades like the flat cube (its faces meet at 90 degrees, past the 27-degree
+ * crease limit); averaging every face at a vertex (until session 58) rounded it. */
+static void test_mesh_creases(void) {
+  const char *obj = kt_tmpfile("cube.obj");
+  FILE *f = fopen(obj, "w");
+  CHECK(f != NULL);
+  if (!f) return;
+  fputs("v -0.5 -0.5 -0.5\nv 0.5 -0.5 -0.5\nv 0.5 0.5 -0.5\nv -0.5 0.5 -0.5\n"
+        "v -0.5 -0.5 0.5\nv 0.5 -0.5 0.5\nv 0.5 0.5 0.5\nv -0.5 0.5 0.5\n"
+        "f 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\n"
+        "f 4 7 3\nf 4 8 7\nf 1 5 8\nf 1 8 4\nf 2 3 7\nf 2 7 6\n",
+        f);
+  fclose(f);
+  cJSON *doc = rt_read_json(KPCN_TESTDATA "/scenes/envmap-lighting/scene.json");
+  CHECK(doc != NULL);
+  if (!doc) return;
+  cJSON *mesh = cJSON_GetArrayItem(cJSON_GetObjectItem(doc, "primitives"), 1);
+  cJSON_ReplaceItemInObject(mesh, "file", cJSON_CreateString(obj));
+  kpcn_aov_set *img[2] = {NULL, NULL}; /* flat; smooth with recomputed normals */
+  for (int k = 0; k < 2; k++) {
+    cJSON_DeleteItemFromObject(mesh, "smooth");
+    cJSON_DeleteItemFromObject(mesh, "recompute_normals");
+    cJSON_AddBoolToObject(mesh, "smooth", k == 1);
+    if (k) cJSON_AddBoolToObject(mesh, "recompute_normals", 1);
+    kpcn_scene *sc = NULL;
+    CHECK(rt_load(doc, KPCN_TESTDATA "/scenes/envmap-lighting", &sc) == KPCN_OK);
+    if (sc) img[k] = rt_render(sc, 1, 3, 0, 32, 24, KPCN_LIGHTS_SCENE, -1);
+    kpcn_scene_destroy(sc);
+  }
+  CHECK(img[0] && img[1]);
+  if (img[0] && img[1]) {
+    const size_t n = 3 * kpcn_aov_plane_size(img[0]);
+    double worst = 0, seen = 0;
+    for (size_t i = 0; i < n; i++) {
+      worst = fmax(worst, fabs(img[0]->buf[KPCN_BUF_NORMAL][i] - img[1]->buf[KPCN_BUF_NORMAL][i]));
+      seen += fabs(img[0]->buf[KPCN_BUF_NORMAL][i]);
+    }
+    printf("mesh creases: worst normal difference to the flat cube %.2e\n", worst);
+    CHECK(seen > 0 && worst < 1e-5);
+  }
+  kpcn_aov_destroy(img[0]), kpcn_aov_destroy(img[1]);
+  cJSON_Delete(doc);
+}
+
 /* mean of colour over the image and the standard deviation of that mean */
 static void image_mean(const kpcn_aov_set *a, double *m, double *sd) {
   size_t plane = kpcn_aov_plane_size(a);
@@ -445,6 +490,7 @@ int main(void) {
   test_aovs(cb);
   test_min_bounces(cb);
   test_mesh_smooth_default();
+  test_mesh_creases();
   test_split(KPCN_TESTDATA "/scenes/glossy-mirror/scene.json");
   test_estimators(CORNELL, 32, 32, 256);
   test_estimators(KPCN_TESTDATA "/scenes/sky-plastics/scene.json", 32, 24, 128);

@@ -129,6 +129,9 @@ kpcn_vec3 kpcn_xform_column(const kpcn_xform *x, int i);
  * arrays in m). Errors name the file and json_path. */
 kpcn_status kpcn_mesh_load(const char *path, const char *json_path, kpcn_mesh *m);
 void kpcn_mesh_free(kpcn_mesh *m);
+/* Smooth normals with hard creases, as Tungsten computes them (mesh_normals.c); may add
+ * vertices (a corner past a crease gets its own). */
+kpcn_status kpcn_mesh_smooth_normals(kpcn_mesh *m);
 
 /* ---- scene_embree.c ---- */
 /* Largest |coordinate| a scene may reach (vertices, sphere/disc extents, camera position plus

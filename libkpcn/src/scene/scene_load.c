@@ -153,33 +153,6 @@ static kpcn_status parse_emission(kpcn_scene *s, kpcn_prim *p, const cJSON *e, c
   return KPCN_OK;
 }
 
-/* Smooth vertex normals: area-weighted sum of the adjacent face normals (object space; the
- * transform is applied later like for file normals). */
-static kpcn_status compute_vertex_normals(kpcn_mesh *m) {
-  if (!m->nrm) {
-    m->nrm = kpcn_alloc((size_t)m->nverts * 3 * sizeof(float), "mesh normals");
-    if (!m->nrm) return KPCN_ERR_OUT_OF_MEMORY;
-  }
-  memset(m->nrm, 0, (size_t)m->nverts * 3 * sizeof(float));
-  for (int t = 0; t < m->ntris; t++) {
-    const unsigned *id = m->idx + 3 * t;
-    kpcn_vec3 a = kv3(m->pos[3 * id[0]], m->pos[3 * id[0] + 1], m->pos[3 * id[0] + 2]);
-    kpcn_vec3 b = kv3(m->pos[3 * id[1]], m->pos[3 * id[1] + 1], m->pos[3 * id[1] + 2]);
-    kpcn_vec3 c = kv3(m->pos[3 * id[2]], m->pos[3 * id[2] + 1], m->pos[3 * id[2] + 2]);
-    kpcn_vec3 n = kv3_cross(kv3_sub(b, a), kv3_sub(c, a)); /* length = 2 x area */
-    for (int k = 0; k < 3; k++) {
-      m->nrm[3 * id[k]] += n.x;
-      m->nrm[3 * id[k] + 1] += n.y;
-      m->nrm[3 * id[k] + 2] += n.z;
-    }
-  }
-  for (int i = 0; i < m->nverts; i++) {
-    kpcn_vec3 n = kv3_normalize(kv3(m->nrm[3 * i], m->nrm[3 * i + 1], m->nrm[3 * i + 2]));
-    m->nrm[3 * i] = n.x, m->nrm[3 * i + 1] = n.y, m->nrm[3 * i + 2] = n.z;
-  }
-  return KPCN_OK;
-}
-
 /* Fills the analytic description of p from its transform. */
 static kpcn_status setup_shape(kpcn_prim *p, const kpcn_xform *x, const char *path) {
   kpcn_vec3 c = kpcn_xform_point(x, kv3s(0));
@@ -344,7 +317,7 @@ static kpcn_status parse_primitive_into_slot(kpcn_scene *s, const cJSON *pj, int
     KPCN_TRY(require_bool(pj, "backface_culling", path, 0));
     int recompute = 0;
     KPCN_TRY(get_bool(pj, "recompute_normals", path, &recompute));
-    if (p->mesh.smooth && (recompute || !p->mesh.nrm)) KPCN_TRY(compute_vertex_normals(&p->mesh));
+    if (p->mesh.smooth && (recompute || !p->mesh.nrm)) KPCN_TRY(kpcn_mesh_smooth_normals(&p->mesh));
     s->ntriangles += p->mesh.ntris;
   }
   KPCN_TRY(setup_shape(p, &x, path));
