@@ -176,12 +176,17 @@ static void test_exposure(void) {
   CHECK(kpcn_denoiser_create(&d, &o) == KPCN_OK);
   CHECK(kpcn_denoiser_execute_aov(d, fresh, ob) == KPCN_OK);
   kpcn_denoiser_destroy(d);
-  /* a baseline sigma whose 1 / (2 sigma^2) overflows is named, not a NaN result */
+  /* a baseline sigma whose 1 / (2 sigma^2) overflows is named, not a NaN result, and like
+   * every baseline parameter it is checked at create, not at the first execute */
   o.bilateral.sigma_normal = 1e-30f;
-  CHECK(kpcn_denoiser_create(&d, &o) == KPCN_OK);
-  CHECK(kpcn_denoiser_execute_aov(d, fresh, ob) == KPCN_ERR_INVALID_ARGUMENT);
+  d = NULL;
+  CHECK(kpcn_denoiser_create(&d, &o) == KPCN_ERR_INVALID_ARGUMENT && !d);
   CHECK(strstr(kpcn_last_error(), "sigma_normal 1e-30 is too small") != NULL);
-  kpcn_denoiser_destroy(d);
+  kpcn_denoiser_options_defaults(&o);
+  o.method = KPCN_DENOISE_NLMEANS;
+  o.nlmeans.patch_radius = 17;
+  CHECK(kpcn_denoiser_create(&d, &o) == KPCN_ERR_INVALID_ARGUMENT && !d);
+  CHECK(strstr(kpcn_last_error(), "patch_radius 17 outside [0, 16]") != NULL);
   /* the buffer API: every missing buffer in one message, in set_buffer's names; strides that
    * would make pixels or rows overlap refused */
   kpcn_denoiser_options_defaults(&o);

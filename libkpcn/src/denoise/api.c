@@ -75,6 +75,9 @@ static kpcn_status check_options(const kpcn_denoiser_options *o) {
       (o->ensemble > 1 && (o->ensemble & (o->ensemble - 1)) != 0))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
                      "denoiser_create: ensemble %d must be 0, 1, 2, 4 or 8", o->ensemble);
+  /* a baseline's parameters at create, not at the first execute */
+  if (o->method == KPCN_DENOISE_BILATERAL) return kpcn_baseline_params_check(&o->bilateral, 0);
+  if (o->method == KPCN_DENOISE_NLMEANS) return kpcn_baseline_params_check(&o->nlmeans, 1);
   return KPCN_OK;
 }
 

@@ -41,15 +41,37 @@ static kpcn_status inv_two_sq(float sigma, const char *what, const char *name, f
   return KPCN_OK;
 }
 
-static kpcn_status guide_init(guide *g, const kpcn_aov_set *aov, const kpcn_baseline_params *p,
-                              const char *what) {
-  memset(g, 0, sizeof *g);
+static const char *baseline_name(int nlmeans) {
+  return nlmeans ? "non-local means" : "bilateral filter";
+}
+
+kpcn_status kpcn_baseline_params_check(const kpcn_baseline_params *p, int nlmeans) {
+  const char *what = baseline_name(nlmeans);
+  float v;
   if (!p) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: parameters are NULL", what);
   if (p->radius < 0 || p->radius > 64)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: radius %d outside [0, 64]", what, p->radius);
   if (!(p->k_color > 0.0f) || !isfinite(p->k_color * p->k_color))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: k_color must be > 0 with a finite square",
                      what);
+  if (p->sigma_normal > 0.0f) KPCN_TRY(inv_two_sq(p->sigma_normal, what, "sigma_normal", &v));
+  if (p->sigma_albedo > 0.0f) KPCN_TRY(inv_two_sq(p->sigma_albedo, what, "sigma_albedo", &v));
+  if (p->sigma_depth > 0.0f) KPCN_TRY(inv_two_sq(p->sigma_depth, what, "sigma_depth", &v));
+  if (nlmeans && (p->patch_radius < 0 || p->patch_radius > 16))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "non-local means: patch_radius %d outside [0, 16]",
+                     p->patch_radius);
+  if (!nlmeans && !(p->sigma_spatial > 0.0f))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "bilateral filter: sigma_spatial must be > 0");
+  if (!nlmeans) KPCN_TRY(inv_two_sq(p->sigma_spatial, what, "sigma_spatial", &v));
+  return KPCN_OK;
+}
+
+/* the parameters checked (kpcn_baseline_params_check), the guide buffers taken from aov */
+static kpcn_status guide_init(guide *g, const kpcn_aov_set *aov, const kpcn_baseline_params *p,
+                              int nlmeans) {
+  const char *what = baseline_name(nlmeans);
+  memset(g, 0, sizeof *g);
+  KPCN_TRY(kpcn_baseline_params_check(p, nlmeans));
   KPCN_TRY(kpcn_aov_require(aov, KPCN_BUF_COLOR, 1, what));
   g->W = aov->width;
   g->H = aov->height;
@@ -240,9 +262,7 @@ static kpcn_status offset_filter(const guide *gp, int r, int f, float is, const 
 kpcn_status kpcn_baseline_bilateral(const kpcn_aov_set *aov, const kpcn_baseline_params *p,
                                     float *out, int nthreads, kpcn_progress *prog) {
   guide g;
-  KPCN_TRY(guide_init(&g, aov, p, "bilateral filter"));
-  if (!(p->sigma_spatial > 0.0f))
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "bilateral filter: sigma_spatial must be > 0");
+  KPCN_TRY(guide_init(&g, aov, p, 0));
   float is = 0.0f;
   KPCN_TRY(inv_two_sq(p->sigma_spatial, "bilateral filter", "sigma_spatial", &is));
   /* a bilateral filter is the offset filter with 1x1 "patches" plus the spatial term */
@@ -252,10 +272,7 @@ kpcn_status kpcn_baseline_bilateral(const kpcn_aov_set *aov, const kpcn_baseline
 kpcn_status kpcn_baseline_nlmeans(const kpcn_aov_set *aov, const kpcn_baseline_params *p,
                                   float *out, int nthreads, kpcn_progress *prog) {
   guide g;
-  KPCN_TRY(guide_init(&g, aov, p, "non-local means"));
-  if (p->patch_radius < 0 || p->patch_radius > 16)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "non-local means: patch_radius %d outside [0, 16]",
-                     p->patch_radius);
+  KPCN_TRY(guide_init(&g, aov, p, 1));
   return offset_filter(&g, p->radius, p->patch_radius, 0.0f, "non-local means", out, nthreads,
                        prog);
 }

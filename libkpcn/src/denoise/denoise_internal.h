@@ -17,6 +17,9 @@ static inline int kpcn_progress_report(kpcn_progress *p, double f) {
   return p ? p->cancelled : 0;
 }
 
+/* The baseline parameters' ranges (the bilateral filter's, or non-local means' with nlmeans),
+ * checked at kpcn_denoiser_create and again by each baseline. */
+kpcn_status kpcn_baseline_params_check(const kpcn_baseline_params *p, int nlmeans);
 /* Classical baselines on the color buffer of `aov` guided by its features. out: planar RGB
  * [3][H][W]. Need color + color.var, and normal/albedo/depth for each feature whose sigma
  * is > 0 (missing ones are named in the error). */
