@@ -168,6 +168,8 @@ kpcn_status kpcn_metric_planar(kpcn_metric m, const float *x, const float *y, in
   return pointwise(m, x, y, w, h, nch, &opt, res, errormap);
 }
 
+static const char *const k_rgb[3] = {"R", "G", "B"};
+
 static int has_name(const char *const *names, int n, const char *want) {
   for (int i = 0; i < n; i++)
     if (names[i] && !strcmp(names[i], want)) return 1;
@@ -183,10 +185,9 @@ static int names_aov(const char *const *names, int n) {
 }
 
 int kpcn_metric_default_rgb(const char *const *xnames, int nx, const char *const *ynames, int ny) {
-  static const char *const rgb[3] = {"R", "G", "B"};
   if (!xnames || !ynames) return 0;
   for (int c = 0; c < 3; c++)
-    if (!has_name(xnames, nx, rgb[c]) || !has_name(ynames, ny, rgb[c])) return 0;
+    if (!has_name(xnames, nx, k_rgb[c]) || !has_name(ynames, ny, k_rgb[c])) return 0;
   return names_aov(xnames, nx) || names_aov(ynames, ny);
 }
 
@@ -194,10 +195,9 @@ int kpcn_metric_default_rgb(const char *const *xnames, int nx, const char *const
 static kpcn_status match_channels(const kpcn_image *x, const kpcn_image *y,
                                   const char *const *channels, int nnames, int *ix, int *iy,
                                   int *count, const char *what) {
-  static const char *const rgb[3] = {"R", "G", "B"};
   if (!channels && kpcn_metric_default_rgb((const char *const *)x->names, x->nchannels,
                                            (const char *const *)y->names, y->nchannels))
-    channels = rgb, nnames = 3;
+    channels = k_rgb, nnames = 3;
   if (channels) {
     for (int k = 0; k < nnames; ++k) {
       if (!channels[k])

@@ -489,8 +489,9 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
   if (!(ap >= 0.0))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera.aperture_size: %g is negative", ap);
   const cJSON *tj = cJSON_GetObjectItemCaseSensitive(cj, "transform");
+  /* Tungsten's older camera fields, the view when there is no transform */
+  static const char *const old_keys[3] = {"position", "lookAt", "up"};
   if (tj) {
-    static const char *const old_keys[3] = {"position", "lookAt", "up"};
     for (int k = 0; k < 3; k++)
       if (cJSON_GetObjectItemCaseSensitive(cj, old_keys[k]))
         return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
@@ -518,19 +519,19 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
                        "camera.transform: a mirroring transform (left-handed axes) is not "
                        "supported");
   } else { /* Tungsten's older camera fields */
-    const char *keys[3] = {"position", "lookAt", "up"};
     kpcn_vec3 look = kv3_add(pos, dir);
     kpcn_vec3 *dst[3] = {&pos, &look, &up};
     for (int k = 0; k < 3; k++) {
-      const cJSON *a = cJSON_GetObjectItemCaseSensitive(cj, keys[k]);
+      const cJSON *a = cJSON_GetObjectItemCaseSensitive(cj, old_keys[k]);
       if (!a) continue;
       if (!cJSON_IsArray(a) || cJSON_GetArraySize(a) != 3)
-        return kpcn_fail(KPCN_ERR_FORMAT, "camera.%s: expected 3 numbers", keys[k]);
+        return kpcn_fail(KPCN_ERR_FORMAT, "camera.%s: expected 3 numbers", old_keys[k]);
       float v[3];
       for (int i = 0; i < 3; i++) {
         const cJSON *e = cJSON_GetArrayItem(a, i);
         if (!cJSON_IsNumber(e) || !isfinite((float)e->valuedouble))
-          return kpcn_fail(KPCN_ERR_FORMAT, "camera.%s[%d]: expected a finite number", keys[k], i);
+          return kpcn_fail(KPCN_ERR_FORMAT, "camera.%s[%d]: expected a finite number", old_keys[k],
+                           i);
         v[i] = (float)e->valuedouble;
       }
       *dst[k] = kv3(v[0], v[1], v[2]);

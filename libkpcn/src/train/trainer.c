@@ -66,6 +66,12 @@ static char *with_suffix(const char *base, const char *suffix) {
   return d;
 }
 
+/* An output's path as the trainer uses it (owned): the one given, or the model's path with
+ * `suffix` when none was (an empty one turns the output off). */
+static char *output_path(const char *given, const char *model, const char *suffix) {
+  return given ? dup_or_null(given) : with_suffix(model, suffix);
+}
+
 void kpcn_trainer_destroy(kpcn_trainer *t) {
   if (!t) return;
   for (int b = 0; b < KT_NB; b++) {
@@ -305,18 +311,18 @@ kpcn_status kpcn_train_settings_check(const kpcn_train_settings *s) {
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
                      "the plot (--plot) '%s' is drawn from the CSV log, which --csv '' turns off",
                      s->plot_path);
-  /* the outputs as kpcn_trainer_create names them: unset ones are beside the model */
-  char *ckpt = s->ckpt_path ? NULL : with_suffix(s->out_path, ".ckpt");
-  char *csv = s->csv_path ? NULL : with_suffix(s->out_path, ".csv");
-  char *plot = s->plot_path ? NULL : with_suffix(s->out_path, ".png");
+  /* the outputs as kpcn_trainer_create names them */
+  char *ckpt = output_path(s->ckpt_path, s->out_path, ".ckpt");
+  char *csv = output_path(s->csv_path, s->out_path, ".csv");
+  char *plot = output_path(s->plot_path, s->out_path, ".png");
   kpcn_status st = KPCN_ERR_OUT_OF_MEMORY;
-  if ((s->ckpt_path || ckpt) && (s->csv_path || csv) && (s->plot_path || plot)) {
+  if (ckpt && csv && plot) {
     const char *path[7] = {s->store_path,
                            s->init_model,
                            s->out_path,
-                           s->ckpt_path ? s->ckpt_path : ckpt,
-                           s->csv_path ? s->csv_path : csv,
-                           s->plot_path ? s->plot_path : plot,
+                           ckpt,
+                           csv,
+                           plot,
                            s->best_path && *s->best_path ? s->best_path : NULL};
     st = check_output_paths(s, path);
   }
@@ -335,9 +341,9 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   if (t->s.log_every < 1) t->s.log_every = 1;
   t->store_path = dup_or_null(s->store_path);
   t->out_path = dup_or_null(s->out_path);
-  t->ckpt_path = s->ckpt_path ? dup_or_null(s->ckpt_path) : with_suffix(s->out_path, ".ckpt");
-  t->csv_path = s->csv_path ? dup_or_null(s->csv_path) : with_suffix(s->out_path, ".csv");
-  t->plot_path = s->plot_path ? dup_or_null(s->plot_path) : with_suffix(s->out_path, ".png");
+  t->ckpt_path = output_path(s->ckpt_path, s->out_path, ".ckpt");
+  t->csv_path = output_path(s->csv_path, s->out_path, ".csv");
+  t->plot_path = output_path(s->plot_path, s->out_path, ".png");
   t->init_model = dup_or_null(s->init_model);
   t->best_path = s->best_path && *s->best_path ? dup_or_null(s->best_path) : NULL;
   t->s.best_path = t->best_path;
