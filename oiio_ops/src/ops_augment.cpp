@@ -12,19 +12,43 @@
 #include <cstdio>
 #include <cstring>
 #include <sys/stat.h>
+#include <utility>
 
 namespace kpcn {
 namespace ops {
 
 namespace {
 
+// Where a transform puts an image's pixels in its frame (display window). Mirrors and quarter
+// turns act on the whole frame, as oiiotool's --flop, --flip and --rotate90 do, so a crop (a
+// --render crop) keeps its place in the transformed frame; a shift wraps inside the pixels
+// and moves nothing.
+OIIO::ImageSpec transformed_frame(const OIIO::ImageSpec &s, const kpcn_augment_xform &x) {
+  OIIO::ImageSpec f = s;
+  int rx = s.x - s.full_x, ry = s.y - s.full_y;
+  if (x.mirror_h) rx = s.full_width - rx - s.width;
+  if (x.mirror_v) ry = s.full_height - ry - s.height;
+  for (int t = 0; t < ((x.rot90 % 4) + 4) % 4; t++) {
+    // one counter-clockwise turn: pixel (u, v) of a frame W wide goes to (v, W - 1 - u)
+    const int nry = f.full_width - rx - f.width;
+    rx = ry;
+    ry = nry;
+    std::swap(f.width, f.height);
+    std::swap(f.full_width, f.full_height);
+  }
+  f.x = s.full_x + rx;
+  f.y = s.full_y + ry;
+  return f;
+}
+
 // Runs f on src's pixels and writes the result to dst (which may be src). The planar round
 // trip carries neither the header attributes (kpcn:spp ...) nor the data window's place, so
-// both are taken from src first (dst.reset would clear them when dst is src) and put back: a
-// result of src's size keeps src's origin and full window; a quarter turn of a non-square
-// image has no such place and starts at 0,0.
-template <class F> bool apply(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, F &&f) {
-  const OIIO::ImageSpec where = src.spec(); // a copy, attributes included
+// both are taken from src first (dst.reset would clear them when dst is src) and put back:
+// moved by geom's mirrors and turns when given (transformed_frame), else (a rotation by another
+// angle, which keeps the size) where src's were.
+template <class F>
+bool apply(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, const kpcn_augment_xform *geom, F &&f) {
+  const OIIO::ImageSpec where = geom ? transformed_frame(src.spec(), *geom) : src.spec();
   std::string err;
   ImagePtr in = to_kpcn_image(src, err);
   if (!in) {
@@ -43,11 +67,9 @@ template <class F> bool apply(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, F 
   }
   for (const auto &p : where.extra_attribs)
     dst.specmod().attribute(p.name().string(), p.type(), p.data());
-  if (dst.spec().width == where.width && dst.spec().height == where.height) {
-    dst.set_origin(where.x, where.y);
-    dst.set_full(where.full_x, where.full_x + where.full_width, where.full_y,
-                 where.full_y + where.full_height, 0, 1);
-  }
+  dst.set_origin(where.x, where.y);
+  dst.set_full(where.full_x, where.full_x + where.full_width, where.full_y,
+               where.full_y + where.full_height, 0, 1);
   return true;
 }
 
@@ -84,7 +106,7 @@ bool to_aov_pair(const OIIO::ImageBuf &noisy, const OIIO::ImageBuf &ref, AovPtr 
 
 bool augment(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, const kpcn_augment_xform &x,
              int nthreads) {
-  return apply(dst, src, [&](kpcn_image **o, const kpcn_image *i) {
+  return apply(dst, src, &x, [&](kpcn_image **o, const kpcn_image *i) {
     return kpcn_augment_image(o, i, &x, nthreads);
   });
 }
@@ -118,7 +140,7 @@ bool rotate(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, double degrees, int 
     x.rot90 = (int)(((long long)std::llround(q) % 4 + 4) % 4);
     return augment(dst, src, x, nthreads);
   }
-  return apply(dst, src, [&](kpcn_image **o, const kpcn_image *i) {
+  return apply(dst, src, nullptr, [&](kpcn_image **o, const kpcn_image *i) {
     return rotate_any_image(o, i, degrees, nthreads);
   });
 }

@@ -1,6 +1,8 @@
 // The ImageBuf ops keep where the pixels are and what the header says: a data window away from
-// 0,0 stays where it was through mirror / colorswap / shift (also in place, dst == src, which
-// must not lose the kpcn:* attributes), through errormap and through a denoise with a ROI; a
+// 0,0 stays where it was through colorswap / shift, and moves inside its frame (display
+// window) through a mirror or quarter turn as with oiiotool's --flop / --rotate90 (also in
+// place, dst == src, which must not lose the kpcn:* attributes); it stays through errormap and
+// through a denoise with a ROI; a
 // ROI outside the data window is an error, not a comparison against zeros. The same for the
 // kernel export (denoise_kernels).
 #include "kpcn/ops_augment.h"
@@ -32,26 +34,33 @@ int main() {
   aov.set_full(0, 40, 0, 50, 0, 1);
   CHECK(aov.spec().get_int_attribute("kpcn:spp") == 4);
 
+  const int w = aov.spec().width, h = aov.spec().height;
   ImageBuf m = ops::mirror(aov), c = ops::colorswap(aov, "BRG"), s = ops::shift(aov, 2, 1);
-  CHECK(!m.has_error() && placed_like(m, aov) && m.spec().get_int_attribute("kpcn:spp") == 4);
+  ImageBuf mv = ops::mirror(aov, true), r = ops::rotate(aov, 90.0);
+  CHECK(!m.has_error() && m.spec().x == 40 - 3 - w && m.spec().y == 5 &&
+        m.spec().full_width == 40 && m.spec().get_int_attribute("kpcn:spp") == 4);
+  CHECK(!mv.has_error() && mv.spec().x == 3 && mv.spec().y == 50 - 5 - h);
+  // a quarter turn counter-clockwise: the 40x50 frame becomes 50x40, pixel (u, v) -> (v, 39 - u)
+  CHECK(!r.has_error() && r.spec().x == 5 && r.spec().y == 40 - 3 - w &&
+        r.spec().full_width == 50 && r.spec().full_height == 40 && r.spec().width == h);
   CHECK(!c.has_error() && placed_like(c, aov));
   CHECK(!s.has_error() && placed_like(s, aov));
-  ImageBuf inplace = aov; // dst == src: the attributes and the place survive
+  ImageBuf inplace = aov; // dst == src: the attributes survive, the place moves as above
   CHECK(ops::mirror(inplace, inplace));
-  CHECK(placed_like(inplace, aov) && inplace.spec().get_int_attribute("kpcn:spp") == 4);
+  CHECK(inplace.spec().x == m.spec().x && inplace.spec().get_int_attribute("kpcn:spp") == 4);
   ImageBuf twice;
   CHECK(ops::mirror(twice, inplace)); // mirroring twice is the identity, pixel for pixel
-  CHECK(OIIO::ImageBufAlgo::compare(twice, aov, 0.0f, 0.0f).nfail == 0);
+  CHECK(placed_like(twice, aov) && OIIO::ImageBufAlgo::compare(twice, aov, 0.0f, 0.0f).nfail == 0);
 
   // errormap: the map lies where x's compared pixels lie
   ImageBuf map;
-  CHECK(ops::errormap(map, aov, m, ops::Metric::L1));
+  CHECK(ops::errormap(map, aov, c, ops::Metric::L1));
   CHECK(placed_like(map, aov));
   ROI win(10, 20, 12, 30);
-  CHECK(ops::errormap(map, aov, m, ops::Metric::L1, {}, win));
+  CHECK(ops::errormap(map, aov, c, ops::Metric::L1, {}, win));
   CHECK(map.spec().x == 10 && map.spec().y == 12 && map.spec().width == 10);
   // a window outside the data window (which starts at 3,5) is an error naming it
-  ops::MetricResult out = ops::compare(aov, m, ops::Metric::L1, {}, ROI(0, 10, 0, 10));
+  ops::MetricResult out = ops::compare(aov, c, ops::Metric::L1, {}, ROI(0, 10, 0, 10));
   CHECK(!out.ok && out.error.find("not inside") != std::string::npos);
 
   // denoise: the whole result keeps the input's place; a ROI's part is stored where it was

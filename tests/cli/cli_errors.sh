@@ -25,9 +25,9 @@ expect_fail "truncated.exr" out.exr truncated.exr "$REF" --relmse -o out.exr
 expect_fail "garbage.exr" out.exr garbage.exr -o out.exr
 expect_fail "'wide.exr' has an unsupported or absurd size 70000x1" out.exr wide.exr -o out.exr
 expect_fail "-o 'nodir/out.exr': folder 'nodir': No such file or directory" "" "$REF" -o nodir/out.exr
-expect_fail "PNG only supports 1-4 channels" out.png "$NOISY" -o out.png
+expect_fail "the image has 16 channels and .png files hold at most 4" out.png "$NOISY" -o out.png
 # All or nothing: a later output or command that fails leaves none of the earlier ones.
-expect_fail "PNG only supports 1-4 channels" out.exr "$NOISY" -o out.exr -o out.png
+expect_fail "the image has 16 channels and .png files hold at most 4" out.exr "$NOISY" -o out.exr -o out.png
 expect_fail "has no channel 'Q'" p.kps "$NOISY" "$REF" --patches:size=16:count=4:out=p.kps --ch Q
 expect_fail "count= (random patches) and stride= (a regular grid) exclude each other" p.kps \
   "$NOISY" "$REF" --patches:size=16:count=4:stride=8:out=p.kps

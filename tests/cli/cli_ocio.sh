@@ -70,4 +70,30 @@ expect_fail "colour map 'nope'" cm.png ramp.exr --colormap:map=nope -o cm.png
 expect_fail "modifier 'max' must be positive" cm.png ramp.exr --colormap:max=0 -o cm.png
 oiiotool --pattern constant:color=0 4x2 1 -o zero.exr
 expect_fail "give a positive :max=" cm.png zero.exr --colormap -o cm.png
+# from= defaults to the image's own colour space, as in oiiotool: an 8-bit sRGB PNG through
+# the Standard view comes back as it was (it used to be encoded a second time); one tagged
+# with a space the config lacks is an error asking for from=.
+oiiotool --pattern fill:left=0.05,0.3,0.6:right=0.9,0.5,0.1 16x4 3 -d uint8 -o s8.png
+run_ok s8.png --ociodisplay -o s8d.exr
+OCIO=$TD/ocio/config.ocio oiiotool s8.png --ociodisplay sRGB Standard -o s8o.exr
+idiff -fail 1e-6 -a s8d.exr s8o.exr >/dev/null && pass "from= defaults to the PNG's sRGB, as oiiotool" ||
+  fail "default from: $(idiff -a s8d.exr s8o.exr)"
+run_ok s8.png --ociodisplay:from=scene_linear s8.png --ociodisplay --l1 --json
+$PY -c 'import json,sys; sys.exit(json.load(open("out.txt"))["l1"] < 0.05)' &&
+  pass "from=scene_linear still encodes it" || fail "explicit from: $(cat out.txt)"
+oiiotool s8.png --attrib oiio:ColorSpace GammaCorrected1.8 -o g18.png
+expect_fail "tagged as colour space 'GammaCorrected1.8' (oiio:ColorSpace), which OCIO config" x.exr \
+  g18.png --ociodisplay -o x.exr
+# looks= are applied (OIIO 2.4's display transform ignores them): a config with a look
+# 'Brighten' (exponent 0.5 in linear) against oiiotool's --ociolook then --ociodisplay.
+sed 's/^active_views:.*/&\nlooks:\n  - !<Look>\n    name: Brighten\n    process_space: Linear Rec.709 (sRGB)\n    transform: !<ExponentTransform> {value: [0.5, 0.5, 0.5, 1]}/' \
+  "$TD/ocio/config.ocio" >looks.ocio
+run_ok c.exr --ociodisplay:config=looks.ocio:looks=Brighten -o lk.exr c.exr \
+  --ociodisplay:config=looks.ocio -o nolk.exr
+oiiotool --colorconfig looks.ocio c.exr --ociolook:from=scene_linear:to=scene_linear Brighten \
+  --ociodisplay:from=scene_linear sRGB Standard -o lk_oiio.exr
+idiff -fail 1e-6 -a lk.exr lk_oiio.exr >/dev/null && pass "looks=Brighten == oiiotool --ociolook" ||
+  fail "looks: $(idiff -a lk.exr lk_oiio.exr)"
+idiff -fail 1e-3 -a lk.exr nolk.exr >/dev/null && fail "looks=Brighten changed nothing" ||
+  pass "looks=Brighten changes the image"
 finish

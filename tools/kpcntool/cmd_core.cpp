@@ -10,6 +10,7 @@
 #include <OpenImageIO/half.h>
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
+#include <OpenImageIO/strutil.h>
 
 #include <algorithm>
 #include <cmath>
@@ -78,17 +79,36 @@ std::string img_desc(const ImageBuf &b, const char *role = "the top image") {
   return n.empty() ? std::string(role) : "image '" + n + "'";
 }
 
-bool cmd_output(Context &ctx, const Modifiers &, const std::vector<std::string> &a, std::string &) {
+bool cmd_output(Context &ctx, const Modifiers &, const std::vector<std::string> &a,
+                std::string &err) {
   const std::string &path = a[0];
   const std::string ext = lower_ext(path); // a writable format: checked when parsed (main.cpp)
+  if (!output_channels_ok(ctx.top(), ext, err)) return false;
+  const TypeDesc fmt = output_type(ctx, ext);
   // A deep copy: later commands may change the top.
   auto img = std::make_shared<const ImageBuf>(ctx.top());
   ctx.outputs.push_back({"-o " + path, path, false,
-                         [img, ext](const std::string &tmp, std::string &e) {
-                           return write_image(*img, tmp, ext, e);
+                         [img, fmt](const std::string &tmp, std::string &e) {
+                           return write_image(*img, tmp, fmt, e);
                          },
                          true});
   return true;
+}
+
+// -d TYPE: the pixel type of the following -o files (oiiotool's -d).
+bool cmd_datatype(Context &ctx, const Modifiers &, const std::vector<std::string> &a,
+                  std::string &err) {
+  static const std::pair<const char *, TypeDesc> types[] = {{"uint8", TypeDesc::UINT8},
+                                                            {"uint16", TypeDesc::UINT16},
+                                                            {"half", TypeDesc::HALF},
+                                                            {"float", TypeDesc::FLOAT}};
+  for (const auto &t : types)
+    if (a[0] == t.first) {
+      ctx.output_type = t.second;
+      return true;
+    }
+  err = "pixel type '" + printable(a[0]) + "' is not one of uint8, uint16, half, float";
+  return false;
 }
 
 bool cmd_threads(Context &ctx, const Modifiers &, const std::vector<std::string> &a,
@@ -287,6 +307,35 @@ std::string default_ocio_config() {
   return KPCN_INSTALLED_OCIO;
 }
 
+// The colour space the display transform starts from: from= when given; else the image's own
+// (its oiio:ColorSpace, which OIIO's readers set: "sRGB" for an 8-bit PNG, "Linear" for EXR),
+// as oiiotool does, with "Linear" meaning the config's scene_linear; scene_linear when the image
+// names none. A space the config does not know is an error naming it and from=.
+bool display_source_space(const OIIO::ColorConfig &cc, const std::string &path, const Modifiers &m,
+                          const ImageBuf &img, std::string &from, std::string &err) {
+  if (m.has("from")) {
+    from = m.str("from");
+    return true;
+  }
+  from = std::string(img.spec().get_string_attribute("oiio:ColorSpace"));
+  if (from.empty() || OIIO::Strutil::iequals(from, "linear")) {
+    from = "scene_linear";
+    return true;
+  }
+  auto known = [&](const std::string &n) { return OIIO::Strutil::iequals(n, from); };
+  for (const std::string &cs : cc.getColorSpaceNames()) {
+    std::vector<std::string> names = cc.getAliases(cs);
+    names.push_back(cs);
+    if (std::any_of(names.begin(), names.end(), known)) return true;
+  }
+  for (const std::string &role : cc.getRoles())
+    if (known(role)) return true;
+  err = img_desc(img) + " is tagged as colour space '" + printable(from) +
+        "' (oiio:ColorSpace), which OCIO config '" + path +
+        "' does not define: give :from= the space its values are in";
+  return false;
+}
+
 bool cmd_ociodisplay(Context &ctx, const Modifiers &m, const std::vector<std::string> &,
                      std::string &err) {
   std::string path = m.str("config", default_ocio_config());
@@ -356,9 +405,23 @@ bool cmd_ociodisplay(Context &ctx, const Modifiers &m, const std::vector<std::st
           " channel(s); the display transform needs R,G,B";
     return false;
   }
+  std::string from;
+  if (!display_source_space(*cc, path, m, src, from, err)) return false;
+  // OIIO 2.4's ociodisplay ignores its looks argument, so the looks are applied first, in the
+  // source space (as `oiiotool --ociolook:from=S:to=S L --ociodisplay` does).
+  const std::string looks = m.str("looks");
+  if (!looks.empty()) {
+    ImageBuf looked;
+    if (!IBA::ociolook(looked, src, looks, from, from, false, false, "", "", cc.get(), {},
+                       ctx.nthreads)) {
+      err = "looks '" + looks + "': " + looked.geterror();
+      return false;
+    }
+    src = std::move(looked);
+  }
   ImageBuf dst;
-  if (!IBA::ociodisplay(dst, src, display, view, m.str("from", "scene_linear"), m.str("looks"),
-                        false, "", "", cc.get(), {}, ctx.nthreads)) {
+  if (!IBA::ociodisplay(dst, src, display, view, from, "", false, "", "", cc.get(), {},
+                        ctx.nthreads)) {
     err = dst.geterror();
     return false;
   }
@@ -435,12 +498,24 @@ bool cmd_mosaic(Context &ctx, const Modifiers &m, const std::vector<std::string>
     return false;
   }
   size_t base = ctx.stack.size() - (size_t)n; // left to right = bottom to top
-  int nch = ctx.stack[base].nchannels(), W = 0, H = 0;
+  // Each tile is its image's whole frame (display window): an image whose pixels cover part
+  // of it (a --render crop) is padded with black, as oiiotool's --mosaic does.
+  std::vector<ImageBuf> tiles;
   for (long i = 0; i < n; ++i) {
     const ImageBuf &b = ctx.stack[base + i];
+    tiles.push_back(b.roi() == b.roi_full() ? b : IBA::crop(b, b.roi_full(), ctx.nthreads));
+    if (tiles.back().has_error()) {
+      err = tiles.back().geterror();
+      return false;
+    }
+  }
+  int nch = tiles[0].nchannels(), W = 0, H = 0;
+  for (long i = 0; i < n; ++i) {
+    const ImageBuf &b = tiles[(size_t)i];
     if (b.nchannels() != nch) {
-      err = "image " + std::to_string(i + 1) + " (" + img_desc(b, "computed") + ") has " +
-            std::to_string(b.nchannels()) + " channels, image 1 has " + std::to_string(nch);
+      err = "image " + std::to_string(i + 1) + " (" + img_desc(ctx.stack[base + i], "computed") +
+            ") has " + std::to_string(b.nchannels()) + " channels, image 1 has " +
+            std::to_string(nch);
       return false;
     }
     W += b.spec().width;
@@ -460,7 +535,7 @@ bool cmd_mosaic(Context &ctx, const Modifiers &m, const std::vector<std::string>
   std::vector<float> white((size_t)nch, 1.0f);
   bool warned = false;
   for (long i = 0; i < n; ++i) {
-    const ImageBuf &b = ctx.stack[base + i];
+    const ImageBuf &b = tiles[(size_t)i];
     if (!IBA::paste(dst, x, 0, 0, 0, b)) {
       err = dst.geterror();
       return false;
@@ -499,9 +574,15 @@ bool cmd_mosaic(Context &ctx, const Modifiers &m, const std::vector<std::string>
 bool r1 = register_command({"o",
                             1,
                             {},
-                            "queue the top image for writing to a file (EXR float, "
-                            "PNG/JPEG 8 bit; written atomically after all commands succeed)",
+                            "queue the top image for writing to a file (the input files' pixel "
+                            "type or -d's; written atomically after all commands succeed)",
                             cmd_output});
+bool r1d = register_command({"d",
+                             1,
+                             {},
+                             "pixel type of the following -o files: uint8|uint16|half|float "
+                             "(default: the widest input file's, as far as the format holds it)",
+                             cmd_datatype});
 bool r2 = register_command(
     {"threads", 1, {}, "threads for the following commands (0 = all)", cmd_threads});
 bool r3 = register_command({"json", 0, {}, "print results as one JSON object", cmd_json});

@@ -39,6 +39,12 @@ struct Context {
   std::vector<OIIO::ImageBuf> stack; // back() is the top
   bool json = false;                 // --json: machine-readable results
   int nthreads = 0;                  // --threads N (0 = all cores)
+  // -d TYPE: the pixel type of the following -o files; UNKNOWN until given (then each -o
+  // takes input_type, as far as its format holds it: output_type() in output.cpp).
+  OIIO::TypeDesc output_type = OIIO::TypeDesc::UNKNOWN;
+  // The widest pixel type of the image files read so far (uint8 < uint16 < half < float);
+  // UNKNOWN before the first, when outputs default to float.
+  OIIO::TypeDesc input_type = OIIO::TypeDesc::UNKNOWN;
   // Results of measuring commands, printed at exit (as one JSON object with --json).
   std::vector<std::pair<std::string, double>> results;
   // Extension (main/cmd_core owner): non-numeric results as raw JSON text, e.g. --info.
@@ -81,9 +87,20 @@ bool register_command(Command c);
 // Extensions used by main.cpp (implemented in registry.cpp / cmd_core.cpp).
 const Command *find_command(const std::string &name); // nullptr if unknown
 std::vector<const Command *> all_commands();          // sorted by name
-// Writes img to file (the format chosen by ext, lower case: EXR keeps float, PNG/JPEG/... get
-// 8 bits). Returns false with err on failure.
-bool write_image(const OIIO::ImageBuf &img, const std::string &file, const std::string &ext,
+// The pixel type an -o file of extension ext (lower case) gets: the -d type when given, else
+// the widest input type (float when nothing was read), as far as the format holds it: 8-bit
+// formats (PNG, JPEG, ...) get uint8, PNG and PNM uint16 when the inputs had 16 bits.
+OIIO::TypeDesc output_type(const Context &ctx, const std::string &ext);
+// Folds the pixel type of a file just read into ctx.input_type.
+void note_input_type(Context &ctx, OIIO::TypeDesc file_type);
+// Checks that img can be written to a file of extension ext: more channels than R,G,B,A only
+// to formats that hold any number (EXR, TIFF); false with err naming the count and --ch.
+bool output_channels_ok(const OIIO::ImageBuf &img, const std::string &ext, std::string &err);
+// Writes img to file in pixel type fmt (the format chosen by the file's extension). A format
+// without display windows (PNG, JPEG, ...) gets the whole frame: an image whose pixels cover part
+// of it (a --render crop) is padded with black to its display window, as oiiotool does. Returns
+// false with err on failure.
+bool write_image(const OIIO::ImageBuf &img, const std::string &file, OIIO::TypeDesc fmt,
                  std::string &err);
 // "png" for "a/b.PNG", "" when the name has no extension.
 std::string lower_ext(const std::string &path);

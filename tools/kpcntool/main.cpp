@@ -232,6 +232,7 @@ int main(int argc, char **argv) {
       if (!st.cmd) {
         OIIO::ImageBuf buf;
         ok = kpcntool::read_image(buf, st.file, err);
+        if (ok) kpcntool::note_input_type(ctx, buf.nativespec().format);
         if (ok) ctx.push(std::move(buf));
       } else {
         ok = st.cmd->run(ctx, st.mods, st.args, err);

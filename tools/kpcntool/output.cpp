@@ -2,6 +2,7 @@
 // produces (`-o`, `--patches:out=`), see kpcntool.h.
 #include "kpcntool.h"
 
+#include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
@@ -45,18 +46,72 @@ bool output_format_ok(const std::string &path, std::string &err) {
   return true;
 }
 
-bool write_image(const OIIO::ImageBuf &img, const std::string &file, const std::string &ext,
+// 1 uint8, 2 uint16, 3 half, 4 float (and the other wide types): how wide a type is.
+static int type_rank(OIIO::TypeDesc t) {
+  switch (t.basetype) {
+  case OIIO::TypeDesc::UNKNOWN: return 0;
+  case OIIO::TypeDesc::UINT8:
+  case OIIO::TypeDesc::INT8: return 1;
+  case OIIO::TypeDesc::UINT16:
+  case OIIO::TypeDesc::INT16: return 2;
+  case OIIO::TypeDesc::HALF: return 3;
+  default: return 4;
+  }
+}
+
+void note_input_type(Context &ctx, OIIO::TypeDesc file_type) {
+  static const OIIO::TypeDesc by_rank[] = {OIIO::TypeDesc::UNKNOWN, OIIO::TypeDesc::UINT8,
+                                           OIIO::TypeDesc::UINT16, OIIO::TypeDesc::HALF,
+                                           OIIO::TypeDesc::FLOAT};
+  const int r = std::max(type_rank(ctx.input_type), type_rank(file_type));
+  ctx.input_type = by_rank[r];
+}
+
+static bool is_any_of(const std::string &ext, std::initializer_list<const char *> list) {
+  return std::any_of(list.begin(), list.end(), [&](const char *e) { return ext == e; });
+}
+
+OIIO::TypeDesc output_type(const Context &ctx, const std::string &ext) {
+  if (ctx.output_type != OIIO::TypeDesc::UNKNOWN) return ctx.output_type;
+  const int r = type_rank(ctx.input_type);
+  if (is_any_of(ext, {"png", "jpg", "jpeg", "jpe", "jfif", "bmp", "tga", "ppm", "pgm", "pnm", "pbm",
+                      "gif", "ico", "webp"}))
+    return r == 2 && is_any_of(ext, {"png", "ppm", "pgm", "pnm"}) ? OIIO::TypeDesc::UINT16
+                                                                  : OIIO::TypeDesc::UINT8;
+  return r == 0 ? OIIO::TypeDesc::FLOAT : ctx.input_type;
+}
+
+bool output_channels_ok(const OIIO::ImageBuf &img, const std::string &ext, std::string &err) {
+  if (img.nchannels() <= 4) return true;
+  auto out = OIIO::ImageOutput::create("x." + ext);
+  if (!out) {
+    OIIO::geterror();
+    return true; // not a writable format: output_format_ok said so when the line was parsed
+  }
+  if (out->supports("nchannels")) return true;
+  err = "the image has " + std::to_string(img.nchannels()) + " channels and ." + ext +
+        " files hold at most 4: select them first (--ch R,G,B)";
+  return false;
+}
+
+bool write_image(const OIIO::ImageBuf &img, const std::string &file, OIIO::TypeDesc fmt,
                  std::string &err) {
-  static const char *eight_bit[] = {"png", "jpg", "jpeg", "bmp", "tga", "ppm", "pgm", "gif"};
-  OIIO::TypeDesc fmt = OIIO::TypeDesc::FLOAT;
-  for (const char *e : eight_bit)
-    if (ext == e) fmt = OIIO::TypeDesc::UINT8;
-  if (!img.write(file, fmt)) {
-    err = img.geterror();
-    if (err.empty()) err = "the image writer failed";
+  auto out = OIIO::ImageOutput::create(file);
+  if (!out) {
+    err = OIIO::geterror();
     return false;
   }
-  return true;
+  bool ok;
+  if (!out->supports("displaywindow") && img.roi() != img.roi_full()) {
+    OIIO::ImageBuf framed = OIIO::ImageBufAlgo::crop(img, img.roi_full());
+    ok = !framed.has_error() && framed.write(file, fmt);
+    if (!ok) err = framed.geterror();
+  } else {
+    ok = img.write(file, fmt);
+    if (!ok) err = img.geterror();
+  }
+  if (!ok && err.empty()) err = "the image writer failed";
+  return ok;
 }
 
 // The output's path without trailing slashes ("patches/" names the directory "patches"; only

@@ -217,12 +217,16 @@ typedef struct kpcn_denoiser_options {
                              an eighth of the machine's memory, kept within 1..3 GiB (a
                              1 Mpx frame: one tile on a 24 GB machine). A tile
                              >= the image size denoises in one piece. Tiles overlap by
-                             kpcn_denoise_tile_overlap(arch) pixels; the result does not
-                             depend on the tile size, bit for bit, except where oneDNN's
-                             Winograd logits layer is refused for one padded size and not
-                             another (its scratchpad bound, docs/denoiser.md): then within
-                             float summation order. */
-  int nthreads;           /* 0 = all cores; at most KPCN_DENOISE_MAX_THREADS */
+                             kpcn_denoise_tile_overlap(arch) pixels, so every tile sees
+                             the inputs the untiled image does; the result agrees across
+                             tile sizes to float summation order (oneDNN sums in an order
+                             that depends on the tensor's shape: up to ~2e-6 relative with
+                             the shipped model, docs/denoiser.md), bit for bit only for
+                             some sizes. A tile far below the padding is refused at execute
+                             when it would tile the image (> 25 times the work). */
+  int nthreads;           /* 0 = all cores; at most KPCN_DENOISE_MAX_THREADS. Results agree
+                             across thread counts to float summation order (oneDNN's
+                             choice of kernel depends on it), not always bit for bit */
   int direct_conv;        /* 1: no Winograd convolutions (kpcn_net_options.direct_conv) */
   int ensemble;           /* self-ensemble: 0 or 1 = off; 2, 4 or 8 = denoise that many
                              mirrored / rotated copies of the input and average the results

@@ -81,21 +81,6 @@ static kpcn_status check_options(const kpcn_denoiser_options *o) {
   return KPCN_OK;
 }
 
-/* Each tile is padded by the overlap on every side, so a tile far below the overlap multiplies
- * the work (tile 1 of the shipped model: hundreds of times, which looks like a hang). Refused
- * once the padded tile would hold more than 25 times its core, i.e. tile < overlap / 2 (tiles
- * down to that size keep the tiled == untiled tests' small tiles). */
-static kpcn_status check_tile(int tile, const kpcn_arch *arch) {
-  const int overlap = kpcn_denoise_tile_overlap(arch), least = (overlap + 1) / 2;
-  if (tile > 0 && tile < least)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "denoiser_create: tile %d would pad each %dx%d core to %dx%d (the model's "
-                     "tile overlap is %d pixels per side), more than 25 times the untiled work: "
-                     "use 0 (automatic) or a tile of at least %d",
-                     tile, tile, tile, tile + 2 * overlap, tile + 2 * overlap, overlap, least);
-  return KPCN_OK;
-}
-
 kpcn_status kpcn_denoiser_create(kpcn_denoiser **out, const kpcn_denoiser_options *opts) {
   if (!out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: out is NULL");
   *out = NULL;
@@ -117,7 +102,6 @@ kpcn_status kpcn_denoiser_create(kpcn_denoiser **out, const kpcn_denoiser_option
     kpcn_status s = d->model_path ? kpcn_model_load(o.model_path, &d->model)
                                   : kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "denoiser model path");
     if (s == KPCN_OK) s = kpcn_features_check_arch(kpcn_model_arch(d->model));
-    if (s == KPCN_OK) s = check_tile(o.tile, kpcn_model_arch(d->model));
     if (s != KPCN_OK) {
       kpcn_fail_context("denoiser model '%s'", o.model_path);
       kpcn_denoiser_destroy(d);
@@ -143,7 +127,6 @@ kpcn_status kpcn_denoiser_create_with_model(kpcn_denoiser **out, kpcn_model *mod
   else
     kpcn_denoiser_options_defaults(&o);
   KPCN_TRY(check_options(&o));
-  KPCN_TRY(check_tile(o.tile, kpcn_model_arch(model)));
   kpcn_denoiser *d = kpcn_calloc(1, sizeof *d, "denoiser");
   if (!d) return KPCN_ERR_OUT_OF_MEMORY;
   d->opt = o;

@@ -244,6 +244,17 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
   const int pad = tile_pad(arch);
   const float eps = arch->eps;
   const size_t P = kpcn_aov_plane_size(aov);
+  /* Each tile is padded by `pad` on every side, so a tile far below it multiplies the work
+   * (tile 1 of the shipped model: hundreds of times, which looks like a hang). Refused once
+   * the padded tile would hold more than 25 times its core, when the image is tiled at all
+   * (a tile >= the image runs in one piece, whatever its size). */
+  if (tile > 0 && (tile < W || tile < H) && 5 * tile < tile + 2 * pad)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "denoise: tile %d would pad each %dx%d core of this %dx%d image to %dx%d "
+                     "(the model needs %d pixels of context per side), more than 25 times the "
+                     "untiled work: use 0 (automatic), a tile of at least %d, or one of at "
+                     "least the image's size",
+                     tile, tile, tile, W, H, tile + 2 * pad, tile + 2 * pad, pad, (pad + 1) / 2);
   int TW, TH;
   tile_grid(arch, o->bf16, W, H, pad, tile, &TW, &TH);
   kpcn_features_norm norm;

@@ -6,9 +6,11 @@
 // triple is colour (permuted by colorswap), "<p>N.X <p>N.Y" are camera-space normals
 // (negated by mirrors, rotated by rotations), everything else only moves. Header metadata
 // (kpcn:spp, kpcn:seed, ...) is kept, also when dst is src. These act on the whole data
-// window (no ROI: an augmentation of part of an image would misalign it with its reference);
-// a result of the source's size keeps its origin and full window, a quarter turn of a
-// non-square image starts at 0,0. Errors are reported on dst (dst.geterror()).
+// window (no ROI: an augmentation of part of an image would misalign it with its reference).
+// Mirrors and quarter turns act on the whole frame (full window), as oiiotool's --flop, --flip
+// and --rotate90 do: a crop's data window moves inside the transformed frame; colour swaps,
+// shifts (wrapping inside the pixels) and other angles keep it. Errors are reported on dst
+// (dst.geterror()).
 //
 //   ImageBuf out = kpcn::ops::rotate(src, 90);          // exact quarter turn
 //   kpcn::ops::colorswap(dst, src, "BRG");
