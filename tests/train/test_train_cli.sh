@@ -179,6 +179,16 @@ noisy=$(sed -n 's/.*validation inputs as rendered (noisy): relMSE \([^ ]*\) .*/\
 want=$(/usr/bin/python3 -c 'import json,sys; print("%.4g" % (json.load(open(sys.argv[1]))["relmse"] / 2))' "$D/nr.json")
 [ -n "$noisy" ] && [ "$noisy" = "$want" ] || fail "noisy validation figure '$noisy', want '$want' (half of kpcntool's: the second pair is 0)"
 grep -q "the model is worse than its noisy inputs" "$D/log" || fail "no worse-than-noisy warning: $(cat "$D/log")"
+# a fine-tune's starting point: the --init model as given (its own exposure, as kpcntool runs
+# it), equal to kpcntool's figure, and at the store's exposure when that differs (what the
+# fine-tuned model records; session 59: a run's figures looked unlike its --init model's)
+"$K" --store "$D/p.kps" -o "$D/ft.safetensors" --init "$M" --stage1-iters 0 --iters 1 --lr 1e-12 \
+  --batch 2 --patch 16 --csv '' --plot '' --ckpt '' --val "$N,$R" 2>"$D/log" || fail "fine-tune with --val: $(cat "$D/log")"
+"$T" --json "$N" --denoise:model="$M" "$R" --relmse >"$D/ir.json" || fail "init relmse"
+want=$(/usr/bin/python3 -c 'import json,sys; print("%.4g" % json.load(open(sys.argv[1]))["relmse"])' "$D/ir.json")
+grep -q "the --init model as given (exposure [0-9.e+-]*): relMSE $want " "$D/log" ||
+  fail "--init figure is not kpcntool's $want: $(cat "$D/log")"
+grep -q "the --init model at the store's exposure" "$D/log" || fail "no store-exposure figure: $(cat "$D/log")"
 # --val-store: the full renders of another store's sources (vs.kps is cut from the sample pair,
 # so its one source gives the same noisy figure); the training store itself is refused,
 # and --val-from-store (a train store's own 'val' sources) says what replaced it

@@ -103,7 +103,8 @@ static void fmt_time(char *b, size_t n, double s) {
 static int progress_cb(void *u, const kpcn_train_progress *p) {
   int tty = *(int *)u;
   if (p->has_val && !g_quiet)
-    fprintf(stderr, "%sval @%lld: relMSE %.4g (geometric mean %.4g)  SSIM %.4f  PSNR %.2f dB\n",
+    fprintf(stderr,
+            "%sval @%lld: relMSE %.4g (geometric mean %.4g)  SSIM %.4f  PSNR %.2f dB (linear)\n",
             tty ? "\r\033[K" : "", (long long)p->iter, p->val_relmse, p->val_relmse_geo,
             p->val_ssim, p->val_psnr);
   if (tty) {

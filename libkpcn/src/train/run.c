@@ -133,6 +133,45 @@ static double best_figure(const kpcn_trainer *t, const kpcn_val_result *v) {
   return t->s.best_by == KPCN_VAL_GEOMEAN ? v->relmse_geo : v->relmse;
 }
 
+static void log_val(const kpcn_trainer *t, const char *what, const kpcn_val_result *v) {
+  kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_INFO,
+           "%s: relMSE %.4g (geometric mean %.4g)  SSIM %.4f  PSNR %.2f dB (linear)", what,
+           v->relmse, v->relmse_geo, v->ssim, v->psnr);
+}
+
+/* A fine-tune's starting point, before its first step: the --init model as given (at its own
+ * recorded exposure, as kpcntool --denoise runs it) and, when the store's differs, at the
+ * store's exposure, which the trained model records instead (training.md, "Exposure"): its
+ * later figures compare with that one. Leaves the model and the last validation as they were. */
+static kpcn_status validate_init(kpcn_trainer *t, kpcn_val_result *given) {
+  const float store_exposure = kpcn_model_arch(t->model)->exposure;
+  const kpcn_val_result last = t->last_val;
+  const int had = t->have_val;
+  kpcn_status st = KPCN_OK;
+  if (t->init_exposure != store_exposure) {
+    kpcn_val_result at_store;
+    st = kpcn_trainer_validate(t, &at_store);
+    if (st == KPCN_OK) {
+      char what[160];
+      snprintf(what, sizeof what, "the --init model at the store's exposure %.6g", store_exposure);
+      log_val(t, what, &at_store);
+    }
+    if (st == KPCN_OK) st = kpcn_model_set_exposure(t->model, t->init_exposure);
+  }
+  if (st == KPCN_OK) st = kpcn_trainer_validate(t, given);
+  if (t->init_exposure != store_exposure) {
+    kpcn_status r = kpcn_model_set_exposure(t->model, store_exposure);
+    if (st == KPCN_OK) st = r;
+  }
+  t->last_val = last;
+  t->have_val = had;
+  KPCN_TRY(st);
+  char what[160];
+  snprintf(what, sizeof what, "the --init model as given (exposure %.6g)", t->init_exposure);
+  log_val(t, what, given);
+  return KPCN_OK;
+}
+
 kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
   if (!t) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_trainer_run: NULL trainer");
   if (stopped) *stopped = 0;
@@ -147,16 +186,16 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
   int stop = 0;
   kpcn_status st = KPCN_OK;
   /* the inputs' own figures first: a validation relMSE means little without them */
-  kpcn_val_result noisy;
+  kpcn_val_result noisy, init;
+  const int have_init = t->nval && t->s.init_model && !t->s.resume && t->iter == 0;
   if (t->nval) {
-    if ((st = kpcn_trainer_validate_noisy(t, &noisy)) != KPCN_OK) {
+    st = kpcn_trainer_validate_noisy(t, &noisy);
+    if (st == KPCN_OK) log_val(t, "validation inputs as rendered (noisy)", &noisy);
+    if (st == KPCN_OK && have_init) st = validate_init(t, &init);
+    if (st != KPCN_OK) {
       if (csv) fclose(csv);
       return st;
     }
-    kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_INFO,
-             "validation inputs as rendered (noisy): relMSE %.4g (geometric mean %.4g)  SSIM "
-             "%.4f  PSNR %.2f dB",
-             noisy.relmse, noisy.relmse_geo, noisy.ssim, noisy.psnr);
   }
   while (t->iter < t->s.iters && st == KPCN_OK) {
     double elapsed = t->elapsed_prev + (kt_now() - t0);
@@ -248,6 +287,12 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
              "mean %.4g against %.4g as rendered): train longer, on more data, or fine-tune a "
              "trained model (--init; docs/training.md, \"Train your own\")",
              t->last_val.relmse_geo, noisy.relmse_geo);
+  else if (have_init && t->have_val && t->last_val.relmse_geo > init.relmse_geo)
+    kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_WARNING,
+             "the model ends worse than the --init model as given on the validation pairs "
+             "(relMSE geometric mean %.4g against %.4g): keep the --init model, or train with "
+             "a lower learning rate or on more data",
+             t->last_val.relmse_geo, init.relmse_geo);
   double elapsed = t->elapsed_prev + (kt_now() - t0);
   KPCN_TRY(checkpoint(t, elapsed));
   KPCN_TRY(save_model(t, elapsed, t->out_path));

@@ -65,6 +65,9 @@ struct kpcn_trainer {
   kpcn_train_timing timing;
   kpcn_val_result last_val;
   int have_val;
+  /* the init model's own recorded exposure (0: none, or no init model), before
+   * record_exposure replaced it with the store's: run.c validates the model as given too */
+  float init_exposure;
   double best_val; /* lowest best_by figure written to best_path (run.c), +inf if none */
 };
 

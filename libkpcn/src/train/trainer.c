@@ -226,6 +226,7 @@ static kpcn_status record_exposure(kpcn_trainer *t) {
                          "patches again)",
                          t->store_path, i, src->scene);
     }
+  if (t->s.init_model && !t->s.resume) t->init_exposure = kpcn_model_arch(t->model)->exposure;
   if (!(m > 0.0)) return KPCN_OK;
   KPCN_TRY(kpcn_model_set_exposure(t->model, (float)m));
   t->arch = *kpcn_model_arch(t->model);
