@@ -93,6 +93,13 @@ oiiotool "$REF" --cut 0,0,23,23 -o tile24.exr
 run_ok tile24.exr tile24.exr --mosaic:labels=a,b:fontsize=90 -o big.exr
 grep -qF "fontsize 90 does not fit a 24x24 tile" err.txt && [ -f big.exr ] && pass "oversized labels" ||
   fail "oversized labels: $(cat err.txt)"
+# --ch as oiiotool: bare numbers are channel indices, blanks around items are dropped, a
+# number after '=' stays a constant
+run_ok "$NOISY" --ch "2, 1,0" --info
+grep -qF "3 channels (B,G,R)" out.txt && pass "--ch by index" || fail "--ch 2,1,0: $(cat out.txt)"
+run_ok "$NOISY" --ch "R, G ,B" "$NOISY" --ch 0,1,2 --l1 --json
+grep -q '"l1": 0}' out.txt && pass "indices == names" || fail "indices: $(cat out.txt)"
+expect_fail "has no channel '99' (channel indices are 0 to" x.exr "$NOISY" --ch 99 -o x.exr
 # As oiiotool: an -o file keeps the input files' pixel type (the widest of them) as far as its
 # format holds it, -d sets it; more than 4 channels only to EXR/TIFF; a crop (data window
 # inside a larger frame) keeps its frame: PNG pads it with black, --mosaic tiles the frame,

@@ -247,11 +247,24 @@ bool cmd_ch(Context &ctx, const Modifiers &, const std::vector<std::string> &a, 
   std::vector<int> order;
   std::vector<float> values;
   std::vector<std::string> names;
-  for (auto &it : items) {
+  for (auto &item : items) {
+    // as oiiotool: blanks around an item are not part of it ("R, G, B")
+    const std::string it = std::string(OIIO::Strutil::strip(item, " \t"));
     size_t eq = it.find('=');
     std::string newname = it.substr(0, eq), from = eq == std::string::npos ? it : it.substr(eq + 1);
     int idx = src.spec().channelindex(from);
     float v = 0.f;
+    // as oiiotool: a bare number that names no channel is a channel index ("0,1,2"); after
+    // '=' it is a constant ("A=1")
+    if (idx < 0 && eq == std::string::npos &&
+        cli_parse_int(from.c_str(), 0, src.nchannels() - 1, &idx))
+      newname = src.spec().channel_name(idx);
+    else if (idx < 0 && eq == std::string::npos && !from.empty() &&
+             from.find_first_not_of("0123456789") == std::string::npos) {
+      err = img_desc(src) + " has no channel '" + from + "' (channel indices are 0 to " +
+            std::to_string(src.nchannels() - 1) + ")";
+      return false;
+    }
     if (idx < 0) {
       double d = 0;
       const bool number = cli_parse_double(from.c_str(), &d); // decimal and finite only
