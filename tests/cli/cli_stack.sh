@@ -118,6 +118,14 @@ expect_fail "and .png files hold at most 4: select them first (--ch R,G,B)" x.pn
 expect_fail "and .jpg files hold at most 4" x.jpg "$NOISY" -o x.jpg
 oiiotool --pattern fill:left=0.1,0.2,0.3:right=0.9,0.5,0.1 40x30 3 --origin +5+7 --fullsize 60x50 \
   -o dw.exr
+# a display window far beyond the pixels (a 16x16 header saying 60000x60000) cannot be filled:
+# refused by name for PNG and --mosaic (OIIO aborted), kept as it is in EXR
+oiiotool --create 16x16 3 -d float --fullsize 60000x60000+0+0 -o huge_frame.exr
+expect_fail "its display window is 60000x60000 (its pixels 16x16), too large to fill" x.png \
+  huge_frame.exr -o x.png
+expect_fail "image 1 (image 'huge_frame.exr'): its display window is 60000x60000" x.exr \
+  huge_frame.exr huge_frame.exr --mosaic:n=2 -o x.exr
+run_ok huge_frame.exr --ch R,G -o hf.exr
 run_ok dw.exr -o dw.png dw.exr --mosaic:n=1 -o dwm.exr
 oiiotool dw.exr -o dw_oiio.png
 idiff -fail 0 -warn 0 -a dw.png dw_oiio.png >/dev/null && pass "crop to PNG padded like oiiotool" ||

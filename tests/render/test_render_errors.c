@@ -1,5 +1,6 @@
 /* Malformed scenes: every failure is a clear error naming the JSON path (or file), never a
  * crash or a silently different scene; the tool exits non-zero and writes no file. */
+#include "core/internal.h"
 #include "render/render_internal.h"
 #include "render_testutil.h"
 #include "testutil.h"
@@ -355,12 +356,23 @@ static void test_render_limits(void) {
   CHECK(strstr(kpcn_last_error(), "crop") != NULL);
   kpcn_scene_destroy(s);
 
-  /* the buffer estimate against physical memory: 16384^2 x 24 planes is 25.8 GB */
+  /* the buffer estimate against the memory available: 16384^2 x 24 planes is 25.8 GB */
   CHECK(kpcn_render_check_memory(16384, 16384, 24, 23000000000ull) == KPCN_ERR_OUT_OF_MEMORY);
   printf("memory check: %s\n", kpcn_last_error());
   CHECK(strstr(kpcn_last_error(), "25.77 GB") && strstr(kpcn_last_error(), "23.00 GB"));
   CHECK(kpcn_render_check_memory(16384, 16384, 24, 26000000000ull) == KPCN_OK);
   CHECK(kpcn_render_check_memory(1920, 1080, 24, 0) == KPCN_OK); /* this machine */
+  /* by default the memory available now, at most the physical: a render that needs more than
+   * is available (but less than physical) is refused, not killed part-way */
+  CHECK(kpcn_available_memory() > 0 && kpcn_available_memory() <= kpcn_physical_memory());
+  {
+    const uint64_t avail = kpcn_available_memory(), px = avail / (24 * sizeof(float)) + 4096;
+    const int side = (int)ceil(sqrt((double)px));
+    if ((uint64_t)side * (uint64_t)side * 24u * sizeof(float) < kpcn_physical_memory()) {
+      CHECK(kpcn_render_check_memory(side, side, 24, 0) == KPCN_ERR_OUT_OF_MEMORY);
+      CHECK(strstr(kpcn_last_error(), "available") != NULL);
+    }
+  }
 
   /* a thin lens whose focus plane squares past float range at this aspect ratio */
   CHECK(kpcn_scene_load_json(CAM("\"type\":\"thinlens\",\"focus_distance\":1e15,"

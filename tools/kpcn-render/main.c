@@ -362,6 +362,7 @@ int main(int argc, char **argv) {
             (unsigned long long)stats.nonfinite_samples);
   kpcn_exr_write_options opt = kpcn_exr_write_options_defaults();
   if (half) opt.pixel_type = KPCN_EXR_HALF;
+  opt.nthreads = rs.nthreads; /* --threads bounds the writer's compression threads too */
   st = kpcn_exr_write_aov(out_path, aov, &opt);
   kpcn_aov_destroy(aov);
   if (st != KPCN_OK) {

@@ -83,7 +83,7 @@ bool cmd_output(Context &ctx, const Modifiers &, const std::vector<std::string> 
                 std::string &err) {
   const std::string &path = a[0];
   const std::string ext = lower_ext(path); // a writable format: checked when parsed (main.cpp)
-  if (!output_channels_ok(ctx.top(), ext, err)) return false;
+  if (!output_fits(ctx.top(), ext, err)) return false;
   const TypeDesc fmt = output_type(ctx, ext);
   // A deep copy: later commands may change the top.
   auto img = std::make_shared<const ImageBuf>(ctx.top());
@@ -513,15 +513,13 @@ bool cmd_mosaic(Context &ctx, const Modifiers &m, const std::vector<std::string>
   size_t base = ctx.stack.size() - (size_t)n; // left to right = bottom to top
   // Each tile is its image's whole frame (display window): an image whose pixels cover part
   // of it (a --render crop) is padded with black, as oiiotool's --mosaic does.
-  std::vector<ImageBuf> tiles;
-  for (long i = 0; i < n; ++i) {
-    const ImageBuf &b = ctx.stack[base + i];
-    tiles.push_back(b.roi() == b.roi_full() ? b : IBA::crop(b, b.roi_full(), ctx.nthreads));
-    if (tiles.back().has_error()) {
-      err = tiles.back().geterror();
+  std::vector<ImageBuf> tiles((size_t)n);
+  for (long i = 0; i < n; ++i)
+    if (!whole_frame(ctx.stack[base + i], tiles[(size_t)i], ctx.nthreads, err)) {
+      err = "image " + std::to_string(i + 1) + " (" + img_desc(ctx.stack[base + i], "computed") +
+            "): " + err;
       return false;
     }
-  }
   int nch = tiles[0].nchannels(), W = 0, H = 0;
   for (long i = 0; i < n; ++i) {
     const ImageBuf &b = tiles[(size_t)i];

@@ -94,8 +94,13 @@ OIIO::TypeDesc output_type(const Context &ctx, const std::string &ext);
 // Folds the pixel type of a file just read into ctx.input_type.
 void note_input_type(Context &ctx, OIIO::TypeDesc file_type);
 // Checks that img can be written to a file of extension ext: more channels than R,G,B,A only
-// to formats that hold any number (EXR, TIFF); false with err naming the count and --ch.
-bool output_channels_ok(const OIIO::ImageBuf &img, const std::string &ext, std::string &err);
+// to formats that hold any number (EXR, TIFF), and a frame that whole_frame can fill for formats
+// without display windows; false with err saying which and what to do.
+bool output_fits(const OIIO::ImageBuf &img, const std::string &ext, std::string &err);
+// out = img's whole frame (display window): img itself, or padded with black where its pixels
+// (data window) cover part of it, as oiiotool does for formats without windows and --mosaic.
+// A display window beyond the image size limits is an error (false, err says so).
+bool whole_frame(const OIIO::ImageBuf &img, OIIO::ImageBuf &out, int nthreads, std::string &err);
 // Writes img to file in pixel type fmt (the format chosen by the file's extension). A format
 // without display windows (PNG, JPEG, ...) gets the whole frame: an image whose pixels cover part
 // of it (a --render crop) is padded with black to its display window, as oiiotool does. Returns

@@ -2,6 +2,8 @@
 // produces (`-o`, `--patches:out=`), see kpcntool.h.
 #include "kpcntool.h"
 
+#include "kpcn/common.h"
+
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
 
@@ -81,17 +83,52 @@ OIIO::TypeDesc output_type(const Context &ctx, const std::string &ext) {
   return r == 0 ? OIIO::TypeDesc::FLOAT : ctx.input_type;
 }
 
-bool output_channels_ok(const OIIO::ImageBuf &img, const std::string &ext, std::string &err) {
-  if (img.nchannels() <= 4) return true;
+// The frame limits whole_frame applies, without filling anything.
+static bool frame_fits(const OIIO::ImageBuf &img, std::string &err) {
+  const OIIO::ROI full = img.roi_full();
+  if (full.width() <= KPCN_MAX_DIM && full.height() <= KPCN_MAX_DIM &&
+      (int64_t)full.width() * full.height() <= KPCN_MAX_PIXELS)
+    return true;
+  err = "its display window is " + std::to_string(full.width()) + "x" +
+        std::to_string(full.height()) + " (its pixels " + std::to_string(img.spec().width) + "x" +
+        std::to_string(img.spec().height) + "), too large to fill (limit " +
+        std::to_string(KPCN_MAX_DIM) + " per side, " + std::to_string(KPCN_MAX_PIXELS) +
+        " pixels)";
+  return false;
+}
+
+bool output_fits(const OIIO::ImageBuf &img, const std::string &ext, std::string &err) {
   auto out = OIIO::ImageOutput::create("x." + ext);
   if (!out) {
     OIIO::geterror();
     return true; // not a writable format: output_format_ok said so when the line was parsed
   }
-  if (out->supports("nchannels")) return true;
-  err = "the image has " + std::to_string(img.nchannels()) + " channels and ." + ext +
-        " files hold at most 4: select them first (--ch R,G,B)";
+  if (img.nchannels() > 4 && !out->supports("nchannels")) {
+    err = "the image has " + std::to_string(img.nchannels()) + " channels and ." + ext +
+          " files hold at most 4: select them first (--ch R,G,B)";
+    return false;
+  }
+  if (out->supports("displaywindow") || img.roi() == img.roi_full() || frame_fits(img, err))
+    return true;
+  err += ": ." + ext + " files have no display window; write EXR, which keeps both windows";
   return false;
+}
+
+bool whole_frame(const OIIO::ImageBuf &img, OIIO::ImageBuf &out, int nthreads, std::string &err) {
+  const OIIO::ROI full = img.roi_full();
+  if (img.roi() == full) {
+    out = img;
+    return true;
+  }
+  // a header's display window can be far larger than its pixels (OIIO aborts when the padded
+  // buffer cannot be allocated): the same size limits as any image read
+  if (!frame_fits(img, err)) return false;
+  out = OIIO::ImageBufAlgo::crop(img, full, nthreads);
+  if (out.has_error()) {
+    err = out.geterror();
+    return false;
+  }
+  return true;
 }
 
 bool write_image(const OIIO::ImageBuf &img, const std::string &file, OIIO::TypeDesc fmt,
@@ -101,17 +138,17 @@ bool write_image(const OIIO::ImageBuf &img, const std::string &file, OIIO::TypeD
     err = OIIO::geterror();
     return false;
   }
-  bool ok;
-  if (!out->supports("displaywindow") && img.roi() != img.roi_full()) {
-    OIIO::ImageBuf framed = OIIO::ImageBufAlgo::crop(img, img.roi_full());
-    ok = !framed.has_error() && framed.write(file, fmt);
-    if (!ok) err = framed.geterror();
-  } else {
-    ok = img.write(file, fmt);
-    if (!ok) err = img.geterror();
+  OIIO::ImageBuf framed;
+  if (out->supports("displaywindow"))
+    framed = img;
+  else if (!whole_frame(img, framed, 0, err))
+    return false;
+  if (!framed.write(file, fmt)) {
+    err = framed.geterror();
+    if (err.empty()) err = "the image writer failed";
+    return false;
   }
-  if (!ok && err.empty()) err = "the image writer failed";
-  return ok;
+  return true;
 }
 
 // The output's path without trailing slashes ("patches/" names the directory "patches"; only

@@ -114,6 +114,23 @@ uint64_t kpcn_physical_memory(void) {
   return mem;
 }
 
+uint64_t kpcn_available_memory(void) {
+  const uint64_t phys = kpcn_physical_memory();
+  FILE *f = fopen("/proc/meminfo", "r");
+  if (!f) return phys;
+  unsigned long long kb, avail = 0, swap = 0;
+  int found = 0;
+  char line[256];
+  while (fgets(line, sizeof line, f)) {
+    if (sscanf(line, "MemAvailable: %llu kB", &kb) == 1) avail = kb, found = 1;
+    if (sscanf(line, "SwapFree: %llu kB", &kb) == 1) swap = kb;
+  }
+  fclose(f);
+  if (!found) return phys;
+  const uint64_t a = (uint64_t)(avail + swap) * 1024u;
+  return phys && a > phys ? phys : a;
+}
+
 void *kpcn_aligned_alloc(size_t bytes, const char *what) {
   /* A block larger than the machine (an absurd header, a huge render) is an error to name,
    * not an allocation that overcommits and ends in the OOM killer once its pages are touched. */

@@ -117,15 +117,18 @@ static void store_buffer(kpcn_aov_set *set, int b, const pixel_acc *acc, size_t 
   if (set->var[b]) set->var[b][pi] = var < (double)FLT_MAX ? (float)var : FLT_MAX;
 }
 
-kpcn_status kpcn_render_check_memory(int width, int height, int planes, uint64_t phys_bytes) {
-  if (phys_bytes == 0) phys_bytes = kpcn_physical_memory();
-  if (phys_bytes == 0) return KPCN_OK; /* unknown: let the allocation decide */
+kpcn_status kpcn_render_check_memory(int width, int height, int planes, uint64_t avail_bytes) {
+  /* available, not physical: a render between the two was accepted and then killed by the
+   * OOM killer part-way (16000x16000: 24.6 GB against 25.3 physical, 23.6 available) */
+  if (avail_bytes == 0) avail_bytes = kpcn_available_memory();
+  if (avail_bytes == 0) return KPCN_OK; /* unknown: let the allocation decide */
   const uint64_t need = (uint64_t)width * (uint64_t)height * (uint64_t)planes * sizeof(float);
-  if (need > phys_bytes)
+  if (need > avail_bytes)
     return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY,
                      "render %dx%d: the output buffers need %.2f GB (%d float planes), more than "
-                     "this machine's %.2f GB of physical memory",
-                     width, height, (double)need * 1e-9, planes, (double)phys_bytes * 1e-9);
+                     "the %.2f GB of memory this machine has available (of %.2f GB physical)",
+                     width, height, (double)need * 1e-9, planes, (double)avail_bytes * 1e-9,
+                     (double)kpcn_physical_memory() * 1e-9);
   return KPCN_OK;
 }
 

@@ -62,8 +62,9 @@ typedef struct kpcn_render_ctx {
 } kpcn_render_ctx;
 
 /* render.c: fails with KPCN_ERR_OUT_OF_MEMORY, naming both sizes, when `planes` float planes
- * of width x height exceed phys_bytes (0: this machine's physical memory). */
-kpcn_status kpcn_render_check_memory(int width, int height, int planes, uint64_t phys_bytes);
+ * of width x height exceed avail_bytes (0: the memory this machine has available now,
+ * kpcn_available_memory). */
+kpcn_status kpcn_render_check_memory(int width, int height, int planes, uint64_t avail_bytes);
 
 /* render_ckpt.c: which rows of a render are finished, their statistics and, when path is not
  * NULL, its checkpoint file (kpcn_render_settings.checkpoint). `what` is the JSON object that
