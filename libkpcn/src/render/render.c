@@ -118,8 +118,8 @@ static void store_buffer(kpcn_aov_set *set, int b, const pixel_acc *acc, size_t 
 }
 
 kpcn_status kpcn_render_check_memory(int width, int height, int planes, uint64_t avail_bytes) {
-  /* available, not physical: a render between the two was accepted and then killed by the
-   * OOM killer part-way (16000x16000: 24.6 GB against 25.3 physical, 23.6 available) */
+  /* available, not physical: a render between the two was accepted, to be killed by the OOM
+   * killer part-way (16000x16000: 24.6 GB against 25.3 physical, 23.6 available then) */
   if (avail_bytes == 0) avail_bytes = kpcn_available_memory();
   if (avail_bytes == 0) return KPCN_OK; /* unknown: let the allocation decide */
   const uint64_t need = (uint64_t)width * (uint64_t)height * (uint64_t)planes * sizeof(float);
