@@ -115,18 +115,24 @@ typedef struct chunk_slot {
   kpcn_status st;
 } chunk_slot;
 
-/* Copies the pipeline's compressed chunk into slot (the pipeline reuses its buffer). */
+/* Copies the pipeline's chunk into slot (the pipeline reuses its buffers). A reader takes a
+ * chunk as large as its raw data for uncompressed, but OpenEXR Core 3.1 falls back to the raw
+ * bytes only when compressing made a chunk larger: on a tie it keeps the compressed bytes, and
+ * the chunk read back as garbage (ZIP, half, 7x32; session 59). So a chunk that compression
+ * did not shrink is written raw. */
 static kpcn_status keep_chunk(chunk_slot *slot, const exr_encode_pipeline_t *enc) {
-  if (enc->compressed_bytes > slot->cap) {
-    void *b = realloc(slot->bytes, (size_t)enc->compressed_bytes);
+  const int raw = enc->compressed_bytes >= enc->packed_bytes;
+  const void *src = raw ? enc->packed_buffer : enc->compressed_buffer;
+  const uint64_t n = raw ? enc->packed_bytes : (uint64_t)enc->compressed_bytes;
+  if (n > slot->cap) {
+    void *b = realloc(slot->bytes, (size_t)n);
     if (!b)
-      return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "EXR chunk of %llu bytes",
-                       (unsigned long long)enc->compressed_bytes);
+      return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "EXR chunk of %llu bytes", (unsigned long long)n);
     slot->bytes = b;
-    slot->cap = enc->compressed_bytes;
+    slot->cap = n;
   }
-  memcpy(slot->bytes, enc->compressed_buffer, (size_t)enc->compressed_bytes);
-  slot->size = enc->compressed_bytes;
+  memcpy(slot->bytes, src, (size_t)n);
+  slot->size = n;
   slot->start_y = enc->chunk.start_y;
   return KPCN_OK;
 }
