@@ -96,4 +96,8 @@ idiff -fail 1e-6 -a lk.exr lk_oiio.exr >/dev/null && pass "looks=Brighten == oii
   fail "looks: $(idiff -a lk.exr lk_oiio.exr)"
 idiff -fail 1e-3 -a lk.exr nolk.exr >/dev/null && fail "looks=Brighten changed nothing" ||
   pass "looks=Brighten changes the image"
+# blanks around look names are dropped, and a look undone by its inverse leaves the plain view
+run_ok c.exr --ociodisplay:config=looks.ocio:looks="Brighten, -Brighten" -o lk2.exr
+idiff -fail 1e-5 -a lk2.exr nolk.exr >/dev/null && pass "looks 'Brighten, -Brighten' cancel" ||
+  fail "looks with blanks: $(idiff -a lk2.exr nolk.exr)"
 finish

@@ -100,6 +100,13 @@ grep -qF "3 channels (B,G,R)" out.txt && pass "--ch by index" || fail "--ch 2,1,
 run_ok "$NOISY" --ch "R, G ,B" "$NOISY" --ch 0,1,2 --l1 --json
 grep -q '"l1": 0}' out.txt && pass "indices == names" || fail "indices: $(cat out.txt)"
 expect_fail "has no channel '99' (channel indices are 0 to" x.exr "$NOISY" --ch 99 -o x.exr
+# after '=' a number is a constant even where a channel has that name
+oiiotool --pattern constant:color=0.3,0.6 2x2 2 --chnames 0,1 -o named01.exr
+run_ok named01.exr --ch X=0 --json --info
+grep -q '"X"' out.txt && pass "X=0 parsed" || fail "X=0: $(cat out.txt)"
+oiiotool --pattern constant:color=0 2x2 1 --chnames X -o zero1.exr
+run_ok named01.exr --ch X=0 zero1.exr --l1 --json
+grep -q '"l1": 0}' out.txt && pass "X=0 is the constant 0, not channel '0'" || fail "X=0: $(cat out.txt)"
 # As oiiotool: an -o file keeps the input files' pixel type (the widest of them) as far as its
 # format holds it, -d sets it; more than 4 channels only to EXR/TIFF; a crop (data window
 # inside a larger frame) keeps its frame: PNG pads it with black, --mosaic tiles the frame,
@@ -112,7 +119,14 @@ for f in u8o.tif:uint8 u16o.png:uint16 h2.exr:half f.exr:float; do
     fail "type of ${f%%:*}: $(oiiotool --info "${f%%:*}")"
 done
 run_ok u8.tif u16.png --mosaic -o mix.png
-oiiotool --info mix.png | grep -q "uint16 png" && pass "widest input type wins" || fail "$(oiiotool --info mix.png)"
+oiiotool --info mix.png | grep -q "uint16 png" && pass "computed: widest input type" || fail "$(oiiotool --info mix.png)"
+# an image as read keeps its own file's type, whatever else was read (as oiiotool)
+run_ok h.exr u16.png -o own16.png h.exr u8.tif -o own8.tif
+oiiotool --info own16.png | grep -q "uint16 png" && oiiotool --info own8.tif | grep -q "uint8 tiff" &&
+  pass "as read: its own type" || fail "own types: $(oiiotool --info own16.png own8.tif)"
+# DPX holds 1, 3 or 4 channels (OIIO's writer aborted on others, leaving temporaries)
+expect_fail ".dpx files hold 1, 3 or 4" x.dpx h.exr --ch R,G -o x.exr -o x.dpx
+[ ! -e x.exr ] || fail "x.exr written beside a refused DPX"
 expect_fail "pixel type 'int' is not one of uint8, uint16, half, float" x.exr h.exr -d int -o x.exr
 expect_fail "and .png files hold at most 4: select them first (--ch R,G,B)" x.png "$NOISY" -o x.png
 expect_fail "and .jpg files hold at most 4" x.jpg "$NOISY" -o x.jpg
@@ -126,6 +140,15 @@ expect_fail "its display window is 60000x60000 (its pixels 16x16), too large to 
 expect_fail "image 1 (image 'huge_frame.exr'): its display window is 60000x60000" x.exr \
   huge_frame.exr huge_frame.exr --mosaic:n=2 -o x.exr
 run_ok huge_frame.exr --ch R,G -o hf.exr
+# a frame within the size limits whose filled copies cannot fit in memory: refused by name
+oiiotool --create 4x4 64 -d half --fullsize 16384x16384+0+0 -o deep_frame.exr
+expect_fail "too large to fill (68.7 GB of 64 channels, with the copies made to write it more than" \
+  x.tif deep_frame.exr -o x.tif
+# --mosaic of a frame that does not start at 0,0 (OIIO's paste ignored the origin: black)
+oiiotool --pattern constant:color=0.5,0.25,1 16x12 3 --origin +10+20 --fullsize 16x12+10+20 -o shifted.exr
+oiiotool shifted.exr --origin +0+0 --fullsize 16x12+0+0 -o shifted0.exr
+run_ok shifted.exr --mosaic:n=1 shifted0.exr --l1 --json
+grep -q '"l1": 0}' out.txt && pass "mosaic of a shifted frame" || fail "shifted mosaic: $(cat out.txt)"
 run_ok dw.exr -o dw.png dw.exr --mosaic:n=1 -o dwm.exr
 oiiotool dw.exr -o dw_oiio.png
 idiff -fail 0 -warn 0 -a dw.png dw_oiio.png >/dev/null && pass "crop to PNG padded like oiiotool" ||

@@ -84,7 +84,7 @@ bool cmd_output(Context &ctx, const Modifiers &, const std::vector<std::string> 
   const std::string &path = a[0];
   const std::string ext = lower_ext(path); // a writable format: checked when parsed (main.cpp)
   if (!output_fits(ctx.top(), ext, err)) return false;
-  const TypeDesc fmt = output_type(ctx, ext);
+  const TypeDesc fmt = output_type(ctx, ctx.top(), ext);
   // A deep copy: later commands may change the top.
   auto img = std::make_shared<const ImageBuf>(ctx.top());
   ctx.outputs.push_back({"-o " + path, path, false,
@@ -252,7 +252,10 @@ bool cmd_ch(Context &ctx, const Modifiers &, const std::vector<std::string> &a, 
     const std::string it = std::string(OIIO::Strutil::strip(item, " \t"));
     size_t eq = it.find('=');
     std::string newname = it.substr(0, eq), from = eq == std::string::npos ? it : it.substr(eq + 1);
-    int idx = src.spec().channelindex(from);
+    double d = 0;
+    const bool number = cli_parse_double(from.c_str(), &d); // decimal and finite only
+    // after '=' a number is a constant, as in oiiotool, even where a channel has that name
+    int idx = eq != std::string::npos && number ? -1 : src.spec().channelindex(from);
     float v = 0.f;
     // as oiiotool: a bare number that names no channel is a channel index ("0,1,2"); after
     // '=' it is a constant ("A=1")
@@ -266,8 +269,6 @@ bool cmd_ch(Context &ctx, const Modifiers &, const std::vector<std::string> &a, 
       return false;
     }
     if (idx < 0) {
-      double d = 0;
-      const bool number = cli_parse_double(from.c_str(), &d); // decimal and finite only
       char *end = nullptr;
       std::strtof(from.c_str(), &end); // what strtof reads as a number: " 1", hex, inf, nan
       if (eq == std::string::npos || (!number && (end == from.c_str() || *end))) {
@@ -382,8 +383,13 @@ bool cmd_ociodisplay(Context &ctx, const Modifiers &m, const std::vector<std::st
     err = "view '" + view + "' of display '" + display + "' is not in OCIO config '" + path + "'";
     return false;
   }
-  // OIIO 2.4 ignores a look the config does not define; name it instead.
-  for (std::string look : kpcn::ops::split_names(m.str("looks"))) {
+  // OIIO 2.4 ignores a look the config does not define; name it instead. Blanks around a
+  // name are not part of it ("A, B"), as in oiiotool.
+  std::string looks;
+  for (std::string item : kpcn::ops::split_names(m.str("looks"))) {
+    item = std::string(OIIO::Strutil::strip(item, " \t"));
+    looks += (looks.empty() ? "" : ",") + item;
+    std::string look = item;
     if (!look.empty() && (look[0] == '+' || look[0] == '-')) look.erase(0, 1);
     found = false;
     for (int i = 0; i < cc->getNumLooks(); ++i)
@@ -422,7 +428,6 @@ bool cmd_ociodisplay(Context &ctx, const Modifiers &m, const std::vector<std::st
   if (!display_source_space(*cc, path, m, src, from, err)) return false;
   // OIIO 2.4's ociodisplay ignores its looks argument, so the looks are applied first, in the
   // source space (as `oiiotool --ociolook:from=S:to=S L --ociodisplay` does).
-  const std::string looks = m.str("looks");
   if (!looks.empty()) {
     ImageBuf looked;
     if (!IBA::ociolook(looked, src, looks, from, from, false, false, "", "", cc.get(), {},
@@ -514,12 +519,17 @@ bool cmd_mosaic(Context &ctx, const Modifiers &m, const std::vector<std::string>
   // Each tile is its image's whole frame (display window): an image whose pixels cover part
   // of it (a --render crop) is padded with black, as oiiotool's --mosaic does.
   std::vector<ImageBuf> tiles((size_t)n);
-  for (long i = 0; i < n; ++i)
-    if (!whole_frame(ctx.stack[base + i], tiles[(size_t)i], ctx.nthreads, err)) {
+  for (long i = 0; i < n; ++i) {
+    ImageBuf &t = tiles[(size_t)i];
+    if (!whole_frame(ctx.stack[base + i], t, ctx.nthreads, err)) {
       err = "image " + std::to_string(i + 1) + " (" + img_desc(ctx.stack[base + i], "computed") +
             "): " + err;
       return false;
     }
+    // OIIO 2.4's paste ignores the source's origin: a frame not at 0,0 pasted black
+    t.set_origin(0, 0);
+    t.set_full(0, t.spec().width, 0, t.spec().height, 0, 1);
+  }
   int nch = tiles[0].nchannels(), W = 0, H = 0;
   for (long i = 0; i < n; ++i) {
     const ImageBuf &b = tiles[(size_t)i];

@@ -87,10 +87,11 @@ bool register_command(Command c);
 // Extensions used by main.cpp (implemented in registry.cpp / cmd_core.cpp).
 const Command *find_command(const std::string &name); // nullptr if unknown
 std::vector<const Command *> all_commands();          // sorted by name
-// The pixel type an -o file of extension ext (lower case) gets: the -d type when given, else
-// the widest input type (float when nothing was read), as far as the format holds it: 8-bit
-// formats (PNG, JPEG, ...) get uint8, PNG and PNM uint16 when the inputs had 16 bits.
-OIIO::TypeDesc output_type(const Context &ctx, const std::string &ext);
+// The pixel type an -o file of extension ext (lower case) gets for img: the -d type when
+// given, else, as in oiiotool, the type of img's file when img is an image as read, or the
+// widest input type when img was computed (float when nothing was read), as far as the format
+// holds it: 8-bit formats (PNG, JPEG, ...) get uint8, PNG and PNM uint16 for 16-bit data.
+OIIO::TypeDesc output_type(const Context &ctx, const OIIO::ImageBuf &img, const std::string &ext);
 // Folds the pixel type of a file just read into ctx.input_type.
 void note_input_type(Context &ctx, OIIO::TypeDesc file_type);
 // Checks that img can be written to a file of extension ext: more channels than R,G,B,A only

@@ -8,6 +8,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
+#include <csignal>
 #include <cctype>
 #include <cstdio>
 #include <cstdlib>
@@ -62,39 +63,55 @@ static int type_rank(OIIO::TypeDesc t) {
 }
 
 void note_input_type(Context &ctx, OIIO::TypeDesc file_type) {
-  static const OIIO::TypeDesc by_rank[] = {OIIO::TypeDesc::UNKNOWN, OIIO::TypeDesc::UINT8,
-                                           OIIO::TypeDesc::UINT16, OIIO::TypeDesc::HALF,
-                                           OIIO::TypeDesc::FLOAT};
-  const int r = std::max(type_rank(ctx.input_type), type_rank(file_type));
-  ctx.input_type = by_rank[r];
+  if (type_rank(file_type) > type_rank(ctx.input_type)) ctx.input_type = file_type;
 }
 
 static bool is_any_of(const std::string &ext, std::initializer_list<const char *> list) {
   return std::any_of(list.begin(), list.end(), [&](const char *e) { return ext == e; });
 }
 
-OIIO::TypeDesc output_type(const Context &ctx, const std::string &ext) {
+OIIO::TypeDesc output_type(const Context &ctx, const OIIO::ImageBuf &img, const std::string &ext) {
   if (ctx.output_type != OIIO::TypeDesc::UNKNOWN) return ctx.output_type;
-  const int r = type_rank(ctx.input_type);
+  // as oiiotool: an image as read keeps its file's type, a computed one the inputs' (widest)
+  const OIIO::TypeDesc t = img.name().empty() ? ctx.input_type : img.nativespec().format;
+  const int r = type_rank(t);
   if (is_any_of(ext, {"png", "jpg", "jpeg", "jpe", "jfif", "bmp", "tga", "ppm", "pgm", "pnm", "pbm",
                       "gif", "ico", "webp"}))
     return r == 2 && is_any_of(ext, {"png", "ppm", "pgm", "pnm"}) ? OIIO::TypeDesc::UINT16
                                                                   : OIIO::TypeDesc::UINT8;
-  return r == 0 ? OIIO::TypeDesc::FLOAT : ctx.input_type;
+  static const OIIO::TypeDesc by_rank[] = {OIIO::TypeDesc::FLOAT, OIIO::TypeDesc::UINT8,
+                                           OIIO::TypeDesc::UINT16, OIIO::TypeDesc::HALF,
+                                           OIIO::TypeDesc::FLOAT};
+  return by_rank[r];
 }
 
 // The frame limits whole_frame applies, without filling anything.
 static bool frame_fits(const OIIO::ImageBuf &img, std::string &err) {
   const OIIO::ROI full = img.roi_full();
-  if (full.width() <= KPCN_MAX_DIM && full.height() <= KPCN_MAX_DIM &&
-      (int64_t)full.width() * full.height() <= KPCN_MAX_PIXELS)
-    return true;
-  err = "its display window is " + std::to_string(full.width()) + "x" +
-        std::to_string(full.height()) + " (its pixels " + std::to_string(img.spec().width) + "x" +
-        std::to_string(img.spec().height) + "), too large to fill (limit " +
-        std::to_string(KPCN_MAX_DIM) + " per side, " + std::to_string(KPCN_MAX_PIXELS) +
-        " pixels)";
-  return false;
+  const std::string what = "its display window is " + std::to_string(full.width()) + "x" +
+                           std::to_string(full.height()) + " (its pixels " +
+                           std::to_string(img.spec().width) + "x" +
+                           std::to_string(img.spec().height) + "), too large to fill";
+  if (full.width() > KPCN_MAX_DIM || full.height() > KPCN_MAX_DIM ||
+      (int64_t)full.width() * full.height() > KPCN_MAX_PIXELS) {
+    err = what + " (limit " + std::to_string(KPCN_MAX_DIM) + " per side, " +
+          std::to_string(KPCN_MAX_PIXELS) + " pixels)";
+    return false;
+  }
+  // the filled frame is float, as every image here; with the image itself and OIIO's copy for
+  // writing, three of them must fit in what the machine has available
+  const double bytes = (double)full.width() * full.height() * img.nchannels() * sizeof(float);
+  const uint64_t avail = kpcn_available_memory();
+  if (avail && 3.0 * bytes > (double)avail) {
+    char b[160];
+    std::snprintf(b, sizeof b,
+                  " (%.1f GB of %d channels, with the copies made to write it more "
+                  "than the %.1f GB available)",
+                  bytes * 1e-9, img.nchannels(), (double)avail * 1e-9);
+    err = what + b;
+    return false;
+  }
+  return true;
 }
 
 bool output_fits(const OIIO::ImageBuf &img, const std::string &ext, std::string &err) {
@@ -102,6 +119,12 @@ bool output_fits(const OIIO::ImageBuf &img, const std::string &ext, std::string 
   if (!out) {
     OIIO::geterror();
     return true; // not a writable format: output_format_ok said so when the line was parsed
+  }
+  // OIIO 2.4's DPX writer claims any channel count but aborts on 2 or more than 4
+  if (ext == "dpx" && (img.nchannels() == 2 || img.nchannels() > 4)) {
+    err = "the image has " + std::to_string(img.nchannels()) +
+          " channels and .dpx files hold 1, 3 or 4: select them first (--ch R,G,B)";
+    return false;
   }
   if (img.nchannels() > 4 && !out->supports("nchannels")) {
     err = "the image has " + std::to_string(img.nchannels()) + " channels and ." + ext +
@@ -226,6 +249,22 @@ static void cleanup_at_exit() {
                g_writing_what.c_str());
 }
 
+// The same for an image library that aborts on what it cannot write (OIIO 2.4 asserts on some
+// DPX channel counts, or when a buffer cannot be allocated): outside a write the default.
+// Only unlink and write, which are async-signal-safe, touch the outside world here; a
+// directory output (--patches:out=) is left for the next run to replace.
+static void abort_while_writing(int sig) {
+  if (g_writing_tmps) {
+    for (const std::string &t : *g_writing_tmps)
+      (void)unlink(t.c_str());
+    static const char msg[] = "kpcntool: error: the image library aborted while writing an "
+                              "output; nothing was written\n";
+    (void)!write(2, msg, sizeof msg - 1);
+  }
+  std::signal(sig, SIG_DFL);
+  std::raise(sig);
+}
+
 // A directory output may merge into an existing directory (its files are replaced one by one).
 static bool move_into_place(const Context::Output &o, const std::string &tmp, std::string &err) {
   std::error_code ec;
@@ -262,7 +301,8 @@ bool commit_outputs(const std::vector<Context::Output> &outputs, std::string &fa
       return false;
     }
     tmp.push_back(temp_path(o, i));
-    static const bool registered = std::atexit(cleanup_at_exit) == 0;
+    static const bool registered =
+        std::atexit(cleanup_at_exit) == 0 && std::signal(SIGABRT, abort_while_writing) != SIG_ERR;
     (void)registered;
     g_writing_what = o.what;
     g_writing_tmps = &tmp;

@@ -103,6 +103,13 @@ kpcn_status kpcn_check_not_input(const char *output, const char *out_what, const
  * reason ("No such file or directory", "is a directory", "is not a regular file (a FIFO,
  * device or socket)"). */
 FILE *kpcn_fopen_input(const char *path, const char **why);
+/* This machine's physical memory in bytes (0 if unknown). */
+uint64_t kpcn_physical_memory(void);
+/* Memory available to a new allocation now (Linux's MemAvailable: free memory plus what the
+ * kernel can reclaim, plus free swap), at most the physical memory; the physical memory where
+ * /proc/meminfo cannot be read; 0 if neither is known. Cgroup limits are not seen. Tools use
+ * it to refuse a buffer that cannot fit before allocating it. */
+uint64_t kpcn_available_memory(void);
 
 /* Upper bound for any image dimension and pixel count accepted by the library;
  * larger requests are rejected as "absurd" rather than attempted. */

@@ -222,8 +222,8 @@ typedef struct kpcn_denoiser_options {
                              tile sizes to float summation order (oneDNN sums in an order
                              that depends on the tensor's shape: up to ~2e-6 relative with
                              the shipped model, docs/denoiser.md), bit for bit only for
-                             some sizes. A tile far below the padding is refused at execute
-                             when it would tile the image (> 25 times the work). */
+                             some sizes. A tile whose padded tiles would add up to more than
+                             25 times the image is refused at execute. */
   int nthreads;           /* 0 = all cores; at most KPCN_DENOISE_MAX_THREADS. Results agree
                              across thread counts to float summation order (oneDNN's
                              choice of kernel depends on it), not always bit for bit */

@@ -25,13 +25,6 @@ void *kpcn_calloc(size_t count, size_t size, const char *what);
 void *kpcn_aligned_alloc(size_t bytes, const char *what);
 void kpcn_aligned_free(void *p);
 
-/* This machine's physical memory in bytes (0 if unknown). */
-uint64_t kpcn_physical_memory(void);
-/* Memory available to a new allocation now (Linux's MemAvailable: free memory plus what the
- * kernel can reclaim, plus free swap), at most the physical memory; the physical memory where
- * /proc/meminfo cannot be read; 0 if neither is known. */
-uint64_t kpcn_available_memory(void);
-
 /* Validates an image size: positive, <= KPCN_MAX_DIM each, <= KPCN_MAX_PIXELS total. */
 kpcn_status kpcn_check_size(int width, int height, const char *what);
 

@@ -90,6 +90,17 @@ static void pad_range(int c0, int c1, int n, int pad, int *p0, int *p1) {
   *p1 = c1 + pad < n ? c1 + pad : n;
 }
 
+/* The summed padded extent of the tiles of size `tile` along an axis of n pixels. */
+static double padded_span(int n, int tile, int pad) {
+  double sum = 0.0;
+  for (int c0 = 0; c0 < n; c0 += tile) {
+    int p0, p1;
+    pad_range(c0, c0 + tile < n ? c0 + tile : n, n, pad, &p0, &p1);
+    sum += p1 - p0;
+  }
+  return sum;
+}
+
 /* Automatic core sizes are even (see tile_pad). */
 static int even_up(int n) { return (n + 1) & ~1; }
 
@@ -244,17 +255,19 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
   const int pad = tile_pad(arch);
   const float eps = arch->eps;
   const size_t P = kpcn_aov_plane_size(aov);
-  /* Each tile is padded by `pad` on every side, so a tile far below it multiplies the work
-   * (tile 1 of the shipped model: hundreds of times, which looks like a hang). Refused once
-   * the padded tile would hold more than 25 times its core, when the image is tiled at all
-   * (a tile >= the image runs in one piece, whatever its size). */
-  if (tile > 0 && (tile < W || tile < H) && 5 * tile < tile + 2 * pad)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "denoise: tile %d would pad each %dx%d core of this %dx%d image to %dx%d "
-                     "(the model needs %d pixels of context per side), more than 25 times the "
-                     "untiled work: use 0 (automatic), a tile of at least %d, or one of at "
-                     "least the image's size",
-                     tile, tile, tile, W, H, tile + 2 * pad, tile + 2 * pad, pad, (pad + 1) / 2);
+  /* Each tile is padded by `pad` on every side (as far as the image reaches), so a tile far
+   * below it multiplies the work (tile 1 of the shipped model: hundreds of times, which looks
+   * like a hang). Refused when the padded tiles would hold more than 25 times the image. */
+  if (tile > 0) {
+    const double cost = padded_span(W, tile, pad) * padded_span(H, tile, pad) / ((double)W * H);
+    if (cost > 25.0)
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                       "denoise: tile %d would split this %dx%d image into tiles whose padded "
+                       "areas (the model needs %d pixels of context per side) add up to %.0f "
+                       "times the image, more than 25 times the untiled work: use 0 "
+                       "(automatic), a larger tile, or one of at least the image's size",
+                       tile, W, H, pad, cost);
+  }
   int TW, TH;
   tile_grid(arch, o->bf16, W, H, pad, tile, &TW, &TH);
   kpcn_features_norm norm;
