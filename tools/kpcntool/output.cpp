@@ -161,13 +161,12 @@ bool write_image(const OIIO::ImageBuf &img, const std::string &file, OIIO::TypeD
     err = OIIO::geterror();
     return false;
   }
-  OIIO::ImageBuf framed;
-  if (out->supports("displaywindow"))
-    framed = img;
-  else if (!whole_frame(img, framed, 0, err))
-    return false;
-  if (!framed.write(file, fmt)) {
-    err = framed.geterror();
+  OIIO::ImageBuf framed; // only where filled: a copy of img would double its memory
+  const bool fill = !out->supports("displaywindow") && img.roi() != img.roi_full();
+  if (fill && !whole_frame(img, framed, 0, err)) return false;
+  const OIIO::ImageBuf &w = fill ? framed : img;
+  if (!w.write(file, fmt)) {
+    err = w.geterror();
     if (err.empty()) err = "the image writer failed";
     return false;
   }
