@@ -470,7 +470,7 @@ coverage() {
     [[ $skip == *" $o "* ]] || [ -n "${TESTED[$tool $o]:-}" ] || untested+=("$tool $o")
   done
 }
-coverage kpcn-render "--checkpoint --color-only --half --quiet --version" "$KR"
+coverage kpcn-render "--checkpoint --color-only --compression --half --quiet --version" "$KR"
 coverage "kpcn-dataset plan" "--eval-variants --force --no-preview --scenes --texture-dir" "$KD" plan
 coverage "kpcn-dataset run" "--dry-run --list --renderer" "$KD" run
 coverage "kpcn-dataset patches" "--allow-partial --dtype --importance --split" "$KD" patches

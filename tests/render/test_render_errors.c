@@ -200,6 +200,22 @@ static void test_tool(void) {
   CHECK(info.width == 16 && info.height == 16 && info.spp == 1);
   for (int b = 0; b < KPCN_BUF_COUNT; b++)
     CHECK(info.has_buffer[b] && info.has_variance[b]);
+  /* --compression: another encoding of the same pixels; an unknown one is a usage error */
+  char out2[1100];
+  snprintf(out2, sizeof out2, "%s.none.exr", out);
+  snprintf(cmd, sizeof(cmd),
+           "%s %s -o %s --spp 1 --resolution 16x16 --threads 1 --compression none", exe,
+           KPCN_TESTDATA "/scenes/cornell-box/scene.json", out2);
+  CHECK(run(cmd) == 0);
+  kpcn_image *zip = NULL, *none = NULL;
+  CHECK(kpcn_exr_read_image(out, &zip) == KPCN_OK && kpcn_exr_read_image(out2, &none) == KPCN_OK);
+  CHECK(zip && none && zip->nchannels == none->nchannels &&
+        memcmp(zip->data, none->data, sizeof(float) * 256 * (size_t)zip->nchannels) == 0);
+  kpcn_image_destroy(zip);
+  kpcn_image_destroy(none);
+  remove(out2);
+  expect_cli(exe, cornell, "--compression lz4", 2,
+             "--compression 'lz4' is not zip, zips, piz, rle or none");
   test_tool_options(exe);
   test_tool_outputs(exe);
 }

@@ -29,11 +29,14 @@ static void usage(FILE *f) {
       "usage: kpcn-render scene.json -o out.exr [--spp N] [--seed S] [--threads N (0=all)]\n"
       "                   [--resolution WxH] [--crop x,y,w,h] [--color-only] [--max-bounces N]\n"
       "                   [--albedo-spp N] [--albedo-footprint K] [--half] [--quiet]\n"
+      "                   [--compression zip|zips|piz|rle|none]\n"
       "                   [--checkpoint PATH [--checkpoint-every S] [--time-limit M]]\n"
       "  --albedo-spp N   the albedo buffer from N >= spp camera samples of a features-only\n"
       "                   pass (less edge noise for the denoiser's remodulation)\n"
       "  --albedo-footprint K  each sample's textured albedo averaged over K x K points of\n"
       "                   its pixel's footprint (texture lookups, no rays; 1 = off)\n"
+      "  --compression C  the EXR's compression (default zip: a 960x540 living-room render\n"
+      "                   at 4 spp is 14 MB, 50 MB with none, which writes 0.3 s faster)\n"
       "  --checkpoint PATH  save finished rows there every S seconds (default 60) and on\n"
       "                   SIGINT/SIGTERM; the same command resumes from it (bit-identical)\n"
       "                   and removes it once the output is written\n"
@@ -141,6 +144,7 @@ int main(int argc, char **argv) {
   const char *scene_path = NULL, *out_path = NULL;
   kpcn_render_settings rs = kpcn_render_settings_defaults();
   int quiet = 0, half = 0;
+  kpcn_exr_compression compression = KPCN_EXR_ZIP;
   double time_limit_min = -1.0;
   int every_given = 0;
   for (int i = 1; i < argc; i++) {
@@ -238,6 +242,22 @@ int main(int argc, char **argv) {
       rs.color_only = 1;
     } else if (strcmp(a, "--half") == 0) {
       half = 1;
+    } else if (strcmp(a, "--compression") == 0) {
+      static const struct {
+        const char *name;
+        kpcn_exr_compression c;
+      } comps[] = {{"zip", KPCN_EXR_ZIP},
+                   {"zips", KPCN_EXR_ZIPS},
+                   {"piz", KPCN_EXR_PIZ},
+                   {"rle", KPCN_EXR_RLE},
+                   {"none", KPCN_EXR_NONE}};
+      NEED_VALUE int found = 0;
+      for (size_t k = 0; k < sizeof comps / sizeof comps[0]; k++)
+        if (strcmp(v, comps[k].name) == 0) compression = comps[k].c, found = 1;
+      if (!found) {
+        fprintf(stderr, "kpcn-render: --compression '%s' is not zip, zips, piz, rle or none\n", v);
+        return 2;
+      }
     } else if (strcmp(a, "--quiet") == 0 || strcmp(a, "-q") == 0) {
       quiet = 1;
     } else if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
@@ -362,6 +382,7 @@ int main(int argc, char **argv) {
             (unsigned long long)stats.nonfinite_samples);
   kpcn_exr_write_options opt = kpcn_exr_write_options_defaults();
   if (half) opt.pixel_type = KPCN_EXR_HALF;
+  opt.compression = compression;
   opt.nthreads = rs.nthreads; /* --threads bounds the writer's compression threads too */
   st = kpcn_exr_write_aov(out_path, aov, &opt);
   kpcn_aov_destroy(aov);
