@@ -104,6 +104,30 @@ static void test_tool_options(const char *exe) {
       "\"transform\":{\"position\":[0,0.5,2],\"look_at\":[0,0,0]}}}";
   write_file(hot, json, strlen(json));
   expect_cli(exe, hot, "--spp 2 --resolution 8x8", 0, "non-finite");
+  /* --half holds at most 65504: a brighter value (a light of 1e5 seen directly) is stored as
+   * 65504 and said, never as Inf */
+  char bright[1024], half_out[1100];
+  snprintf(bright, sizeof(bright), "%s", kt_tmpfile("bright.json"));
+  snprintf(half_out, sizeof(half_out), "%s", kt_tmpfile("bright_half.exr"));
+  const char *bjson =
+      "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"null\"},\"emission\":1e5,"
+      "\"transform\":{\"scale\":4}}],\"camera\":{\"type\":\"pinhole\","
+      "\"transform\":{\"position\":[0,2,0],\"look_at\":[0,0,0],\"up\":[0,0,1]}}}";
+  write_file(bright, bjson, strlen(bjson));
+  char hcmd[8192];
+  snprintf(hcmd, sizeof hcmd, "%s %s -o %s --spp 2 --resolution 8x8 --half --quiet 2>%s.err", exe,
+           bright, half_out, half_out);
+  CHECK(run(hcmd) == 0);
+  snprintf(hcmd, sizeof hcmd, "grep -q 'beyond half.s range were stored as +-65504' %s.err",
+           half_out);
+  CHECK(run(hcmd) == 0);
+  kpcn_image *h = NULL;
+  CHECK(kpcn_exr_read_image(half_out, &h) == KPCN_OK);
+  int inf = 0, at_max = 0;
+  for (size_t i = 0; h && i < (size_t)h->width * h->height * (size_t)h->nchannels; i++)
+    inf += isinf(h->data[i]), at_max += h->data[i] == 65504.0f;
+  CHECK(h && inf == 0 && at_max > 0);
+  kpcn_image_destroy(h);
 }
 
 /* Output paths refused before rendering, each left as it was: a name that is not .exr, a

@@ -16,6 +16,7 @@
 #include <errno.h>
 #include <signal.h>
 #include <stdint.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -380,6 +381,25 @@ int main(int argc, char **argv) {
             "kpcn-render: warning: %llu samples had a non-finite value (radiance beyond float "
             "range) and count as black\n",
             (unsigned long long)stats.nonfinite_samples);
+  /* half holds at most 65504: beyond it the file would say Inf, where a float render says
+   * a large value (a bright light's colour variance). Saturated instead, and said. */
+  if (half) {
+    const size_t plane = (size_t)aov->width * (size_t)aov->height;
+    uint64_t saturated = 0;
+    for (int b = 0; b < KPCN_BUF_COUNT; b++) {
+      const size_t n[2] = {aov->buf[b] ? plane * (size_t)kpcn_buffer_channels(b) : 0,
+                           aov->var[b] ? plane : 0};
+      float *p[2] = {aov->buf[b], aov->var[b]};
+      for (int k = 0; k < 2; k++)
+        for (size_t i = 0; i < n[k]; i++)
+          if (fabsf(p[k][i]) > 65504.0f) p[k][i] = copysignf(65504.0f, p[k][i]), saturated++;
+    }
+    if (saturated)
+      fprintf(stderr,
+              "kpcn-render: warning: %llu values beyond half's range were stored as +-65504 "
+              "(write float, without --half, to keep them)\n",
+              (unsigned long long)saturated);
+  }
   kpcn_exr_write_options opt = kpcn_exr_write_options_defaults();
   if (half) opt.pixel_type = KPCN_EXR_HALF;
   opt.compression = compression;
