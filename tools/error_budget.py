@@ -53,6 +53,8 @@ import subprocess
 import sys
 import tempfile
 
+import kpcn_tools
+
 import numpy as np
 import OpenImageIO as oiio
 
@@ -142,20 +144,19 @@ def denoise(tool, model, src, dst, opts=""):
 
 
 def main():
-    ap = argparse.ArgumentParser(usage=__doc__.split("\n\n")[1])
+    ap = kpcn_tools.parser(__doc__)
     ap.add_argument("noisy")
     ap.add_argument("ref")
     ap.add_argument("--model")
-    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    ap.add_argument("--kpcntool", default=os.path.join(here, "build/tools/kpcntool/kpcntool"))
-    ap.add_argument("--eps", type=float)
+    ap.add_argument("--kpcntool", default=kpcn_tools.tool_path("kpcntool"))
+    ap.add_argument("--eps", type=kpcn_tools.positive_float)
     ap.add_argument("--color-ref")
     ap.add_argument("--edges", action="store_true")
     a = ap.parse_args()
     if a.eps is None:  # the model's own, so the oracle remodulates as its pipeline does
         a.eps = model_eps(a.model) if a.model else 0.00316
-    if a.model and not os.access(a.kpcntool, os.X_OK):
-        fail("no kpcntool at '%s' (build first, or give --kpcntool)" % a.kpcntool)
+    if a.model:
+        kpcn_tools.check_executable(a.kpcntool, "kpcntool", fail)
     nbuf, n = load(a.noisy)
     _, r = load(a.ref)
     d_n, s_n, a_n = (rgb(n, p, a.noisy) for p in ("diffuse.", "specular.", "albedo."))

@@ -23,6 +23,8 @@ import subprocess
 import sys
 import tempfile
 
+import kpcn_tools
+
 PAIR = re.compile(r"^v(\d+)_(\d+)spp\.exr$")
 REF = re.compile(r"^v(\d+)_ref(\d+)spp\.exr$")
 
@@ -80,18 +82,18 @@ def run(cmd):
 
 
 def main():
-    ap = argparse.ArgumentParser(usage=__doc__.split("\n\n")[1])
+    ap = kpcn_tools.parser(__doc__)
     ap.add_argument("model")
     ap.add_argument("datasets", nargs="+")
     ap.add_argument("--variants")
     ap.add_argument("--spp")
-    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    ap.add_argument("--kpcntool", default=os.path.join(here, "build/tools/kpcntool/kpcntool"))
+    ap.add_argument("--kpcntool", default=kpcn_tools.tool_path("kpcntool"))
     ap.add_argument("--denoise-opts", default="")
     ap.add_argument("--pairs")
     a = ap.parse_args()
-    if not os.access(a.kpcntool, os.X_OK):
-        fail("no kpcntool at '%s' (build first, or give --kpcntool)" % a.kpcntool)
+    kpcn_tools.check_executable(a.kpcntool, "kpcntool", fail)
+    if a.pairs:
+        kpcn_tools.check_output(a.pairs, "--pairs", fail)
     if not os.path.isfile(a.model):
         fail("no model file '%s'" % a.model)
     variants = int_list(a.variants, "--variants") if a.variants else None

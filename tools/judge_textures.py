@@ -40,6 +40,8 @@ import subprocess
 import sys
 import tempfile
 
+import kpcn_tools
+
 HERE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ROOMS = ["roomsval", "roomsval2", "roomsval3"]
 VAL = ["v2val", "v3val"]
@@ -151,10 +153,10 @@ def main():
             fail("usage: judge_textures.py --compare NEW.tsv BASE.tsv")
         print(json.dumps(compare(read_pairs(sys.argv[2]), read_pairs(sys.argv[3]))))
         return
-    ap = argparse.ArgumentParser(usage=__doc__.split("\n\n")[1])
+    ap = kpcn_tools.parser(__doc__)
     ap.add_argument("model")
     ap.add_argument("td")
-    ap.add_argument("--bin", default=os.path.join(HERE, "build/tools"))
+    ap.add_argument("--bin", default=kpcn_tools.bin_dir())
     ap.add_argument("--denoise-opts", default="")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--pairs")
@@ -163,9 +165,10 @@ def main():
     base = read_pairs(a.baseline) if a.baseline else None
     tool = os.path.join(a.bin, "kpcntool/kpcntool")
     render = os.path.join(a.bin, "kpcn-render/kpcn-render")
-    for exe in (tool, render):
-        if not os.access(exe, os.X_OK):
-            fail("no '%s' (build first, or give --bin)" % exe)
+    for exe, what in ((tool, "kpcntool"), (render, "kpcn-render")):
+        kpcn_tools.check_executable(exe, what, fail)
+    if a.pairs:
+        kpcn_tools.check_output(a.pairs, "--pairs", fail)
     if not os.path.isfile(a.model):
         fail("no model file '%s'" % a.model)
     if a.threads < 1:

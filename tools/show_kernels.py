@@ -20,6 +20,8 @@ import argparse
 import json
 import sys
 
+import kpcn_tools
+
 import numpy as np
 import OpenImageIO as oiio
 
@@ -76,7 +78,7 @@ def magnify(img, s):
 
 
 def main():
-    ap = argparse.ArgumentParser(usage=__doc__.split("\n\n")[1])
+    ap = kpcn_tools.parser(__doc__)
     ap.add_argument("kernels")
     ap.add_argument("pixels", nargs="+")
     ap.add_argument("-o", dest="out")

@@ -54,6 +54,13 @@ bad() {
 bad "no pairs found" "$M" "$D/ds" --spp 64
 bad "has no renders/ folder" "$M" "$D"
 bad "is not a comma-separated list" "$M" "$D/ds" --variants 1,x
+# an output that cannot be written is refused before any pair is measured (it failed at the end)
+bad "--pairs '$D/nodir/p.tsv': cannot write a file there" "$M" "$D/ds" --pairs "$D/nodir/p.tsv"
+# without --kpcntool, the binaries come from $KPCN_BIN as in the shell tools (it was ignored)
+if KPCN_BIN="$D/nobin" /usr/bin/python3 "$S" "$M" "$D/ds" >"$D/out" 2>"$D/err"; then
+  fail "KPCN_BIN ignored"
+fi
+grep -qF "no kpcntool at '$D/nobin/kpcntool/kpcntool'" "$D/err" || fail "KPCN_BIN: $(cat "$D/err")"
 rm "$D/ds/renders/b/v001_ref1024spp.exr"
 bad "v001_16spp.exr has no reference" "$M" "$D/ds"
 bad "no model file" "$D/nope.safetensors" "$D/ds"
