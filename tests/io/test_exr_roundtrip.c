@@ -122,6 +122,15 @@ static void test_roundtrips(void) {
   roundtrip(19, 11, NC, many, KPCN_EXR_ZIP, KPCN_EXR_FLOAT, "many_f.exr");
   roundtrip(19, 11, NC, many, KPCN_EXR_ZIP, KPCN_EXR_HALF, "many_h.exr");
 
+  /* compression names, as kpcn-render --compression takes them */
+  kpcn_exr_compression c = KPCN_EXR_NONE;
+  CHECK(kpcn_exr_compression_parse("zip", &c) == KPCN_OK && c == KPCN_EXR_ZIP);
+  CHECK(kpcn_exr_compression_parse("piz", &c) == KPCN_OK && c == KPCN_EXR_PIZ);
+  CHECK(kpcn_exr_compression_parse("none", &c) == KPCN_OK && c == KPCN_EXR_NONE);
+  CHECK(kpcn_exr_compression_parse("ZIP", &c) == KPCN_ERR_INVALID_ARGUMENT &&
+        strstr(kpcn_last_error(), "'ZIP'"));
+  CHECK(kpcn_exr_compression_parse(NULL, &c) == KPCN_ERR_INVALID_ARGUMENT);
+
   /* half rounding predictor sanity (independent of the library) */
   CHECK(half_round(1.0f) == 1.0f && half_round(65504.0f) == 65504.0f);
   CHECK(isinf(half_round(70000.0f)) && half_round(1.0f + 1.0f / 4096) == 1.0f);

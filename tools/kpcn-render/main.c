@@ -244,19 +244,8 @@ int main(int argc, char **argv) {
     } else if (strcmp(a, "--half") == 0) {
       half = 1;
     } else if (strcmp(a, "--compression") == 0) {
-      static const struct {
-        const char *name;
-        kpcn_exr_compression c;
-      } comps[] = {{"zip", KPCN_EXR_ZIP},
-                   {"zips", KPCN_EXR_ZIPS},
-                   {"piz", KPCN_EXR_PIZ},
-                   {"rle", KPCN_EXR_RLE},
-                   {"none", KPCN_EXR_NONE}};
-      NEED_VALUE int found = 0;
-      for (size_t k = 0; k < sizeof comps / sizeof comps[0]; k++)
-        if (strcmp(v, comps[k].name) == 0) compression = comps[k].c, found = 1;
-      if (!found) {
-        fprintf(stderr, "kpcn-render: --compression '%s' is not zip, zips, piz, rle or none\n", v);
+      NEED_VALUE if (kpcn_exr_compression_parse(v, &compression) != KPCN_OK) {
+        fprintf(stderr, "kpcn-render: --%s\n", kpcn_last_error());
         return 2;
       }
     } else if (strcmp(a, "--quiet") == 0 || strcmp(a, "-q") == 0) {

@@ -65,6 +65,9 @@ typedef struct kpcn_exr_write_options {
 
 /* ZIP, float, no extra attributes. */
 kpcn_exr_write_options kpcn_exr_write_options_defaults(void);
+/* "zip", "zips", "piz", "rle" or "none" (the names kpcn_exr_info reports) into *out;
+ * KPCN_ERR_INVALID_ARGUMENT naming the text otherwise. */
+kpcn_status kpcn_exr_compression_parse(const char *name, kpcn_exr_compression *out);
 /* Appends a string/int attribute to opt (KPCN_ERR_INVALID_ARGUMENT when full or the name
  * is too long). */
 kpcn_status kpcn_exr_options_add_string(kpcn_exr_write_options *opt, const char *name,

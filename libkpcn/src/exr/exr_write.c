@@ -69,6 +69,24 @@ static exr_compression_t to_exr_compression(kpcn_exr_compression c) {
   }
 }
 
+kpcn_status kpcn_exr_compression_parse(const char *name, kpcn_exr_compression *out) {
+  static const struct {
+    const char *name;
+    kpcn_exr_compression c;
+  } tab[] = {{"zip", KPCN_EXR_ZIP},
+             {"zips", KPCN_EXR_ZIPS},
+             {"piz", KPCN_EXR_PIZ},
+             {"rle", KPCN_EXR_RLE},
+             {"none", KPCN_EXR_NONE}};
+  for (size_t k = 0; name && out && k < sizeof tab / sizeof tab[0]; k++)
+    if (strcmp(name, tab[k].name) == 0) {
+      *out = tab[k].c;
+      return KPCN_OK;
+    }
+  return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "compression '%s' is not zip, zips, piz, rle or none",
+                   name ? name : "(null)");
+}
+
 /* Packs and compresses the chunk starting at scanline y into enc (not written yet). */
 static kpcn_status encode_chunk(exr_context_t ctx, int part, int y, int w, int n,
                                 const char *const *names, const float *const *planes,
