@@ -2,10 +2,13 @@
 """Scores a model on the rendered pairs of one or more datasets, as model changes are judged.
 
 usage: tools/eval_model.py MODEL.safetensors DATASET_DIR... [--variants LIST] [--spp LIST]
-                           [--kpcntool PATH] [--denoise-opts OPTS] [--pairs OUT.tsv]
+                           [--ref-spp N] [--kpcntool PATH] [--denoise-opts OPTS]
+                           [--pairs OUT.tsv]
 
 Every pair is DATASET_DIR/renders/<scene>/v<NNN>_<spp>spp.exr against the same variant's
-v<NNN>_ref<S>spp.exr (the dataset's reference; kpcn-dataset's layout). --variants keeps only
+v<NNN>_ref<S>spp.exr (the dataset's reference; kpcn-dataset's layout); where a variant has
+several (training_data.sh adds 4096-spp ones to v1), the one of most samples, or the one of
+--ref-spp N samples, which every variant must then have. --variants keeps only
 the given variant numbers (v2val and v3val: 1,2, since v000 is the authored scene that the
 training stores hold); --spp keeps only those sample counts (default: every one found). Each
 noisy render is denoised by `kpcntool NOISY --denoise:model=MODEL` (plus --denoise-opts, e.g.
@@ -43,7 +46,7 @@ def int_list(text, what):
     return set(vals)
 
 
-def pairs(dataset, variants, spps):
+def pairs(dataset, variants, spps, ref_spp):
     """(scene, variant, spp, noisy path, reference path) of every pair in DATASET/renders."""
     root = os.path.join(dataset, "renders")
     if not os.path.isdir(root):
@@ -68,9 +71,15 @@ def pairs(dataset, variants, spps):
                 continue
             if v not in refs:
                 fail("%s has no reference (v%03d_ref*spp.exr) beside it" % (os.path.join(d, n), v))
-            if len(refs[v]) > 1:
-                fail("%s: more than one reference for v%03d; keep one" % (d, v))
-            out.append((scene, v, spp, os.path.join(d, n), os.path.join(d, refs[v][0][1])))
+            if ref_spp is None:
+                ref = max(refs[v])[1]
+            else:
+                ref = dict(refs[v]).get(ref_spp)
+                if ref is None:
+                    fail("%s has no %d-spp reference (v%03d_ref%dspp.exr; it has %s)" % (
+                        os.path.join(d, n), ref_spp, v, ref_spp,
+                        ", ".join("%d spp" % r for r, _ in sorted(refs[v]))))
+            out.append((scene, v, spp, os.path.join(d, n), os.path.join(d, ref)))
     return out
 
 
@@ -87,6 +96,7 @@ def main():
     ap.add_argument("datasets", nargs="+")
     ap.add_argument("--variants")
     ap.add_argument("--spp")
+    ap.add_argument("--ref-spp")
     ap.add_argument("--kpcntool", default=kpcn_tools.tool_path("kpcntool"))
     ap.add_argument("--denoise-opts", default="")
     ap.add_argument("--pairs")
@@ -98,7 +108,13 @@ def main():
         fail("no model file '%s'" % a.model)
     variants = int_list(a.variants, "--variants") if a.variants else None
     spps = int_list(a.spp, "--spp") if a.spp else None
-    jobs = [(ds,) + p for ds in a.datasets for p in pairs(ds, variants, spps)]
+    ref_spp = None
+    if a.ref_spp is not None:
+        r = int_list(a.ref_spp, "--ref-spp")
+        if len(r) != 1 or min(r) < 1:
+            fail("--ref-spp '%s' is not one positive sample count" % a.ref_spp)
+        ref_spp = r.pop()
+    jobs = [(ds,) + p for ds in a.datasets for p in pairs(ds, variants, spps, ref_spp)]
     if not jobs:
         fail("no pairs found in %s" % ", ".join(a.datasets))
     rows = []

@@ -18,9 +18,11 @@ spp=${SPP:-16}
 bin=${KPCN_BIN:-$here/build/tools}
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
-rel() { # DENOISE-INPUT REFERENCE
-  "$bin/kpcntool/kpcntool" "$1" --denoise:model="$model${DENOISE_OPTS:-}" "$2" --ch R,G,B --relmse --json |
-    /usr/bin/python3 -c "import json,sys; print(json.load(sys.stdin)['relmse'])"
+rel() { # DENOISE-INPUT REFERENCE (kpcntool's own message when it fails, then this one)
+  local j
+  j=$("$bin/kpcntool/kpcntool" "$1" --denoise:model="$model${DENOISE_OPTS:-}" "$2" --ch R,G,B \
+    --relmse --json) || { echo "footprint_pairs.sh: measuring '$1' against '$2' failed" >&2; return 1; }
+  /usr/bin/python3 -c "import json,sys; print(json.loads(sys.argv[1])['relmse'])" "$j"
 }
 for arg in "$@"; do
   ds=${arg%%:*}
@@ -42,7 +44,8 @@ for l in sys.stdin:
         --resolution "$res" --threads "${THREADS:-2}" --albedo-footprint "$k" --quiet
       plain=-
       [ "${PLAIN:-1}" = 0 ] || plain=$(rel "$noisy" "$ref")
-      printf '%s\t%s\t%s\t%s\t%s\n' "$(basename "$ds")" "$scene" "$v" "$plain" \
-        "$(rel "$tmp/fp.exr" "$ref")"
+      # assigned first: a failure inside printf's arguments would not stop the script
+      fp=$(rel "$tmp/fp.exr" "$ref")
+      printf '%s\t%s\t%s\t%s\t%s\n' "$(basename "$ds")" "$scene" "$v" "$plain" "$fp"
     done
 done

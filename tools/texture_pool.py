@@ -18,7 +18,8 @@ difference to an excluded bitmap under any of the 64x64 cyclic shifts and 8 flip
 below 0.1, or when it is of an excluded bitmap's kind with nearly its parameters: a checker
 with the same cell size whose two colours are within 0.15 of an excluded checker's, or a
 gradient whose corners are within 0.15 of an excluded gradient's under some symmetry.
-Prints, per excluded file, the nearest pool bitmap and its distance.
+Prints, per excluded file, the nearest pool bitmap and its distance. OUT_DIR must be new or
+empty (an earlier pool's bitmaps would stay beside the new ones).
 """
 import argparse
 import colorsys
@@ -233,13 +234,28 @@ def gen_rects(rng, n):
 GEN = {f: globals()["gen_" + f] for f in FAMILIES}
 
 
+def area_matrix(n):
+    """A (64, n) matrix whose rows average an n-pixel row onto 64 cells by covered length."""
+    a = np.zeros((64, n))
+    for i in range(64):
+        lo, hi = i * n / 64, (i + 1) * n / 64
+        for j in range(int(np.floor(lo)), min(n, int(np.ceil(hi)))):
+            a[i, j] = min(hi, j + 1) - max(lo, j)
+    return a / a.sum(axis=1, keepdims=True)
+
+
 def box64(img):
-    """Resample a square bitmap to 64x64 (box filter down, nearest up)."""
+    """Resample a square bitmap to 64x64 (box filter down, nearest up). Sizes that are not a
+    multiple or a divisor of 64 (an excluded scene bitmap can be any size) are averaged by
+    covered area, so the whole bitmap counts (cropping to a multiple dropped its last rows)."""
     n = img.shape[0]
-    if n >= 64:
+    if n >= 64 and n % 64 == 0:
         f = n // 64
-        return img[: 64 * f, : 64 * f].reshape(64, f, 64, f, 3).mean(axis=(1, 3))
-    return np.repeat(np.repeat(img, 64 // n, 0), 64 // n, 1)
+        return img.reshape(64, f, 64, f, 3).mean(axis=(1, 3))
+    if n < 64 and 64 % n == 0:
+        return np.repeat(np.repeat(img, 64 // n, 0), 64 // n, 1)
+    a = area_matrix(n)
+    return np.einsum("iy,yxc,jx->ijc", a, img, a)
 
 
 def symmetries(img):
@@ -321,6 +337,13 @@ def main():
     for p in a.exclude:
         img = read_png(p)
         excl.append((p, box64(img), infer_params(img)))
+    if os.path.isdir(a.out) and os.listdir(a.out):
+        # bitmaps of an earlier pool would stay beside the new one and be drawn from by
+        # kpcn-dataset plan --texture-dir, while pool.json lists only the new ones
+        sys.exit("texture_pool.py: '%s' already holds files (an earlier pool?); write the pool "
+                 "to a new or empty folder" % a.out)
+    if os.path.exists(a.out) and not os.path.isdir(a.out):
+        sys.exit("texture_pool.py: '%s' exists and is not a folder" % a.out)
     os.makedirs(a.out, exist_ok=True)
     manifest = []
     nearest = {p: (1e9, None) for p, _, _ in excl}

@@ -76,6 +76,28 @@ for e in json.load(open(os.path.join(d, "a", "pool.json")))["bitmaps"]:
         inner = max(np.abs(a[:, i] - a[:, i + 1]).mean() for i in range(a.shape[1] - 1))
         assert wrap <= inner + 1e-6, (e["file"], wrap, inner)
 PY
+# An excluded bitmap of any size is compared whole: box64 against an independent area average
+# (each pixel repeated to the least common multiple of n and 64, then block means); before,
+# sizes not a multiple of 64 were cropped to one (a 100x100 bitmap lost its last 36 rows).
+/usr/bin/python3 - "$S" <<'PY' || fail "box64 on sizes other than 32, 64, 128"
+import importlib.util, math, sys
+import numpy as np
+spec = importlib.util.spec_from_file_location("texture_pool", sys.argv[1])
+tp = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(tp)
+rng = np.random.default_rng(7)
+for n in (16, 32, 48, 64, 96, 100, 128, 129, 200):
+    img = rng.uniform(size=(n, n, 3))
+    l = n * 64 // math.gcd(n, 64)
+    big = np.repeat(np.repeat(img, l // n, 0), l // n, 1)
+    ref = big.reshape(64, l // 64, 64, l // 64, 3).mean(axis=(1, 3))
+    got = tp.box64(img)
+    assert got.shape == (64, 64, 3) and np.abs(got - ref).max() < 1e-12, n
+PY
+# a folder holding an earlier pool is refused, and left as it was
+/usr/bin/python3 "$S" "$D/a" --count 5 --seed 9 2>"$D/err0" && fail "existing pool folder accepted"
+grep -q "already holds files" "$D/err0" || fail "existing folder: $(cat "$D/err0")"
+[ "$(ls "$D/a"/*.png | wc -l)" -eq 30 ] || fail "existing folder changed"
 # bad input: a clear error, a non-zero exit, no output directory
 /usr/bin/python3 "$S" "$D/bad1" --exclude "$D/none.png" 2>"$D/err1" && fail "missing --exclude file accepted"
 grep -q "none.png" "$D/err1" || fail "missing file not named: $(cat "$D/err1")"

@@ -61,6 +61,22 @@ if KPCN_BIN="$D/nobin" /usr/bin/python3 "$S" "$M" "$D/ds" >"$D/out" 2>"$D/err"; 
   fail "KPCN_BIN ignored"
 fi
 grep -qF "no kpcntool at '$D/nobin/kpcntool/kpcntool'" "$D/err" || fail "KPCN_BIN: $(cat "$D/err")"
+# two references for a variant (training_data.sh's v1 has 1024- and 4096-spp ones): the one of
+# most samples by default, --ref-spp picks one (it was refused); a missing count is named
+cp "$D/ref2.exr" "$D/ds/renders/a/v000_ref4096spp.exr"
+j=$(/usr/bin/python3 "$S" "$M" "$D/ds" --kpcntool "$T" --variants 0 --spp 16) || fail "two refs"
+/usr/bin/python3 -c "import json,sys; d=json.loads(sys.argv[1]); a=json.loads(sys.argv[2])['relmse']
+b=json.loads(sys.argv[3])['relmse']
+assert d['pairs'] == 2 and abs(d['mean'] - (a + b) / 2) <= 1e-9 * b, d" "$j" "$r1" "$r2" ||
+  fail "most samples not chosen: $j"
+j=$(/usr/bin/python3 "$S" "$M" "$D/ds" --kpcntool "$T" --variants 0 --spp 16 --ref-spp 1024) ||
+  fail "--ref-spp 1024"
+/usr/bin/python3 -c "import json,sys; d=json.loads(sys.argv[1]); a=json.loads(sys.argv[2])['relmse']
+assert d['pairs'] == 2 and abs(d['mean'] - a) <= 1e-9 * a, d" "$j" "$r1" || fail "--ref-spp: $j"
+bad "has no 4096-spp reference (v000_ref4096spp.exr; it has 1024 spp)" "$M" "$D/ds" --variants 0 \
+  --ref-spp 4096
+bad "is not one positive sample count" "$M" "$D/ds" --ref-spp 0
+rm "$D/ds/renders/a/v000_ref4096spp.exr"
 rm "$D/ds/renders/b/v001_ref1024spp.exr"
 bad "v001_16spp.exr has no reference" "$M" "$D/ds"
 bad "no model file" "$D/nope.safetensors" "$D/ds"
