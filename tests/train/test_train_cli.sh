@@ -133,6 +133,11 @@ bad_usage "--freeze given for both branches" --init "$M" --freeze diffuse --free
 # --freeze: needs a model to start from (a usage mistake: exit 2, nothing written); with one,
 # the model says which branch it kept (test_train_pipeline checks the weights bit for bit)
 bad_usage "needs a model to start from" --freeze specular
+# architectures the trainer cannot build and --widen without a model: usage mistakes too
+# (they were exit 1, after the store was read, naming the library's field only)
+bad_usage "kernel_size = 4: must be odd" --preset tiny --kernel 4
+bad_usage "conv_size[0] = 2: must be odd" --preset tiny --conv 2
+bad_usage "(widen_channels, kpcn-train --widen) needs an init model" --preset tiny --widen 16
 # an output that cannot be written is a usage mistake too (exit 2, as in the other tools)
 bad_usage "folder '$D/nodir'" --plot "$D/nodir/u.png"
 bad_usage "must end in .png" --plot "$D/u.jpg"
@@ -225,13 +230,50 @@ oiiotool --pattern constant:color=0.5,nan,0.5 1x1 3 "$TD/dataset/sample_ref.exr"
 if "$K" --store "$D/p.kps" -o "$D/v.safetensors" --preset tiny --iters 1 --batch 2 --patch 16 \
   --val "$N,$D/vref.exr" 2>"$D/err"; then fail "NaN validation reference accepted"; fi
 grep -q "vref.exr': non-finite colour at pixel (5, 2)" "$D/err" || fail "NaN reference unclear: $(cat "$D/err")"
+# a validation input without a buffer the KPCN reads is refused before training, not after
+# it (the whole run was lost, and its CSV left alone)
+"$T" "$N" --ch R,G,B,Z,N.X,N.Y,N.Z,N.var,Z.var,albedo.R,albedo.G,albedo.B,albedo.var,color.var,diffuse.R,diffuse.G,diffuse.B,diffuse.var,specular.R,specular.G,specular.B,specular.var \
+  -o "$D/novis.exr" || fail "input without visibility"
+if "$K" --store "$D/p.kps" -o "$D/v.safetensors" --preset tiny --iters 50 --batch 2 --patch 16 \
+  --val "$D/novis.exr,$R" 2>"$D/err"; then fail "validation input without visibility accepted"; fi
+grep -q "validation input '$D/novis.exr': .*missing buffer 'visibility'" "$D/err" ||
+  fail "missing buffer unclear: $(cat "$D/err")"
+[ -z "$(ls "$D" | grep -E '^v\.')" ] || fail "files left for a validation input without visibility: $(ls "$D")"
+# --iters may grow on a resume when the stage-1 length is left to its default (0.6 * iters:
+# the checkpoint's 2 is kept, not 0.6 * 8); the start-up line names the architecture in use
+"$K" --store "$D/p.kps" -o "$D/g.safetensors" --preset tiny --iters 4 --batch 2 --patch 16 \
+  --plot '' 2>"$D/log" || fail "4 iterations: $(cat "$D/log")"
+"$K" --store "$D/p.kps" -o "$D/g.safetensors" --preset tiny --iters 8 --batch 2 --patch 16 \
+  --plot '' --resume 2>"$D/log" || fail "--iters grown on resume: $(cat "$D/log")"
+grep -q "tiny architecture, 8 iterations (stage 1: 2)" "$D/log" || fail "start-up line: $(cat "$D/log")"
+grep -q "finished at iteration 8" "$D/log" || fail "not resumed to 8: $(cat "$D/log")"
+"$K" --store "$D/p.kps" -o "$D/g.safetensors" --preset tiny --iters 10 --stage1-iters 3 \
+  --batch 2 --patch 16 --plot '' --resume 2>"$D/err" && fail "resume with another --stage1-iters"
+grep -q "train.stage1_iters = 2, this run uses 3 (--stage1-iters)" "$D/err" ||
+  fail "stage-1 mismatch unclear: $(cat "$D/err")"
+"$K" --store "$D/p.kps" -o "$D/gi.safetensors" --init "$D/g.safetensors" --iters 1 --batch 2 \
+  --patch 16 --csv '' --plot '' --ckpt '' 2>"$D/log" || fail "--init tiny: $(cat "$D/log")"
+grep -q "kpcn-train: tiny architecture (from --init)" "$D/log" || fail "--init start-up line: $(cat "$D/log")"
+# --compare: a column a run has no value in (no --val), or values a log axis cannot show,
+# is refused naming the run (it drew an empty plot, or a legend entry without a line)
+if "$K" --compare "$D/ce.png" --y val_relmse a="$D/g.safetensors.csv" 2>"$D/err"; then
+  fail "--compare of an empty column accepted"
+fi
+grep -q "run 'a' .* has no value in column 'val_relmse' (was it trained without --val?)" "$D/err" ||
+  fail "--compare empty column unclear: $(cat "$D/err")"
+[ ! -e "$D/ce.png" ] || fail "--compare wrote a plot of nothing"
+printf 'iter,loss,elapsed_s\n1,0.5,1\n2,-0.25,2\n' >"$D/neg.csv"
+if "$K" --compare "$D/ce.png" b="$D/neg.csv" 2>"$D/err"; then fail "--compare of a negative value on a log axis"; fi
+grep -q "1 value(s) of 'loss' are <= 0, which a log axis cannot show (plot with --linear)" "$D/err" ||
+  fail "--compare negative unclear: $(cat "$D/err")"
+"$K" --compare "$D/ce.png" --linear b="$D/neg.csv" 2>"$D/err" || fail "--compare --linear: $(cat "$D/err")"
 # stopped by a signal: the checkpoint and the model so far are written, and the exit status
 # (128 + the signal) says it did not finish
 "$K" --store "$D/p.kps" -o "$D/s.safetensors" --preset tiny --iters 1000000 --batch 2 --patch 16 \
-  --quiet --plot '' 2>"$D/err" &
+  --plot '' 2>"$D/err" &
 pid=$!
-i=0 # the CSV log is opened when the run starts, after the signal handlers are set
-while [ ! -e "$D/s.safetensors.csv" ] && [ $i -lt 1200 ]; do
+i=0 # the start-up line is printed when the run starts, after the signal handlers are set
+while ! grep -q "GFLOP/iteration" "$D/err" 2>/dev/null && [ $i -lt 1200 ]; do
   sleep 0.1
   i=$((i + 1))
 done

@@ -630,6 +630,9 @@ static void test_bad_stores(void) {
     }
     if (in) fclose(in);
     if (outf) fclose(outf);
+    /* a run that fails before its first checkpoint leaves no CSV log of its own, and an
+     * earlier run's log at that name as it was (it was replaced by the failed run's rows,
+     * beside the earlier run's model) */
     settings(&s, tf_tmp("nan.safetensors"));
     s.store_path = tf_tmp("nan.kps");
     CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
@@ -637,6 +640,26 @@ static void test_bad_stores(void) {
     CHECK(strstr(kpcn_last_error(), "non-finite value in channel") != NULL);
     kpcn_trainer_destroy(t);
     t = NULL;
+    FILE *lone = fopen(tf_tmp("nan.safetensors.csv"), "rb");
+    CHECK(lone == NULL);
+    if (lone) fclose(lone);
+    settings(&s, tf_tmp("nan.safetensors"));
+    CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+    CHECK(t && kpcn_trainer_run(t, NULL) == KPCN_OK);
+    kpcn_trainer_destroy(t);
+    t = NULL;
+    long before_len = 0, after_len = 0;
+    char *before = kt_slurp(tf_tmp("nan.safetensors.csv"), &before_len);
+    settings(&s, tf_tmp("nan.safetensors"));
+    s.store_path = tf_tmp("nan.kps");
+    CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+    CHECK(t && kpcn_trainer_run(t, NULL) == KPCN_ERR_NONFINITE);
+    kpcn_trainer_destroy(t);
+    t = NULL;
+    char *after = kt_slurp(tf_tmp("nan.safetensors.csv"), &after_len);
+    CHECK(before && after && before_len > 0 && before_len == after_len &&
+          !memcmp(before, after, (size_t)before_len));
+    free(before), free(after);
   }
   /* resume without a checkpoint */
   settings(&s, tf_tmp("nockpt.safetensors"));

@@ -24,6 +24,7 @@ static int g_bf16;                    /* settings(): mixed-precision training */
 static int g_passes = 1;              /* settings(): arch.kpa_passes */
 static int g_sw;                      /* settings(): arch.source_weight */
 static const char *g_vn[1], *g_vr[1]; /* the validation pair */
+static int g_val_every = 1;           /* settings(): validation interval */
 
 /* tf_settings in the variant, validated on one pair every iteration (so every iteration is a
  * CSV row), keeping the best model at `best`; lr 5e-2 in stage 1 (iterations 1-3: steps so
@@ -36,7 +37,7 @@ static void settings(kpcn_train_settings *s, const char *out, const char *best) 
   s->arch.kpa_passes = g_passes;
   s->arch.source_weight = g_sw;
   s->nval = 1, s->val_noisy = g_vn, s->val_ref = g_vr;
-  s->val_every = 1;
+  s->val_every = g_val_every;
   s->best_path = best;
   s->adam.lr = 5e-2;
   s->stage2_lr = 1e-4;
@@ -158,7 +159,7 @@ static float *run_full(const char *out, const char *best, size_t *n) {
 
 /* The outputs of runs `a` and `b` (model, best model, checkpoint, CSV) are equal but for the
  * wall-clock fields. */
-static int same_outputs(const char *what, const char *a, const char *b) {
+static int same_outputs(const char *what, const char *a, const char *b, int nrows) {
   static const char *file[4] = {".safetensors", ".best.safetensors", ".safetensors.ckpt",
                                 ".safetensors.csv"};
   char pa[4][600], pb[4][600];
@@ -172,7 +173,7 @@ static int same_outputs(const char *what, const char *a, const char *b) {
   int ra, rb, ia, ib;
   double va[6], vb[6];
   char *ca = csv_no_clock(pa[3], &ra, &ia, va), *cb = csv_no_clock(pb[3], &rb, &ib, vb);
-  ok &= ca && cb && ra == 6 && rb == 6; /* iterations 1..6, each validated */
+  ok &= ca && cb && ra == nrows && rb == nrows;
   if (ca && cb && strcmp(ca, cb)) {
     printf("%s: CSV logs (wall-clock columns dropped) differ:\n%s--\n%s", what, ca, cb);
     ok = 0;
@@ -190,7 +191,7 @@ static void test_determinism_and_resume(void) {
   float *w1 = run_full(tf_tmp("a.safetensors"), tf_tmp("a.best.safetensors"), &n1);
   float *w2 = run_full(tf_tmp("b.safetensors"), tf_tmp("b.best.safetensors"), &n2), *w3 = NULL;
   CHECK(w1 && w2 && n1 == n2 && memcmp(w1, w2, n1 * sizeof(float)) == 0);
-  CHECK(same_outputs("two runs", "a", "b"));
+  CHECK(same_outputs("two runs", "a", "b", 6)); /* iterations 1..6, each validated */
   const char *c = tf_tmp("c.safetensors"), *cbest = tf_tmp("c.best.safetensors");
   kpcn_train_settings s;
   settings(&s, c, cbest);
@@ -228,7 +229,7 @@ static void test_determinism_and_resume(void) {
     kpcn_trainer_destroy(t);
   }
   CHECK(w3 && n3 == n1 && memcmp(w3, w1, n1 * sizeof(float)) == 0);
-  const int same = same_outputs("resumed twice", "a", "c");
+  const int same = same_outputs("resumed twice", "a", "c", 6);
   CHECK(same);
   /* the best model is not the last, and precedes the last resume (at 4): a resumed run that
    * forgot the best-so-far figure would write its own first iteration's model as the best */
@@ -335,6 +336,44 @@ static void test_determinism_and_resume(void) {
   free(w0), free(w1), free(w2), free(w3);
 }
 
+/* Stops between CSV rows (validation every 3 iterations, a row every 2: rows at 2, 3, 4 and
+ * 6), at iterations 1 and 5: each stop validates and writes a row of its own, which the
+ * uninterrupted run has not, and each resume starts the loss average of the next row part
+ * way. The resumed run's outputs equal the uninterrupted one's all the same: the stop rows
+ * are dropped on resume and pick no best model, and the loss accumulator comes back from the
+ * checkpoint (before session 60 the CSV differed in both). */
+static void test_resume_between_rows(void) {
+  g_val_every = 3;
+  size_t n1;
+  float *w1 = run_full(tf_tmp("d.safetensors"), tf_tmp("d.best.safetensors"), &n1);
+  kpcn_train_settings s;
+  settings(&s, tf_tmp("e.safetensors"), tf_tmp("e.best.safetensors"));
+  remove(tf_tmp("e.best.safetensors"));
+  s.progress = tf_stop_cb;
+  int stop_rows = 0;
+  for (int seg = 0; seg < 3; seg++) {
+    static const int stop_at[3] = {1, 5, 7};
+    tf_stop_at = stop_at[seg];
+    s.resume = seg > 0;
+    kpcn_trainer *t = NULL;
+    CHECK(kpcn_trainer_create(&t, &s) == KPCN_OK);
+    if (!t) break;
+    CHECK(kpcn_trainer_run(t, NULL) == KPCN_OK);
+    kpcn_trainer_destroy(t);
+    if (seg < 2) { /* the stop row is there until the resume */
+      int rows, best_it;
+      double val[6] = {0};
+      free(csv_no_clock(tf_tmp("e.safetensors.csv"), &rows, &best_it, val));
+      stop_rows += val[stop_at[seg] - 1] > 0;
+    }
+  }
+  CHECK(stop_rows == 2);
+  CHECK(same_outputs("stopped between rows", "d", "e", 4));
+  printf("resume between CSV rows (stops at 1 and 5, rows at 2, 3, 4, 6): outputs identical\n");
+  free(w1);
+  g_val_every = 1;
+}
+
 int main(void) {
   g_store = tf_make_test_store("train.kps");
   if (!g_store) return 1;
@@ -344,6 +383,7 @@ int main(void) {
   snprintf(vn, sizeof vn, "%s", g_vn[0]), snprintf(vr, sizeof vr, "%s", g_vr[0]);
   g_vn[0] = vn, g_vr[0] = vr;
   test_determinism_and_resume();
+  test_resume_between_rows();
   g_passes = 2;
   test_determinism_and_resume();
   g_sw = 1;

@@ -685,12 +685,11 @@ int main(int argc, char **argv) {
   }
   if (!g_quiet)
     fprintf(stderr,
-            "kpcn-train: %s preset, %lld iterations (stage 1: %lld), batch %d of %dx%d, "
+            "kpcn-train: %s architecture%s, %lld iterations (stage 1: %lld), batch %d of %dx%d, "
             "%.1f GFLOP/iteration%s\n",
-            preset, (long long)s.iters,
-            (long long)(s.stage1_iters < 0 ? (long long)(0.6 * s.iters + 0.5) : s.stage1_iters),
-            s.batch, s.patch, s.patch, kpcn_trainer_flops_per_iter(t) * 1e-9,
-            s.resume ? ", resuming" : "");
+            kpcn_model_arch(kpcn_trainer_model(t))->name, s.init_model ? " (from --init)" : "",
+            (long long)s.iters, (long long)kpcn_trainer_stage1_iters(t), s.batch, s.patch, s.patch,
+            kpcn_trainer_flops_per_iter(t) * 1e-9, s.resume ? ", resuming" : "");
   int stopped = 0;
   kpcn_status st = kpcn_trainer_run(t, &stopped);
   if (tty) fputs("\n", stderr);

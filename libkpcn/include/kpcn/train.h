@@ -9,7 +9,10 @@
  *     branches -> kernel prediction -> loss -> Adam, two stages, validation on full
  *     images, atomic checkpoints with bit-exact resume.
  * Conventions as in common.h: status returns, kpcn_last_error(), no printing, explicit
- * nthreads (0 = all cores), results independent of the thread count.
+ * nthreads (0 = all cores). The losses, Adam and the curves give the same results for any
+ * thread count; a training run is reproducible bit for bit for a seed AND a thread count
+ * (oneDNN's convolutions sum in a thread-dependent order: other counts differ in the last
+ * bits, about 1e-7 per weight after a few hundred iterations).
  */
 #ifndef KPCN_TRAIN_H
 #define KPCN_TRAIN_H
@@ -328,6 +331,9 @@ kpcn_status kpcn_trainer_load_checkpoint(kpcn_trainer *t, const char *path);
 kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped);
 
 int64_t kpcn_trainer_iteration(const kpcn_trainer *t);
+/* The stage-1 length in use: the settings' or, left to its default, 0.6 * iters, or on a
+ * resume the checkpoint's. */
+int64_t kpcn_trainer_stage1_iters(const kpcn_trainer *t);
 kpcn_model *kpcn_trainer_model(kpcn_trainer *t);
 /* Conv FLOPs (forward + backward, both branches) of one iteration, for benchmarks:
  * 3 x forward FLOPs (forward, backward-data, backward-weights) less the first layer's

@@ -7,9 +7,12 @@
  *            kpcn.architecture  kpcn_arch_to_json (must equal the trainer's on load)
  *            train.iteration, train.rng (hex splitmix64 word), train.adam_steps.<branch>,
  *            train.elapsed_s, train.seed, train.batch, train.patch, train.stage1_iters,
- *            train.precision ("f32" | "bf16"), train.loss1, train.loss2
+ *            train.precision ("f32" | "bf16"), train.loss1, train.loss2,
+ *            train.log_loss_sum, train.log_loss_n (the CSV's loss accumulator; session 60)
  * Loading checks format, architecture and the settings that change the trajectory (seed,
- * batch, patch, stage-1 length, precision) and names the first mismatch. */
+ * batch, patch, stage-1 length, precision) and names the first mismatch with its option. A
+ * stage-1 length left to its default (0.6 * iters) is taken from the checkpoint, so a resume
+ * may raise --iters. */
 #include "core/internal.h"
 #include "train/train_internal.h"
 
@@ -114,6 +117,9 @@ kpcn_status kt_checkpoint_save(kpcn_trainer *t, const char *path) {
   meta_i64(meta, "train.adam_steps.specular", kpcn_adam_steps(t->adam[1]));
   snprintf(buf, sizeof buf, "%.17g", t->elapsed_prev);
   cJSON_AddStringToObject(meta, "train.elapsed_s", buf);
+  snprintf(buf, sizeof buf, "%.17g", t->log_loss_sum);
+  cJSON_AddStringToObject(meta, "train.log_loss_sum", buf);
+  meta_i64(meta, "train.log_loss_n", t->log_loss_n);
   snprintf(buf, sizeof buf, "%" PRIu64, t->s.seed);
   cJSON_AddStringToObject(meta, "train.seed", buf);
   meta_i64(meta, "train.batch", t->N);
@@ -181,8 +187,8 @@ static const char *meta_str(cJSON *meta, const char *key) {
   return cJSON_IsString(e) ? e->valuestring : NULL;
 }
 
-static kpcn_status meta_expect(cJSON *meta, const char *key, long long want, const char *path,
-                               long long *got) {
+static kpcn_status meta_expect(cJSON *meta, const char *key, const char *option, long long want,
+                               const char *path, long long *got) {
   const char *s = meta_str(meta, key);
   char *end = NULL;
   long long v = s ? strtoll(s, &end, 10) : 0;
@@ -195,8 +201,9 @@ static kpcn_status meta_expect(cJSON *meta, const char *key, long long want, con
   }
   if (v != want)
     return kpcn_fail(KPCN_ERR_FORMAT,
-                     "checkpoint '%s' was written with %s = %lld, this run uses %lld", path, key, v,
-                     want);
+                     "checkpoint '%s' was written with %s = %lld, this run uses %lld (%s): a "
+                     "resumed run must keep its settings",
+                     path, key, v, want, option);
   return KPCN_OK;
 }
 
@@ -302,9 +309,16 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
   if (!seed || strtoull(seed, NULL, 10) != t->s.seed)
     BAD("checkpoint '%s' was written with train.seed = %s, this run uses %" PRIu64, path,
         seed ? seed : "(missing)", t->s.seed);
-  if ((st = meta_expect(meta, "train.batch", t->N, path, NULL)) ||
-      (st = meta_expect(meta, "train.patch", t->P, path, NULL)) ||
-      (st = meta_expect(meta, "train.stage1_iters", t->s.stage1_iters, path, NULL)))
+  if (t->stage1_default) { /* not given: the checkpoint's, so that --iters may grow */
+    long long s1 = 0;
+    if ((st = meta_expect(meta, "train.stage1_iters", NULL, 0, path, &s1)) != KPCN_OK) goto done;
+    if (s1 < 0) BAD("checkpoint '%s': train.stage1_iters %lld is negative", path, s1);
+    t->s.stage1_iters = s1;
+  }
+  if ((st = meta_expect(meta, "train.batch", "--batch", t->N, path, NULL)) ||
+      (st = meta_expect(meta, "train.patch", "--patch", t->P, path, NULL)) ||
+      (st = meta_expect(meta, "train.stage1_iters", "--stage1-iters", t->s.stage1_iters, path,
+                        NULL)))
     goto done;
   /* checkpoints from before mixed precision carry no train.precision: they were f32 */
   const char *prec = meta_str(meta, "train.precision"), *mine_prec = t->s.bf16 ? "bf16" : "f32";
@@ -335,10 +349,22 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
           path, set[i].key, was, set[i].value, set[i].option);
   }
   long long iter = 0, steps[2] = {0, 0};
-  if ((st = meta_expect(meta, "train.iteration", 0, path, &iter)) ||
-      (st = meta_expect(meta, "train.adam_steps.diffuse", 0, path, &steps[0])) ||
-      (st = meta_expect(meta, "train.adam_steps.specular", 0, path, &steps[1])))
+  if ((st = meta_expect(meta, "train.iteration", NULL, 0, path, &iter)) ||
+      (st = meta_expect(meta, "train.adam_steps.diffuse", NULL, 0, path, &steps[0])) ||
+      (st = meta_expect(meta, "train.adam_steps.specular", NULL, 0, path, &steps[1])))
     goto done;
+  /* absent in checkpoints from before session 60: the next CSV row then averages only the
+   * iterations after the resume */
+  double log_sum = 0.0;
+  long long log_n = 0;
+  const char *ls = meta_str(meta, "train.log_loss_sum");
+  if (ls) {
+    char *end = NULL;
+    log_sum = strtod(ls, &end);
+    if (!end || *end || !isfinite(log_sum) ||
+        meta_expect(meta, "train.log_loss_n", NULL, 0, path, &log_n) != KPCN_OK || log_n < 0)
+      BAD("checkpoint '%s': train.log_loss_sum / train.log_loss_n malformed", path);
+  }
   if (iter > t->s.iters)
     BAD("checkpoint '%s' is at iteration %lld, beyond this run's %lld iterations (--iters)", path,
         iter, (long long)t->s.iters);
@@ -357,6 +383,8 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
   kpcn_adam_set_steps(t->adam[1], steps[1]);
   t->rng.state = strtoull(rng, NULL, 16);
   t->elapsed_prev = strtod(el, NULL);
+  t->log_loss_sum = log_sum;
+  t->log_loss_n = log_n;
 done:
   ck_close(&c);
   free(ts);

@@ -131,6 +131,23 @@ kpcn_status kpcn_train_plot_compare(const char *png_path, const char *title, con
   for (int r = 0; r < nruns && st == KPCN_OK; r++) {
     size_t n = 0;
     st = read_columns(csv_paths[r], xcol, &ycol, 1, &d[r], &n);
+    /* a run with nothing to draw (no --val for a val_ column), or values a log axis cannot
+     * show, would be a legend entry without a line: refused, naming the run */
+    size_t finite = 0, nonpos = 0;
+    for (size_t i = 0; st == KPCN_OK && i < n; i++)
+      if (isfinite(d[r][i]) && isfinite(d[r][n + i])) {
+        finite++;
+        nonpos += !strcmp(ycol, "val_ssim") ? 1.0 - d[r][n + i] <= 0 : d[r][n + i] <= 0;
+      }
+    if (st == KPCN_OK && !finite)
+      st = kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "run '%s' (%s) has no value in column '%s'%s",
+                     labels[r], csv_paths[r], ycol,
+                     !strncmp(ycol, "val_", 4) ? " (was it trained without --val?)" : "");
+    else if (st == KPCN_OK && log_y && nonpos)
+      st = kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "run '%s' (%s): %zu value(s) of '%s' are <= 0, which a log axis cannot show "
+                     "(plot with --linear)",
+                     labels[r], csv_paths[r], nonpos, ycol);
     if (st == KPCN_OK) {
       if (!strcmp(ycol, "val_ssim"))
         for (size_t i = 0; i < n; i++)

@@ -166,11 +166,31 @@ static double nice_step(double span, int n) {
   return (f < 1.5 ? 1 : f < 3.5 ? 2 : f < 7.5 ? 5 : 10) * p;
 }
 
-static void fmt_num(char *buf, size_t n, double v) {
+/* A tick label with `digits` significant digits (callers raise it until neighbouring ticks
+ * read differently; at least 3). */
+static void fmt_num(char *buf, size_t n, double v, int digits) {
   if (v != 0 && (fabs(v) >= 1e5 || fabs(v) < 1e-3))
-    snprintf(buf, n, "%.3g", v);
+    snprintf(buf, n, "%.*g", digits, v);
   else
-    snprintf(buf, n, "%g", v);
+    snprintf(buf, n, "%.*g", digits < 6 ? 6 : digits, v);
+}
+
+/* Significant digits that tell ticks `step` apart near magnitude `mag` (3 at least). */
+static int tick_digits(double mag, double step) {
+  if (!(step > 0) || !(mag > 0)) return 3;
+  int d = (int)ceil(log10(mag / step)) + 1;
+  return d < 3 ? 3 : d > 12 ? 12 : d;
+}
+
+/* Linear ticks over [v0, v1] (value space) at a nice step: their count, values in t[]. A tick
+ * within rounding of zero is exactly 0 (it printed as "-0"). */
+static int linear_ticks(double v0, double v1, int want, double *t, int max, double *step) {
+  double sv = nice_step(v1 - v0, want);
+  int n = 0;
+  for (double v = ceil(v0 / sv) * sv; v <= v1 + 1e-9 * sv && n < max; v += sv)
+    t[n++] = fabs(v) < 1e-9 * sv ? 0.0 : v;
+  *step = sv;
+  return n;
 }
 
 kpcn_status kpcn_plot_png(const char *path, const kpcn_plot_settings *st,
@@ -211,37 +231,46 @@ kpcn_status kpcn_plot_png(const char *path, const kpcn_plot_settings *st,
 #define PY(y) (B - (int)lround(((y)-y0) / (y1 - y0) * (B - T)))
   char buf[64];
   /* x ticks + grid */
-  double sx = nice_step(x1 - x0, 6);
-  for (double v = ceil(x0 / sx) * sx; v <= x1 + 1e-9 * sx; v += sx) {
-    int px = PX(v);
+  double tick[64], step;
+  int nt = linear_ticks(x0, x1, 6, tick, 64, &step);
+  for (int i = 0; i < nt; i++) {
+    int px = PX(tick[i]);
     line(&cv, px, T, px, B, grey, 1);
     line(&cv, px, B, px, B + 4, black, 1);
-    fmt_num(buf, sizeof buf, v);
+    fmt_num(buf, sizeof buf, tick[i], tick_digits(fmax(fabs(x0), fabs(x1)), step));
     text(&cv, px - 3 * (int)strlen(buf), B + 8, buf, black, 0);
   }
-  /* y ticks + grid; a log axis gets ticks at 1, 2, 5 x 10^k (only 10^k over > 4 decades) */
+  /* y ticks + grid (in the axis's space: log10 of the value on a log axis). A log axis gets
+   * ticks at 1, 2, 5 x 10^k (only 10^k over > 4 decades); where fewer than two of those fall
+   * inside (a curve within one factor of 2 or so), linear ticks in value space instead: the
+   * axis had no label at all. */
+  double yt[64];
+  int ny = 0, digits = 3;
   if (st->log_y) {
     static const double mant[3] = {1, 2, 5};
     int nm = y1 - y0 > 4 ? 1 : 3;
-    for (int k = (int)floor(y0); k <= (int)ceil(y1); k++)
-      for (int j = 0; j < nm; j++) {
+    for (int k = (int)floor(y0); k <= (int)ceil(y1) && ny < 64; k++)
+      for (int j = 0; j < nm && ny < 64; j++) {
         double v = k + log10(mant[j]);
-        if (v < y0 || v > y1) continue;
-        int py = PY(v);
-        line(&cv, L, py, R, py, grey, 1);
-        line(&cv, L - 4, py, L, py, black, 1);
-        fmt_num(buf, sizeof buf, mant[j] * pow(10.0, k));
-        text(&cv, L - 7 - 6 * (int)strlen(buf), py - 3, buf, black, 0);
+        if (v >= y0 && v <= y1) yt[ny++] = v;
       }
-  } else {
-    double sy = nice_step(y1 - y0, 6);
-    for (double v = ceil(y0 / sy) * sy; v <= y1 + 1e-9 * sy; v += sy) {
-      int py = PY(v);
-      line(&cv, L, py, R, py, grey, 1);
-      line(&cv, L - 4, py, L, py, black, 1);
-      fmt_num(buf, sizeof buf, v);
-      text(&cv, L - 7 - 6 * (int)strlen(buf), py - 3, buf, black, 0);
+    if (ny < 2) {
+      double v[64];
+      ny = linear_ticks(pow(10.0, y0), pow(10.0, y1), 5, v, 64, &step);
+      digits = tick_digits(pow(10.0, y1), step);
+      for (int i = 0; i < ny; i++)
+        yt[i] = log10(v[i]);
     }
+  } else {
+    ny = linear_ticks(y0, y1, 6, yt, 64, &step);
+    digits = tick_digits(fmax(fabs(y0), fabs(y1)), step);
+  }
+  for (int i = 0; i < ny; i++) {
+    int py = PY(yt[i]);
+    line(&cv, L, py, R, py, grey, 1);
+    line(&cv, L - 4, py, L, py, black, 1);
+    fmt_num(buf, sizeof buf, st->log_y ? pow(10.0, yt[i]) : yt[i], digits);
+    text(&cv, L - 7 - 6 * (int)strlen(buf), py - 3, buf, black, 0);
   }
   line(&cv, L, T, L, B, black, 1);
   line(&cv, L, B, R, B, black, 1);

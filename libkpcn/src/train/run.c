@@ -4,8 +4,12 @@
  * CSV columns: iter,stage,lr,loss,its_per_s,elapsed_s,val_relmse,val_ssim,val_psnr,
  * val_relmse_geo
  * (loss = mean training loss since the previous row; validation columns empty when no
- * validation ran at that iteration). On resume the log is cut back to the rows at or before
- * the checkpoint's iteration, so it reads as one uninterrupted run. */
+ * validation ran at that iteration). A run that stops early (time limit, signal) ends with a
+ * validation row at its last iteration; on resume the log is cut back to the rows at or before
+ * the checkpoint's iteration, without that stop row, and the loss accumulator comes back from
+ * the checkpoint, so the log reads as one uninterrupted run (but for its wall-clock columns).
+ * A fresh run writes its log under a temporary name until its first checkpoint: a run that
+ * fails before it leaves an earlier run's log (and model) as they were. */
 #include "core/internal.h"
 #include "train/train_internal.h"
 
@@ -18,13 +22,48 @@
 #define CSV_HEADER                                                                                 \
   "iter,stage,lr,loss,its_per_s,elapsed_s,val_relmse,val_ssim,val_psnr,val_relmse_geo\n"
 
-/* Opens the CSV for appending: fresh (header only) or cut back to rows <= keep_iter.
- * best_val receives the lowest value of column best_col (1-based: 7 val_relmse, 10
- * val_relmse_geo) among the kept rows (+inf if none), so a resumed run keeps the best-model
- * record of the interrupted one. */
-static kpcn_status csv_open(const char *path, int resume, int64_t keep_iter, int best_col,
-                            FILE **out, double *best_val) {
-  *out = NULL;
+/* Whether an uninterrupted run writes a CSV row at iteration it (run's do_log). */
+static int regular_row(const kpcn_trainer *t, int64_t it) {
+  return it % t->s.log_every == 0 || it == t->s.iters ||
+         (t->nval && t->s.val_every > 0 && it % t->s.val_every == 0);
+}
+
+/* The CSV log being written: its stream, and while uncommitted (a fresh run before its first
+ * checkpoint) the temporary name it is written under. */
+typedef struct csv_log {
+  FILE *f;
+  const char *path;
+  char tmp[4096];
+  int committed;
+} csv_log;
+
+/* Gives the log its name (once): the run has a checkpoint the log belongs to. */
+static kpcn_status csv_commit(csv_log *c) {
+  if (!c->f || c->committed) return KPCN_OK;
+  if (fflush(c->f) != 0) return kpcn_fail(KPCN_ERR_IO, "cannot write CSV log '%s'", c->path);
+  KPCN_TRY(kpcn_commit_file(c->tmp, c->path)); /* a rename: the open stream follows it */
+  c->committed = 1;
+  return KPCN_OK;
+}
+
+/* Closes the log; an uncommitted one is removed (the run failed before its first checkpoint,
+ * so an earlier run's log stays). */
+static void csv_close(csv_log *c) {
+  if (!c->f) return;
+  fclose(c->f);
+  c->f = NULL;
+  if (!c->committed) kpcn_abort_file(c->tmp);
+}
+
+/* Opens the CSV for appending: fresh (header only, under a temporary name) or cut back to the
+ * rows an uninterrupted run has at or before keep_iter (the checkpoint's iteration). best_val
+ * receives the lowest value of column best_col (1-based: 7 val_relmse, 10 val_relmse_geo)
+ * among the kept rows (+inf if none), so a resumed run keeps the best-model record of the
+ * interrupted one. */
+static kpcn_status csv_open(const kpcn_trainer *t, const char *path, int resume, int64_t keep_iter,
+                            int best_col, csv_log *out, double *best_val) {
+  memset(out, 0, sizeof *out);
+  out->path = path;
   *best_val = INFINITY;
   if (!path || !*path) return KPCN_OK;
   char *kept = NULL;
@@ -39,10 +78,15 @@ static kpcn_status csv_open(const char *path, int resume, int64_t keep_iter, int
         fclose(in);
         return kpcn_last_status();
       }
+      int64_t prev = -1;
       while (fgets(line, sizeof line, in)) {
         if (strncmp(line, "iter,", 5) == 0) continue;
         long long it = strtoll(line, NULL, 10);
         if (it > keep_iter) continue;
+        /* a stop row: the last iteration of an interrupted session, which an uninterrupted
+         * run has no row for (or has its regular row for, first) */
+        if (it == keep_iter && (it == prev || !regular_row(t, it))) continue;
+        prev = it;
         const char *c = line; /* column best_col follows comma best_col - 1 */
         for (int k = 0; k < best_col - 1 && c; k++)
           c = strchr(c, ','), c = c ? c + 1 : NULL;
@@ -66,26 +110,26 @@ static kpcn_status csv_open(const char *path, int resume, int64_t keep_iter, int
       fclose(in);
     }
   }
-  char tmp[4096];
-  if (kpcn_temp_path(tmp, sizeof tmp, path) != KPCN_OK) {
+  if (kpcn_temp_path(out->tmp, sizeof out->tmp, path) != KPCN_OK) {
     free(kept);
     return kpcn_last_status();
   }
-  FILE *f = fopen(tmp, "w");
-  if (!f) {
+  out->f = fopen(out->tmp, "w");
+  if (!out->f) {
     free(kept);
     return kpcn_fail(KPCN_ERR_IO, "cannot write CSV log '%s': %s", path, strerror(errno));
   }
-  fputs(CSV_HEADER, f);
-  if (klen) fwrite(kept, 1, klen, f);
+  fputs(CSV_HEADER, out->f);
+  if (klen) fwrite(kept, 1, klen, out->f);
   free(kept);
-  if (fclose(f) != 0) {
-    kpcn_abort_file(tmp);
-    return kpcn_fail(KPCN_ERR_IO, "cannot write CSV log '%s'", path);
+  /* a resumed run's log belongs to the checkpoint it resumes from: named at once */
+  if (resume) {
+    kpcn_status st = csv_commit(out);
+    if (st != KPCN_OK) {
+      csv_close(out);
+      return st;
+    }
   }
-  KPCN_TRY(kpcn_commit_file(tmp, path));
-  *out = fopen(path, "a");
-  if (!*out) return kpcn_fail(KPCN_ERR_IO, "cannot append to CSV log '%s'", path);
   return KPCN_OK;
 }
 
@@ -111,7 +155,7 @@ static kpcn_status save_model(kpcn_trainer *t, double elapsed, const char *path)
   return kpcn_model_save(t->model, path);
 }
 
-static kpcn_status checkpoint(kpcn_trainer *t, double elapsed) {
+static kpcn_status checkpoint(kpcn_trainer *t, double elapsed, csv_log *csv) {
   double keep = t->elapsed_prev;
   t->elapsed_prev = elapsed;
   /* an empty checkpoint path means none (kpcn-train --ckpt ''): snapshots are still kept */
@@ -122,6 +166,7 @@ static kpcn_status checkpoint(kpcn_trainer *t, double elapsed) {
     st = kt_checkpoint_save(t, snap);
   }
   t->elapsed_prev = keep;
+  if (st == KPCN_OK) st = csv_commit(csv);
   if (st == KPCN_OK && *t->ckpt_path)
     kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_INFO, "checkpoint '%s' at iteration %lld",
              t->ckpt_path, (long long)t->iter);
@@ -175,14 +220,15 @@ static kpcn_status validate_init(kpcn_trainer *t, kpcn_val_result *given) {
 kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
   if (!t) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_trainer_run: NULL trainer");
   if (stopped) *stopped = 0;
-  FILE *csv = NULL;
+  csv_log csvlog;
   double best_csv;
-  KPCN_TRY(csv_open(t->csv_path, t->s.resume, t->iter, t->s.best_by == KPCN_VAL_GEOMEAN ? 10 : 7,
-                    &csv, &best_csv));
+  KPCN_TRY(csv_open(t, t->csv_path, t->s.resume, t->iter, t->s.best_by == KPCN_VAL_GEOMEAN ? 10 : 7,
+                    &csvlog, &best_csv));
+  FILE *csv = csvlog.f;
   if (t->s.resume) t->best_val = best_csv;
   const double t0 = kt_now();
-  double last_t = t0, acc = 0;
-  int64_t last_it = t->iter, nacc = 0, last_val_it = -1, start_it = t->iter;
+  double last_t = t0;
+  int64_t last_it = t->iter, last_val_it = -1, start_it = t->iter;
   int stop = 0;
   kpcn_status st = KPCN_OK;
   /* the inputs' own figures first: a validation relMSE means little without them */
@@ -193,7 +239,7 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
     if (st == KPCN_OK) log_val(t, "validation inputs as rendered (noisy)", &noisy);
     if (st == KPCN_OK && have_init) st = validate_init(t, &init);
     if (st != KPCN_OK) {
-      if (csv) fclose(csv);
+      csv_close(&csvlog);
       return st;
     }
   }
@@ -208,7 +254,7 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
     int stage = t->iter < t->s.stage1_iters ? 1 : 2;
     double lr = kt_lr_at(t, t->iter), loss = 0;
     if ((st = kpcn_trainer_step(t, &loss)) != KPCN_OK) break;
-    acc += loss, nacc++;
+    t->log_loss_sum += loss, t->log_loss_n++;
     int64_t it = t->iter;
     int do_val = t->nval && ((t->s.val_every > 0 && it % t->s.val_every == 0) || it == t->s.iters);
     int do_log = it % t->s.log_every == 0 || it == t->s.iters || do_val;
@@ -235,7 +281,7 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
     p.iter = it;
     p.total = t->s.iters;
     p.stage = stage;
-    p.loss = acc / (double)nacc;
+    p.loss = t->log_loss_sum / (double)t->log_loss_n;
     p.lr = lr;
     p.its_per_s = (double)(it - last_it) / fmax(now - last_t, 1e-9);
     p.elapsed_s = elapsed;
@@ -251,36 +297,36 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
           fputs(",,,,\n", csv);
         fflush(csv);
       }
-      acc = 0, nacc = 0, last_it = it, last_t = now;
+      t->log_loss_sum = 0, t->log_loss_n = 0, last_it = it, last_t = now;
     }
     if (t->s.ckpt_every > 0 && it % t->s.ckpt_every == 0 && it < t->s.iters)
-      if ((st = checkpoint(t, elapsed)) != KPCN_OK) break;
+      if ((st = checkpoint(t, elapsed, &csvlog)) != KPCN_OK) break;
     if (t->s.progress && t->s.progress(t->s.progress_user, &p)) {
       stop = 1;
       break;
     }
   }
   /* a run that stopped early (time limit, request) still ends with a validation row, so
-   * equal-time comparisons have a final figure */
+   * equal-time comparisons have a final figure. It does not pick --best (an uninterrupted run
+   * validates only every --val-every), and a resume drops it (csv_open). */
   if (st == KPCN_OK && t->nval && last_val_it != t->iter && t->iter > start_it) {
     kpcn_val_result v;
     st = kpcn_trainer_validate(t, &v);
-    if (st == KPCN_OK && t->best_path && best_figure(t, &v) < t->best_val) {
-      st = save_model(t, t->elapsed_prev + (kt_now() - t0), t->best_path);
-      if (st == KPCN_OK) t->best_val = best_figure(t, &v);
-    }
     if (st == KPCN_OK && csv) {
       double now = kt_now();
       fprintf(csv, "%lld,%d,%.6g,", (long long)t->iter, t->iter - 1 < t->s.stage1_iters ? 1 : 2,
               kt_lr_at(t, t->iter - 1));
-      if (nacc) fprintf(csv, "%.9g", acc / (double)nacc);
+      if (t->log_loss_n) fprintf(csv, "%.9g", t->log_loss_sum / (double)t->log_loss_n);
       fprintf(csv, ",%.4g,%.2f,%.9g,%.9g,%.6g,%.9g\n",
               (double)(t->iter - last_it) / fmax(now - last_t, 1e-9), t->elapsed_prev + (now - t0),
               v.relmse, v.ssim, v.psnr, v.relmse_geo);
+      fflush(csv);
     }
   }
-  if (csv) fclose(csv);
-  if (st != KPCN_OK) return st;
+  if (st != KPCN_OK) {
+    csv_close(&csvlog);
+    return st;
+  }
   if (t->nval && t->have_val && t->last_val.relmse_geo > noisy.relmse_geo)
     kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_WARNING,
              "the model is worse than its noisy inputs on the validation pairs (relMSE geometric "
@@ -294,7 +340,9 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
              "a lower learning rate or on more data",
              t->last_val.relmse_geo, init.relmse_geo);
   double elapsed = t->elapsed_prev + (kt_now() - t0);
-  KPCN_TRY(checkpoint(t, elapsed));
+  st = checkpoint(t, elapsed, &csvlog);
+  csv_close(&csvlog);
+  KPCN_TRY(st);
   KPCN_TRY(save_model(t, elapsed, t->out_path));
   if (t->plot_path && *t->plot_path && t->csv_path && *t->csv_path)
     KPCN_TRY(kpcn_train_plot_csv(t->csv_path, t->plot_path, "kpcn-train"));

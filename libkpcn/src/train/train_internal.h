@@ -38,6 +38,12 @@ struct kpcn_trainer {
   kpcn_rng rng;
   int64_t iter;
   double elapsed_prev; /* seconds of earlier sessions (resume) */
+  int stage1_default;  /* stage1_iters was not given (0.6 * iters): a resume keeps the
+                          checkpoint's, so --iters may grow */
+  /* training loss summed since the last CSV row, and its count: kept in checkpoints, so the
+   * first row after a resume averages the same iterations as an uninterrupted run's */
+  double log_loss_sum;
+  int64_t log_loss_n;
 
   /* batch tensors, N x C x P x P */
   int N, P, K2, nfeat;

@@ -3,6 +3,7 @@
  * checkpoints is in run.c; batches in batch.c; checkpoints in checkpoint.c. */
 #define _GNU_SOURCE /* realpath */
 #include "core/internal.h"
+#include "denoise/denoise_internal.h"
 #include "kpcn/exr.h"
 #include "kpcn/metrics.h"
 #include "train/train_internal.h"
@@ -122,7 +123,10 @@ static kpcn_status load_validation(kpcn_trainer *t) {
   for (int i = 0; i < t->nval; i++) {
     kpcn_aov_set *ref = NULL;
     KPCN_TRY(kpcn_exr_read_aov(t->s.val_noisy[i], &t->val_aov[i]));
-    /* the denoiser refuses it at the first validation, after hours of training: now instead */
+    /* the denoiser refuses these at the first validation, after hours of training (and the
+     * run is lost with it): a missing AOV buffer or a non-finite value, now instead */
+    if (kpcn_pipeline_require(t->val_aov[i]) != KPCN_OK)
+      return kpcn_fail_context("validation input '%s'", t->s.val_noisy[i]);
     const char *nf = NULL;
     const size_t nbad = kpcn_aov_count_nonfinite(t->val_aov[i], &nf);
     if (nbad)
@@ -306,6 +310,23 @@ kpcn_status kpcn_train_settings_check(const kpcn_train_settings *s) {
                      s->frozen[0] ? "diffuse" : "specular");
   if (s->nval < 0 || (s->nval && (!s->val_noisy || !s->val_ref)))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "validation list is inconsistent");
+  if (s->widen_channels > 0 && !s->init_model)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "widening (widen_channels, kpcn-train --widen) needs an init model to "
+                     "widen (init_model, --init)");
+  /* the architecture a fresh run builds (an init model brings its own): an even kernel or
+   * conv size is a usage mistake, refused before the store is read */
+  if (!s->init_model) {
+    kpcn_arch a = s->arch;
+    if (a.n_inputs == 0) { /* kpcn_trainer_create sets the feature builder's list */
+      const char *names[KPCN_NN_MAX_INPUTS];
+      int n = kpcn_features_channel_names(KPCN_BRANCH_DIFFUSE, names, KPCN_NN_MAX_INPUTS);
+      KPCN_TRY(kpcn_arch_set_inputs(&a, n, names));
+    }
+    if (kpcn_arch_validate(&a) != KPCN_OK)
+      return kpcn_fail_context("architecture (--preset, --layers, --channels, --conv, --kernel, "
+                               "--dilations)");
+  }
   /* a plot asked for by name is drawn from the CSV log: without the log it would silently
    * not exist (the default plot simply goes with the log) */
   if (s->plot_path && *s->plot_path && s->csv_path && !*s->csv_path)
@@ -338,6 +359,7 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
   kpcn_trainer *t = kpcn_calloc(1, sizeof *t, "trainer");
   if (!t) return kpcn_last_status();
   t->s = *s;
+  t->stage1_default = t->s.stage1_iters < 0;
   if (t->s.stage1_iters < 0) t->s.stage1_iters = (int64_t)llround(0.6 * (double)s->iters);
   if (t->s.log_every < 1) t->s.log_every = 1;
   t->store_path = dup_or_null(s->store_path);
@@ -370,8 +392,6 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
     int n = kpcn_features_channel_names(KPCN_BRANCH_DIFFUSE, names, KPCN_NN_MAX_INPUTS);
     GO(kpcn_arch_set_inputs(&t->arch, n, names));
   }
-  if (s->widen_channels > 0 && !t->init_model)
-    GO(kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "widen_channels needs an init model"));
   if (t->init_model) {
     GO(kpcn_model_load(t->init_model, &t->model));
     if (s->widen_channels > 0) {
@@ -453,6 +473,7 @@ fail:
 }
 
 int64_t kpcn_trainer_iteration(const kpcn_trainer *t) { return t ? t->iter : 0; }
+int64_t kpcn_trainer_stage1_iters(const kpcn_trainer *t) { return t ? t->s.stage1_iters : 0; }
 kpcn_model *kpcn_trainer_model(kpcn_trainer *t) { return t ? t->model : NULL; }
 
 double kpcn_trainer_flops_per_iter(const kpcn_trainer *t) {
