@@ -282,6 +282,119 @@ static void test_mesh_creases(void) {
   cJSON_Delete(doc);
 }
 
+/* Renders the JSON scene text (pinhole camera at `cam` looking at the origin, 16x16, a box
+ * filter) at 4 spp; NULL on failure. */
+static kpcn_aov_set *render_text(const char *prims, const char *cam, kpcn_scene **keep) {
+  char buf[4096];
+  snprintf(buf, sizeof buf,
+           "{\"primitives\": [%s], \"camera\": {\"type\": \"pinhole\", \"resolution\": 16, "
+           "\"fov\": 60, \"reconstruction_filter\": \"box\", \"transform\": {\"position\": "
+           "%s, \"look_at\": [0, 0, 0], \"up\": [0, 1, 0]}}}",
+           prims, cam);
+  cJSON *doc = cJSON_Parse(buf);
+  CHECK(doc != NULL);
+  kpcn_scene *sc = NULL;
+  kpcn_aov_set *a = NULL;
+  if (doc && rt_load(doc, kt_tmpdir(), &sc) == KPCN_OK)
+    a = rt_render(sc, 4, 1, 1, 16, 16, KPCN_LIGHTS_SCENE, -1);
+  else
+    printf("scene: %s\n", kpcn_last_error());
+  cJSON_Delete(doc);
+  if (keep)
+    *keep = sc;
+  else
+    kpcn_scene_destroy(sc);
+  return a;
+}
+
+/* Mean of channel c of buffer b over rows [y0, y1) and columns [x0, x1) of a 16x16 image. */
+static double region_mean(const kpcn_aov_set *a, int b, int c, int x0, int x1, int y0, int y1) {
+  double s = 0;
+  for (int y = y0; y < y1; y++)
+    for (int x = x0; x < x1; x++)
+      s += a->buf[b][(size_t)c * 256 + (size_t)y * 16 + (size_t)x];
+  return s / ((x1 - x0) * (y1 - y0));
+}
+
+/* Tungsten's conventions where kpcn differed silently until session 60 (a helper's review):
+ * a disk takes its uv in Tungsten's TangentFrame (a disk facing +x was textured turned by 90
+ * degrees); a mesh's winding defines its outside (vertex normals against it turned the face);
+ * a mesh without texture coordinates has uv (0, 0) everywhere; a constant texture without a
+ * value is 0; renderer.spp defaults to 32. */
+static void test_tungsten_conventions(void) {
+  /* a disk facing +x with a two-cell checker in u: Tungsten's u = atan2(y, z) splits it into
+   * a lit top and a dark bottom (the old frame split it left / right) */
+  kpcn_aov_set *a = render_text(
+      "{\"type\": \"disk\", \"transform\": {\"rotation\": [0, 0, -90]}, \"bsdf\": {\"type\": "
+      "\"null\"}, \"emission\": {\"type\": \"checker\", \"on_color\": 1, \"off_color\": 0, "
+      "\"res_u\": 2, \"res_v\": 1}}",
+      "[3, 0, 0]", NULL);
+  CHECK(a != NULL);
+  if (a) {
+    const double top = region_mean(a, KPCN_BUF_COLOR, 0, 4, 12, 4, 8),
+                 bottom = region_mean(a, KPCN_BUF_COLOR, 0, 4, 12, 8, 12),
+                 left = region_mean(a, KPCN_BUF_COLOR, 0, 4, 8, 4, 12),
+                 right = region_mean(a, KPCN_BUF_COLOR, 0, 8, 12, 4, 12);
+    printf("disk facing +x, checker in u: top %.3f bottom %.3f left %.3f right %.3f\n", top, bottom,
+           left, right);
+    CHECK(top > 0.5 && bottom < 0.05 && fabs(left - right) < 0.05);
+  }
+  kpcn_aov_destroy(a);
+  /* a quad mesh wound towards the camera (+z) whose file's normals point away, emitting 1:
+   * seen from the front as in Tungsten (it was dark); without texture coordinates a checker
+   * albedo is its value at (0, 0) everywhere (it was laid out per triangle) */
+  const char *obj = kt_tmpfile("quad_flipn.obj");
+  FILE *f = fopen(obj, "w");
+  CHECK(f != NULL);
+  if (f) {
+    fputs("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvn 0 0 -1\n"
+          "f 1//1 2//1 3//1\nf 1//1 3//1 4//1\n",
+          f);
+    fclose(f);
+  }
+  char prims[1024];
+  snprintf(prims, sizeof prims,
+           "{\"type\": \"mesh\", \"file\": \"%s\", \"bsdf\": {\"type\": \"null\"}, "
+           "\"emission\": 1}",
+           obj);
+  a = render_text(prims, "[0, 0, 3]", NULL);
+  CHECK(a && fabs(region_mean(a, KPCN_BUF_COLOR, 0, 6, 10, 6, 10) - 1.0) < 1e-4);
+  kpcn_aov_destroy(a);
+  snprintf(prims, sizeof prims,
+           "{\"type\": \"mesh\", \"file\": \"%s\", \"bsdf\": {\"type\": \"lambert\", "
+           "\"albedo\": {\"type\": \"checker\", \"on_color\": 1, \"off_color\": 0.25, "
+           "\"res_u\": 4, \"res_v\": 4}}}, {\"type\": \"infinite_sphere\", \"emission\": 1}",
+           obj);
+  a = render_text(prims, "[0, 0, -3]", NULL); /* the quad's back: lambert is two-sided */
+  CHECK(a != NULL);
+  if (a) {
+    double lo = 1e9, hi = -1e9;
+    for (int y = 5; y < 11; y++)
+      for (int x = 5; x < 11; x++) {
+        const double v = a->buf[KPCN_BUF_ALBEDO][(size_t)y * 16 + (size_t)x];
+        lo = fmin(lo, v), hi = fmax(hi, v);
+      }
+    printf("mesh without uv, checker albedo: %.4f .. %.4f\n", lo, hi);
+    CHECK(hi - lo < 1e-6 && (fabs(lo - 0.25) < 1e-6 || fabs(lo - 1.0) < 1e-6));
+  }
+  kpcn_aov_destroy(a);
+  /* {"type": "constant"} without a value is 0: this quad emits nothing; no renderer block:
+   * 32 spp */
+  kpcn_scene *sc = NULL;
+  a = render_text("{\"type\": \"quad\", \"transform\": {\"rotation\": [90, 0, 0]}, "
+                  "\"bsdf\": {\"type\": \"null\"}, \"emission\": {\"type\": \"constant\"}}, "
+                  "{\"type\": \"quad\", \"transform\": {\"position\": [0, 0, -1], "
+                  "\"scale\": 9, \"rotation\": [90, 0, 0]}, \"bsdf\": {\"type\": \"null\"}, "
+                  "\"emission\": 0.5}",
+                  "[0, 0, 3]", &sc);
+  CHECK(a && sc);
+  if (a) CHECK(fabs(region_mean(a, KPCN_BUF_COLOR, 0, 6, 10, 6, 10)) < 1e-6);
+  kpcn_scene_info info;
+  CHECK(sc && kpcn_scene_get_info(sc, &info) == KPCN_OK && info.spp == 32);
+  kpcn_aov_destroy(a);
+  kpcn_scene_destroy(sc);
+}
+
 /* mean of colour over the image and the standard deviation of that mean */
 static void image_mean(const kpcn_aov_set *a, double *m, double *sd) {
   size_t plane = kpcn_aov_plane_size(a);
@@ -491,6 +604,7 @@ int main(void) {
   test_min_bounces(cb);
   test_mesh_smooth_default();
   test_mesh_creases();
+  test_tungsten_conventions();
   test_split(KPCN_TESTDATA "/scenes/glossy-mirror/scene.json");
   test_estimators(CORNELL, 32, 32, 256);
   test_estimators(KPCN_TESTDATA "/scenes/sky-plastics/scene.json", 32, 24, 128);

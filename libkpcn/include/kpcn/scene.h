@@ -35,7 +35,7 @@ void kpcn_scene_destroy(kpcn_scene *scene);
 /* Summary of what was loaded (for tools and tests). */
 typedef struct kpcn_scene_info {
   int width, height;    /* camera resolution */
-  int spp;              /* renderer.spp (default 64) */
+  int spp;              /* renderer.spp (default 32, as Tungsten; 64 before session 60) */
   int min_bounces;      /* integrator.min_bounces */
   int max_bounces;      /* integrator.max_bounces */
   int light_sampling;   /* integrator.enable_light_sampling */

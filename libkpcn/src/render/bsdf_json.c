@@ -184,7 +184,7 @@ kpcn_status kpcn_texture_parse(kpcn_material_lib *lib, const cJSON *node, const 
     if (strcmp(type, "constant") == 0) {
       static const char *const keys[] = {"type", "value", NULL};
       KPCN_TRY(check_keys(node, path, "constant texture", keys));
-      kpcn_vec3 v = kv3s(1.0f);
+      kpcn_vec3 v = kv3s(0.0f); /* Tungsten's ConstantTexture() (it was 1) */
       const cJSON *val = cJSON_GetObjectItemCaseSensitive(node, "value");
       if (val) KPCN_TRY(json_vec3(val, path, "value", &v));
       return kpcn_texture_constant(lib->tex, v, out);

@@ -21,8 +21,10 @@ static inline void mesh_uv(const kpcn_mesh *m, const unsigned *id, float b0, flo
     const float *t0 = m->uv + 2 * id[0], *t1 = m->uv + 2 * id[1], *t2 = m->uv + 2 * id[2];
     *u = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
     *v = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
-  } else {
-    *u = b1, *v = b2;
+  } else { /* no texture coordinates: (0, 0) at every vertex, as Tungsten's loaders set them
+              (a texture took the barycentric weights until session 60) */
+    (void)b0, (void)b1, (void)b2;
+    *u = 0.0f, *v = 0.0f;
   }
 }
 
@@ -55,7 +57,7 @@ static inline void cube_uv(const kpcn_prim *p, const float l[3], int dim, int cl
 
 /* Disk: r the in-plane offset from its centre. */
 static inline void disk_uv(const kpcn_prim *p, kpcn_vec3 r, float *u, float *v) {
-  float a = kv3_dot(r, p->frame.b), b = kv3_dot(r, p->frame.t);
+  float a = kv3_dot(r, p->axis[1]), b = kv3_dot(r, p->axis[0]);
   *v = kpcn_minf(kv3_length(r) / p->radius, 1.0f);
   *u = (a == 0.0f && b == 0.0f) ? 0.0f : atan2f(b, a) * KPCN_INV_2PI + 0.5f;
 }
@@ -115,8 +117,9 @@ void kpcn_hit_fill(const kpcn_scene *s, const kpcn_prim *p, kpcn_vec3 o, kpcn_ve
       kpcn_vec3 ns = kv3(b0 * n0[0] + bu * n1[0] + bv * n2[0], b0 * n0[1] + bu * n1[1] + bv * n2[1],
                          b0 * n0[2] + bu * n1[2] + bv * n2[2]);
       ns = kv3_normalize(ns);
-      /* vertex normals define the outside; orient the face normal with them */
-      if (kv3_dot(ns, ng) < 0.0f) ng = kv3_neg(ng);
+      /* the winding defines the outside, as in Tungsten (emitters' front, glass's inside); a
+       * vertex normal against it is turned to its side (it used to turn the face instead) */
+      if (kv3_dot(ns, ng) < 0.0f) ns = kv3_neg(ns);
       h->ns = (m->smooth && kv3_length2(ns) > 0.5f) ? ns : ng;
     } else {
       h->ns = ng;
@@ -220,8 +223,13 @@ void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_p
     lp->p = kv3_add(p->center, kv3_add(kv3_scale(p->frame.b, x * p->radius),
                                        kv3_scale(p->frame.t, y * p->radius)));
     lp->n = p->n;
-    lp->v = kpcn_minf(sqrtf(x * x + y * y), 1.0f);
-    lp->u = (x == 0.0f && y == 0.0f) ? 0.0f : atan2f(y, x) * KPCN_INV_2PI + 0.5f;
+    if (kv3_equal(p->frame.b, p->axis[1]) && kv3_equal(p->frame.t, p->axis[0])) {
+      /* the uv frame is the sampling frame (normals along +-y, +-z): the warp's own (x, y) */
+      lp->v = kpcn_minf(sqrtf(x * x + y * y), 1.0f);
+      lp->u = (x == 0.0f && y == 0.0f) ? 0.0f : atan2f(y, x) * KPCN_INV_2PI + 0.5f;
+    } else {
+      disk_uv(p, kv3_sub(lp->p, p->center), &lp->u, &lp->v);
+    }
     break;
   }
   case KPCN_PRIM_MESH: {
@@ -236,13 +244,7 @@ void kpcn_prim_sample_point(const kpcn_prim *p, float u1, float u2, kpcn_light_p
     const unsigned *id = m->idx + 3 * tri;
     kpcn_vec3 v0 = mesh_vtx(m, id[0]), v1 = mesh_vtx(m, id[1]), v2 = mesh_vtx(m, id[2]);
     lp->p = kv3_add(kv3_add(kv3_scale(v0, b0), kv3_scale(v1, b1)), kv3_scale(v2, 1.0f - b0 - b1));
-    kpcn_vec3 ng = kv3_normalize(kv3_cross(kv3_sub(v1, v0), kv3_sub(v2, v0)));
-    if (m->nrm) {
-      const float *n0 = m->nrm + 3 * id[0], *n1 = m->nrm + 3 * id[1], *n2 = m->nrm + 3 * id[2];
-      kpcn_vec3 ns = kv3(n0[0] + n1[0] + n2[0], n0[1] + n1[1] + n2[1], n0[2] + n1[2] + n2[2]);
-      if (kv3_dot(ns, ng) < 0.0f) ng = kv3_neg(ng);
-    }
-    lp->n = ng;
+    lp->n = kv3_normalize(kv3_cross(kv3_sub(v1, v0), kv3_sub(v2, v0))); /* the winding's */
     float b2 = 1.0f - b0 - b1; /* Embree's (u, v) are the weights of vertices 1 and 2 */
     mesh_uv(m, id, b0, b1, b2, &lp->u, &lp->v);
     break;

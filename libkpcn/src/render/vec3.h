@@ -61,6 +61,9 @@ static inline float kv3_avg(kpcn_vec3 a) { return (a.x + a.y + a.z) * (1.0f / 3.
 static inline float kv3_luminance(kpcn_vec3 a) {
   return 0.2126f * a.x + 0.7152f * a.y + 0.0722f * a.z;
 }
+static inline int kv3_equal(kpcn_vec3 a, kpcn_vec3 b) {
+  return a.x == b.x && a.y == b.y && a.z == b.z;
+}
 static inline int kv3_is_zero(kpcn_vec3 a) { return a.x == 0.0f && a.y == 0.0f && a.z == 0.0f; }
 static inline int kv3_is_finite(kpcn_vec3 a) {
   return isfinite(a.x) && isfinite(a.y) && isfinite(a.z);

@@ -48,7 +48,9 @@ typedef struct kpcn_prim {
   /* cube: centre, unit axes (rows of rot), half extents; face cdf for sampling */
   kpcn_vec3 center, axis[3], half;
   float face_cdf[3];
-  /* sphere / disk: centre = center, radius; disk normal = n with tangent frame */
+  /* sphere / disk: centre = center, radius; disk normal = n with tangent frame (the disk's
+   * light samples); disk uv: Tungsten's TangentFrame(n) in axis[0] (tangent), axis[1]
+   * (bitangent), u = atan2(r.tangent, r.bitangent) / 2pi + 0.5, v = |r| / radius */
   float radius;
   kpcn_frame frame;
   kpcn_mesh mesh;

@@ -154,6 +154,17 @@ static kpcn_status parse_emission(kpcn_scene *s, kpcn_prim *p, const cJSON *e, c
 }
 
 /* Fills the analytic description of p from its transform. */
+
+/* Tungsten's TangentFrame(n) (the frame its disks take their uv in): tangent (0, 1, 0) when
+ * |n.x| > |n.y|, else (1, 0, 0); bitangent = normalize(n x tangent), tangent = bitangent x n.
+ * It equals kpcn_frame_from_normal for normals along +-y and +-z only; other disks got their
+ * texture turned (session 60). */
+static void disk_uv_frame(kpcn_vec3 n, kpcn_vec3 *tangent, kpcn_vec3 *bitangent) {
+  kpcn_vec3 t = fabsf(n.x) > fabsf(n.y) ? kv3(0.0f, 1.0f, 0.0f) : kv3(1.0f, 0.0f, 0.0f);
+  *bitangent = kv3_normalize(kv3_cross(n, t));
+  *tangent = kv3_cross(*bitangent, n);
+}
+
 static kpcn_status setup_shape(kpcn_prim *p, const kpcn_xform *x, const char *path) {
   kpcn_vec3 c = kpcn_xform_point(x, kv3s(0));
   kpcn_vec3 cx = kpcn_xform_column(x, 0), cy = kpcn_xform_column(x, 1),
@@ -205,6 +216,7 @@ static kpcn_status setup_shape(kpcn_prim *p, const kpcn_xform *x, const char *pa
     p->n = kv3_normalize(cy);
     if (kv3_length2(p->n) == 0.0f) p->n = kpcn_xform_normal(x, kv3(0, 1, 0));
     p->frame = kpcn_frame_from_normal(p->n);
+    disk_uv_frame(p->n, &p->axis[0], &p->axis[1]);
     p->area = KPCN_PI * p->radius * p->radius;
     break;
   case KPCN_PRIM_MESH: {
@@ -578,7 +590,7 @@ static kpcn_status parse_integrator(kpcn_scene *s, const cJSON *ij) {
 }
 
 static kpcn_status parse_renderer(kpcn_scene *s, const cJSON *rj) {
-  s->spp = 64;
+  s->spp = 32; /* Tungsten's RendererSettings default (it was 64) */
   if (!rj) return KPCN_OK;
   if (!cJSON_IsObject(rj)) return kpcn_fail(KPCN_ERR_FORMAT, "renderer: expected an object");
   /* Everything but spp concerns Tungsten's own output/scheduling; accepted, without effect. */
