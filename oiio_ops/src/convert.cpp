@@ -72,6 +72,13 @@ static bool read_planes(const ImageBuf &src, ROI roi, const std::vector<int> &id
 static bool check_source(const ImageBuf &src, ROI &roi, std::string &err) {
   if (!src.initialized()) {
     err = desc(src) + " is not initialized";
+    if (src.has_error()) err += " (" + src.geterror(false) + ")"; // e.g. the file is missing
+    return false;
+  }
+  // get_pixels on deep data crashed (OIIO 2.4 reads it as flat pixels); ImageBufAlgo and
+  // kpcntool refuse it
+  if (src.deep()) {
+    err = desc(src) + " is a deep image: deep images are not supported";
     return false;
   }
   // A file-backed ImageBuf reads lazily; unreadable / truncated files surface in get_pixels

@@ -52,7 +52,19 @@ bool place_result(OIIO::ImageBuf &dst, OIIO::ImageBuf &full, const OIIO::ImageBu
                  full.roi());
     return false;
   }
-  return OIIO::ImageBufAlgo::crop(dst, full, roi, nthreads);
+  if (!OIIO::ImageBufAlgo::crop(dst, full, roi, nthreads) || dst.has_error()) {
+    if (!dst.has_error()) dst.errorfmt("{}: cropping to the region {} failed", what, roi);
+    return false;
+  }
+  return true;
+}
+
+// A caller's ROI must hold pixels: an empty one was "accepted", and dst came back
+// uninitialised with OIIO's internal message and a true return.
+bool empty_roi(OIIO::ImageBuf &dst, OIIO::ROI roi, const char *what) {
+  if (!roi.defined() || (roi.width() > 0 && roi.height() > 0 && roi.depth() == 1)) return false;
+  dst.errorfmt("{}: the region {} holds no pixels", what, roi);
+  return true;
 }
 
 // The C library's last error for dst, prefixed with `what` unless it already names the
@@ -74,6 +86,7 @@ bool denoise(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptio
     dst.errorfmt("denoise: method kpcn needs a model file (model=...)");
     return false;
   }
+  if (empty_roi(dst, roi, "denoise")) return false;
   std::string err;
   AovPtr set = to_aov_set(aovs, err);
   if (!set) {
@@ -108,6 +121,7 @@ bool denoise_kernels(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const Deno
     dst.errorfmt("denoise_kernels: unknown branch '{}' (diffuse, specular)", branch);
     return false;
   }
+  if (empty_roi(dst, roi, "denoise_kernels")) return false;
   std::string err;
   AovPtr set = to_aov_set(aovs, err);
   if (!set) {
@@ -167,6 +181,13 @@ OIIO::ImageBuf denoise(const OIIO::ImageBuf &aovs, const DenoiseOptions &opt, OI
                        int nthreads) {
   OIIO::ImageBuf dst;
   denoise(dst, aovs, opt, roi, nthreads);
+  return dst;
+}
+
+OIIO::ImageBuf denoise_kernels(const OIIO::ImageBuf &aovs, const DenoiseOptions &opt,
+                               const std::string &branch, OIIO::ROI roi, int nthreads) {
+  OIIO::ImageBuf dst;
+  denoise_kernels(dst, aovs, opt, branch, roi, nthreads);
   return dst;
 }
 

@@ -52,6 +52,16 @@ static MetricResult run(const ImageBuf &x, const ImageBuf &ref, Metric m, const 
     r.error = "unknown metric id " + std::to_string((int)m);
     return r;
   }
+  // an input that is not an image (a missing file, an empty ImageBuf) is named as such, with
+  // OIIO's reason, not as a 0x0 size mismatch
+  for (const ImageBuf *b : {&x, &ref})
+    if (!b->initialized()) {
+      r.error = std::string(what) + ": " +
+                label(*b, b == &x ? "the test image" : "the reference image") +
+                " is not initialized";
+      if (b->has_error()) r.error += " (" + b->geterror(false) + ")";
+      return r;
+    }
   // The channel range of a caller's ROI is ignored (channels are matched by name, and the two
   // images may order them differently); its pixel window must lie inside both images.
   ROI rx = roi.defined() ? roi : x.roi(), ry = roi.defined() ? roi : ref.roi();
@@ -140,9 +150,10 @@ bool errormap(ImageBuf &dst, const ImageBuf &x, const ImageBuf &ref, Metric m,
     dst.errorfmt("{}", r.error);
     return false;
   }
+  // where the compared pixels are in x: its origin (or the ROI's) and full window, read before
+  // dst is written (dst may be x itself: writing first lost x's windows)
+  const ImageSpec xs = x.spec();
   if (!from_kpcn_image(dst, *map)) return false;
-  // where the compared pixels are in x: its origin (or the ROI's) and full window
-  const ImageSpec &xs = x.spec();
   dst.set_origin(roi.defined() ? roi.xbegin : xs.x, roi.defined() ? roi.ybegin : xs.y);
   dst.set_full(xs.full_x, xs.full_x + xs.full_width, xs.full_y, xs.full_y + xs.full_height, 0, 1);
   return true;

@@ -18,7 +18,9 @@ extern "C" {
 #include <string>
 
 using OIIO::ImageBuf;
+using OIIO::ImageSpec;
 using OIIO::ROI;
+using OIIO::TypeDesc;
 namespace ops = kpcn::ops;
 
 static bool placed_like(const ImageBuf &b, const ImageBuf &src) {
@@ -91,5 +93,38 @@ int main() {
   CHECK(kb.geterror().find("only the KPCN") != std::string::npos);
   CHECK(!ops::denoise_kernels(kb, aov, k, "albedo"));
   CHECK(kb.geterror().find("albedo") != std::string::npos);
+  // the value-returning form (session 60: only the dst form existed)
+  ImageBuf kv = ops::denoise_kernels(aov, k, "specular", win);
+  CHECK(!kv.has_error() && OIIO::ImageBufAlgo::compare(kv, kp, 0.0f, 0.0f).nfail == 0);
+
+  // session 60 (a review of the C++ face): an empty ROI is an error (it returned true with an
+  // uninitialised dst); errormap in place keeps x's windows; a deep image is refused, not a
+  // crash
+  ImageBuf e;
+  CHECK(!ops::denoise(e, aov, o, ROI(5, 5, 5, 9)));
+  CHECK(e.geterror().find("holds no pixels") != std::string::npos);
+  CHECK(!ops::denoise_kernels(e, aov, k, "diffuse", ROI(3, 3, 0, 8)));
+  CHECK(e.geterror().find("holds no pixels") != std::string::npos);
+  ImageBuf ip = aov;
+  CHECK(ops::errormap(ip, ip, c, ops::Metric::L1, {}, win));
+  CHECK(ip.spec().x == 10 && ip.spec().y == 12 && ip.spec().full_width == 40 &&
+        ip.spec().full_height == 50);
+  ip = aov;
+  CHECK(ops::errormap(ip, ip, c, ops::Metric::L1));
+  CHECK(placed_like(ip, aov));
+  ImageSpec ds(8, 8, 3, TypeDesc::FLOAT);
+  ds.deep = true;
+  ImageBuf deep(ds), dd;
+  CHECK(!ops::mirror(dd, deep) && dd.geterror().find("deep") != std::string::npos);
+  CHECK(!ops::denoise(dd, deep, o) && dd.geterror().find("deep") != std::string::npos);
+  ops::MetricResult dr = ops::compare(deep, deep, ops::Metric::L1);
+  CHECK(!dr.ok && dr.error.find("deep") != std::string::npos);
+  // a missing file or an empty ImageBuf is named as such (it read as a 0x0 size mismatch)
+  ImageBuf nofile(std::string(KPCN_TESTDATA) + "/no_such_file.exr");
+  ops::MetricResult nr = ops::compare(nofile, aov, ops::Metric::L1);
+  CHECK(!nr.ok && nr.error.find("not initialized") != std::string::npos &&
+        nr.error.find("sizes differ") == std::string::npos);
+  nr = ops::compare(aov, ImageBuf(), ops::Metric::L1);
+  CHECK(!nr.ok && nr.error.find("the reference image is not initialized") != std::string::npos);
   return kt_summary("test_ops_places");
 }

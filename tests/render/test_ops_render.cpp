@@ -60,5 +60,9 @@ int main() {
   o.width = 10, o.height = 0;
   CHECK(!ops::render(bad, CORNELL, o) &&
         bad.geterror().find("width and height") != std::string::npos);
+  // a negative max_bounces other than -1 (the scene's) was taken as -1 without a word
+  o.width = 8, o.height = 8, o.max_bounces = -7;
+  CHECK(!ops::render(bad, CORNELL, o) &&
+        bad.geterror().find("max_bounces: -7 must be >= 0") != std::string::npos);
   return kt_summary("ops_render");
 }

@@ -223,6 +223,11 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   int spp = st.spp > 0 ? st.spp : scene->spp;
   if (st.spp < 0 || spp > (1 << 24))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "spp: %d is out of range [1, 2^24]", st.spp);
+  /* -1 is the scene's; any other negative was taken as -1 without a word */
+  if (st.max_bounces < -1)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "max_bounces: %d must be >= 0 (-1: the scene's integrator.max_bounces)",
+                     st.max_bounces);
   if (st.albedo_spp < 0 || st.albedo_spp > (1 << 24))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
                      "albedo_spp (--albedo-spp): %d is out of range (0 = off, or 1 .. 2^24)",

@@ -50,6 +50,8 @@ OIIO::ImageBuf denoise(const OIIO::ImageBuf &aovs, const DenoiseOptions &opt, OI
 // recombination (kpcn/denoise.h). roi and errors as for denoise.
 bool denoise_kernels(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptions &opt,
                      const std::string &branch, OIIO::ROI roi = {}, int nthreads = 0);
+OIIO::ImageBuf denoise_kernels(const OIIO::ImageBuf &aovs, const DenoiseOptions &opt,
+                               const std::string &branch, OIIO::ROI roi = {}, int nthreads = 0);
 
 } // namespace ops
 } // namespace kpcn
