@@ -196,7 +196,8 @@ bool select_patches(const OIIO::ImageBuf &noisy, const OIIO::ImageBuf &ref,
 }
 
 bool write_patches(const std::string &out, const OIIO::ImageBuf &noisy, const OIIO::ImageBuf &ref,
-                   const std::vector<kpcn_patch_origin> &origins, int size, std::string &err) {
+                   const std::vector<kpcn_patch_origin> &origins, int size, std::string &err,
+                   const kpcn_patch_stats *stats, const std::string &settings_json) {
   AovPtr n, r;
   if (!to_aov_pair(noisy, ref, n, r, err)) return false;
   bool kps = out.size() > 4 && out.compare(out.size() - 4, 4, ".kps") == 0;
@@ -204,6 +205,7 @@ bool write_patches(const std::string &out, const OIIO::ImageBuf &noisy, const OI
     kpcn_patchstore_settings ss;
     kpcn_patchstore_settings_defaults(&ss);
     ss.patch_size = size;
+    if (!settings_json.empty()) ss.settings_json = settings_json.c_str();
     kpcn_patchstore_writer *w = nullptr;
     if (kpcn_patchstore_create(&w, out.c_str(), &ss) != KPCN_OK) {
       err = kpcn_last_error();
@@ -223,6 +225,7 @@ bool write_patches(const std::string &out, const OIIO::ImageBuf &noisy, const OI
       kpcn_patchstore_abort(w);
       return false;
     }
+    if (stats) kpcn_patchstore_add_stats(w, stats->candidates, stats->kept, stats->culled);
     for (const auto &o : origins) {
       kpcn_patch_record rec = {sid, o.x, o.y, 0, o.flat_frac, o.weight, 0};
       if (kpcn_patchstore_append_aov(w, &rec, n.get(), r.get()) != KPCN_OK) {

@@ -32,6 +32,28 @@ expect_fail "has no channel 'Q'" p.kps "$NOISY" "$REF" --patches:size=16:count=4
 expect_fail "count= (random patches) and stride= (a regular grid) exclude each other" p.kps \
   "$NOISY" "$REF" --patches:size=16:count=4:stride=8:out=p.kps
 expect_fail "has no channel 'Q'" pdir "$NOISY" "$REF" --patches:size=16:count=4:out=pdir --ch Q
+# session 60: no bound on count (99999999 ran ten minutes and filled the disk); a store from
+# one image failed only at write time; a store of nothing (every candidate culled) was written
+expect_fail "count=99999999 is more than 1048576 patches per image" p.kps "$NOISY" "$REF" \
+  --patches:size=16:count=99999999:out=p.kps
+expect_fail "a patch store needs the noisy image and its reference on top of it" p.kps "$NOISY" \
+  --patches:size=16:count=4:out=p.kps
+expect_fail "no patch kept (" p.kps "$NOISY" "$REF" --patches:size=16:count=4:cull=0:out=p.kps
+# the store records the selection's figures and settings (its metadata said 0 candidates)
+"$KT" "$TD/dataset/sample_noisy.exr" "$TD/dataset/sample_ref.exr" --patches:size=16:count=4:seed=2:out=st.kps \
+  --json >st.json 2>err.txt ||
+  fail "--patches to st.kps: $(cat err.txt)"
+/usr/bin/python3 - st.kps st.json <<'PY' && pass "--patches: the store records stats and settings" ||
+import json, re, sys
+meta = open(sys.argv[1], "rb").read().decode("latin-1")
+j = json.load(open(sys.argv[2]))
+m = re.search(r'"stats":\{"candidates":(\d+),"kept":(\d+),"culled":(\d+)\}', meta)
+assert m and [int(v) for v in m.groups()] == [j["patches_candidates"], j["patches_kept"],
+                                               j["patches_culled"]], (m and m.groups(), j)
+assert int(m.group(2)) > 0 and '"seed":2' in meta and '"size":16' in meta
+PY
+  fail "--patches: store metadata: $(strings st.kps | grep -o '"stats"[^}]*}' | head -1)"
+rm -f st.kps st.json
 expect_fail "has no channel 'Q'" pdir "$NOISY" "$REF" --patches:size=16:count=4:out=pdir/ --ch Q
 # A directory named with a trailing slash (as docs/dataset.md writes it) is made next to its
 # temporary copy, whether it exists yet or not; the second run merges into it.

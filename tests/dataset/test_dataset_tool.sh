@@ -273,6 +273,41 @@ ok '[ "$(grep -c "^\[" "$T/prog.err")" -ge 1 ] && tail -n 1 "$T/prog.err" | grep
   "patches: a final progress line ($(tail -n 1 "$T/prog.err"))"
 "$DS" patches "$T/r" --size 8 --per-image 5 -o "$T/r/prog.kps" --progress-every 0 > /dev/null 2> "$T/prog.err"
 ok '[ "$(grep -c "^\[[0-9]*/10\] " "$T/prog.err")" -eq 10 ]' "patches --progress-every 0: a line per pair"
+# session 60 (a review of the dataset pipeline): a NUL byte in the manifest cut it short
+# silently, a job listed twice was cut into patches twice, an empty manifest was 0 jobs done,
+# and renders left by an earlier plan (plan --force into the same folder, or a manifest edited
+# since) were used as the new jobs' renders. Each is refused, naming the file and line or the
+# render and its job.
+"$DS" patches "$T/r" --size 8 --per-image 5 --cull 0 -o "$T/empty.kps" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && [ ! -e "$T/empty.kps" ] && grep -q "no patch kept (.*all culled at --cull 0)" "$T/err"' \
+  "a store of nothing refused (rc $rc: $(cat "$T/err"))"
+rm -rf "$T/mf" && cp -r "$T/r" "$T/mf"
+{ head -n 2 "$T/r/manifest.jsonl"; printf '\0'; tail -n +3 "$T/r/manifest.jsonl"; } >"$T/mf/manifest.jsonl"
+"$DS" run "$T/mf" --list > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && grep -q "manifest.jsonl:3: a NUL byte" "$T/err"' "a NUL byte in the manifest (rc $rc: $(cat "$T/err"))"
+{ cat "$T/r/manifest.jsonl"; head -n 1 "$T/r/manifest.jsonl"; } >"$T/mf/manifest.jsonl"
+n=$(wc -l < "$T/mf/manifest.jsonl")
+"$DS" patches "$T/mf" --size 8 --per-image 5 -o "$T/mf.kps" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && [ ! -e "$T/mf.kps" ] && grep -q "is listed twice (lines 1 and $n)" "$T/err"' \
+  "a job listed twice (rc $rc: $(cat "$T/err"))"
+: >"$T/mf/manifest.jsonl"
+"$DS" run "$T/mf" --renderer "$FAKE" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && grep -q "holds no job" "$T/err"' "an empty manifest (rc $rc: $(cat "$T/err"))"
+rm -rf "$T/mf" && cp -r "$T/r" "$T/mf"
+"$DS" plan --scenes "$TD/scenes" --variants 2 --seed 4 --spp 2,4 --ref-spp 128 \
+  --split train:cornell-box+cornell-teal,test:cornell-wide -o "$T/mf" --force > /dev/null
+"$DS" run "$T/mf" --renderer "$FAKE" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && grep -q "is not the render of job .*earlier plan (plan --force)" "$T/err"' \
+  "run: renders of an earlier plan (rc $rc: $(cat "$T/err"))"
+"$DS" patches "$T/mf" --size 8 --per-image 5 -o "$T/mf.kps" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && [ ! -e "$T/mf.kps" ] && grep -q "is not the render of job" "$T/err"' \
+  "patches: renders of an earlier plan (rc $rc: $(cat "$T/err"))"
 for order in "--per-image 5 --stride 4" "--stride 4 --per-image 5"; do
   # shellcheck disable=SC2086 # two options
   "$DS" patches "$T/r" --size 8 $order -o "$T/r/both.kps" 2> "$T/err"

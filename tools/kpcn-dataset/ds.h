@@ -56,6 +56,7 @@ extern const char *ds_prog;
 void ds_err(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 int ds_mkdir_p(const char *path);
 int ds_exists(const char *path);
+int ds_check_render(const char *path, const ds_job *j);
 void ds_join(char *out, size_t n, const char *a, const char *b);
 char *ds_slurp(const char *path, size_t *len);
 int ds_write_atomic(const char *path, const char *data, size_t len);

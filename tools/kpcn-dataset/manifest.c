@@ -109,16 +109,34 @@ static int get_seed(const cJSON *o, uint64_t *dst, int line, const char *path) {
   return 1;
 }
 
+static const ds_job *g_sort_jobs; /* job_id_cmp's jobs (qsort has no user pointer) */
+static int job_id_cmp(const void *a, const void *b) {
+  const int i = *(const int *)a, j = *(const int *)b;
+  const int c = strcmp(g_sort_jobs[i].id, g_sort_jobs[j].id);
+  return c ? c : (i > j) - (i < j);
+}
+
 int ds_manifest_read(const char *dir, ds_manifest *m) {
   memset(m, 0, sizeof *m);
   char path[DS_PATH];
   ds_join(path, sizeof path, dir, "manifest.jsonl");
-  char *text = ds_slurp(path, NULL);
+  size_t len = 0;
+  char *text = ds_slurp(path, &len);
   if (!text) {
     ds_err("cannot read '%s' (run `kpcn-dataset plan` first)", path);
     return -1;
   }
-  int lineno = 0, ok = 1;
+  /* a NUL ends the C string early: the lines after it were silently dropped */
+  const char *nul = memchr(text, 0, len);
+  if (nul) {
+    int at = 1;
+    for (const char *c = text; c < nul; c++)
+      at += *c == '\n';
+    ds_err("%s:%d: a NUL byte (the file is damaged)", path, at);
+    free(text);
+    return -1;
+  }
+  int lineno = 0, ok = 1, *lines = NULL; /* lines[k]: the line of job k */
   /* Split by hand, not strtok: strtok skips empty lines, and errors must name the real line. */
   for (char *line = text, *next; line && *line && ok; line = next) {
     lineno++;
@@ -162,9 +180,44 @@ int ds_manifest_read(const char *dir, ds_manifest *m) {
       break;
     }
     j.kind = (ds_kind)k;
-    ds_manifest_push(m, &j);
+    int *nl = realloc(lines, sizeof *nl * (size_t)(m->n + 1));
+    if (!nl || ds_manifest_push(m, &j) != 0) {
+      free(nl ? nl : lines);
+      lines = NULL;
+      ds_err("out of memory reading %s", path);
+      ok = 0;
+      break;
+    }
+    lines = nl;
+    lines[m->n - 1] = lineno;
   }
   free(text);
+  if (ok && m->n == 0) {
+    ds_err("%s holds no job (an empty manifest: plan again)", path);
+    ok = 0;
+  }
+  /* a job twice (concatenated shard manifests, say) would be rendered once and cut into
+   * patches twice: refused, as a dataset folder given twice is */
+  int *by = ok ? malloc(sizeof *by * (size_t)m->n) : NULL;
+  if (ok && !by) {
+    ds_err("out of memory reading %s", path);
+    ok = 0;
+  }
+  for (int i = 0; ok && i < m->n; i++)
+    by[i] = i;
+  if (ok) {
+    g_sort_jobs = m->jobs;
+    qsort(by, (size_t)m->n, sizeof *by, job_id_cmp);
+  }
+  for (int i = 1; ok && i < m->n; i++)
+    if (!strcmp(m->jobs[by[i - 1]].id, m->jobs[by[i]].id)) {
+      const int a = by[i - 1] < by[i] ? by[i - 1] : by[i], b = by[i - 1] ^ by[i] ^ a;
+      ds_err("%s: job '%s' is listed twice (lines %d and %d): its pair would be cut twice", path,
+             m->jobs[a].id, lines[a], lines[b]);
+      ok = 0;
+    }
+  free(by);
+  free(lines);
   if (!ok) ds_manifest_free(m);
   return ok ? 0 : -1;
 }

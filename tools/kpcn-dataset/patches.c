@@ -55,8 +55,8 @@ typedef struct pair_t {
  * reference; counts rejected variants and (up to five printed) missing renders. */
 static void collect_pairs(const char *dir, int dir_index, const ds_manifest *m, const char *split,
                           const int *spps, int nspp, int allow_partial, pair_t *pairs, int *np,
-                          int *missing, int *nrej) {
-  for (int i = 0; i < m->n; i++) {
+                          int *missing, int *nrej, int *stale) {
+  for (int i = 0; i < m->n && !*stale; i++) {
     const ds_job *j = &m->jobs[i];
     if (j->kind != DS_NOISY || strcmp(j->split, split) != 0 || !spp_selected(spps, nspp, j->spp))
       continue;
@@ -80,6 +80,11 @@ static void collect_pairs(const char *dir, int dir_index, const ds_manifest *m, 
                                : b);
       (*missing)++;
       continue;
+    }
+    /* a render left by an earlier plan, or a manifest edited since: named, and no store */
+    if (ds_check_render(a, j) != 0 || ds_check_render(b, &m->jobs[r]) != 0) {
+      *stale = 1;
+      return;
     }
     pairs[*np] = (pair_t){dir_index, i, r};
     (*np)++;
@@ -246,7 +251,7 @@ int ds_cmd_patches(int argc, char **argv) {
   ds_manifest m[MAX_DIRS];
   memset(m, 0, sizeof m);
   pair_t *pairs = NULL;
-  int np = 0, missing = 0, nrej = 0, rc = 0;
+  int np = 0, missing = 0, nrej = 0, rc = 0, stale = 0;
   for (int d = 0; d < ndirs && rc == 0; d++) {
     if (ds_manifest_read(dirs[d], &m[d]) != 0) {
       rc = 1;
@@ -259,7 +264,9 @@ int ds_cmd_patches(int argc, char **argv) {
       break;
     }
     pairs = grown;
-    collect_pairs(dirs[d], d, &m[d], split, spps, nspp, allow_partial, pairs, &np, &missing, &nrej);
+    collect_pairs(dirs[d], d, &m[d], split, spps, nspp, allow_partial, pairs, &np, &missing, &nrej,
+                  &stale);
+    if (stale) rc = 1;
   }
   /* the store must not replace a file of a dataset it reads: the manifest, the plan, */
   for (int d = 0; d < ndirs && rc == 0; d++) {
@@ -380,7 +387,8 @@ int ds_cmd_patches(int argc, char **argv) {
       for (int k = 0; k < n && rc == 0; k++) {
         kpcn_patch_record rec = {sid, o[k].x, o[k].y, 0, o[k].flat_frac, o[k].weight, 0};
         if (kpcn_patchstore_append_aov(w, &rec, noisy, ref) != KPCN_OK) {
-          ds_err("patches: %s: %s", j->id, kpcn_last_error());
+          /* the files, not the scene their header names (which may be another dataset's) */
+          ds_err("patches: %s (noisy %s, reference %s): %s", j->id, a, b, kpcn_last_error());
           rc = 1;
         }
       }
@@ -402,6 +410,11 @@ int ds_cmd_patches(int argc, char **argv) {
   sigaction(SIGINT, &old_int, NULL);
   sigaction(SIGTERM, &old_term, NULL);
   if (ds_isatty() && rc < 128) fputc('\n', stderr);
+  if (rc == 0 && tot.kept == 0) { /* a store of nothing, which kpcn-train refuses only later */
+    ds_err("patches: no patch kept (%lld candidates, all culled at --cull %g): no store written",
+           (long long)tot.candidates, ps.cull);
+    rc = 1;
+  }
   if (rc == 0 && kpcn_patchstore_finish(w) != KPCN_OK) {
     ds_err("patches: %s", kpcn_last_error());
     rc = 1;

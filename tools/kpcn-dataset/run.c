@@ -464,6 +464,18 @@ int ds_cmd_run(int argc, char **argv) {
     if (needed && !ds_exists(out)) pv[npv++] = i;
   }
   int rc = 0;
+  /* renders already there must be their jobs' (a preview too: its verdict is reused) */
+  for (int i = 0; i < m.n && rc == 0; i++) {
+    char out[DS_PATH];
+    ds_join(out, sizeof out, o.dir, m.jobs[i].out);
+    if (ds_exists(out) && ds_check_render(out, &m.jobs[i]) != 0) rc = 1;
+  }
+  if (rc) {
+    free(pv);
+    free(mine);
+    ds_manifest_free(&m);
+    return rc;
+  }
   if (o.dry_run) {
     for (int i = 0; i < npv; i++)
       print_would_render(&o, &m.jobs[pv[i]]);

@@ -3,6 +3,7 @@
 #include "ds.h"
 
 #include "kpcn/common.h"
+#include "kpcn/exr.h"
 
 #include <errno.h>
 #include <math.h>
@@ -154,4 +155,30 @@ void ds_progress(double *last, double every, int final, int done, int total, dou
   fprintf(stderr, "%s[%d/%d] %s, %.0fs elapsed, ~%.0fs left%s", tty ? "\r" : "", done, total,
           detail, elapsed, eta, tty ? "   " : "\n");
   fflush(stderr);
+}
+
+/* A render on disk is the one its job describes: size, spp and seed from its header. A render
+ * left by an earlier plan (plan --force into the same folder) or a hand-edited manifest was
+ * used as if it were the job's. Returns 0 when it matches, -1 (message given) when not. */
+int ds_check_render(const char *path, const ds_job *j) {
+  kpcn_exr_info_t *info = malloc(sizeof *info);
+  if (!info) {
+    ds_err("out of memory checking '%s'", path);
+    return -1;
+  }
+  int rc = 0;
+  if (kpcn_exr_info(path, info) != KPCN_OK) {
+    ds_err("%s: %s", path, kpcn_last_error());
+    rc = -1;
+  } else if (info->width != j->width || info->height != j->height || info->spp != j->spp ||
+             (info->seed >= 0 && (uint64_t)info->seed != j->seed)) {
+    ds_err("%s is not the render of job %s (the file: %dx%d, %d spp, seed %lld; the job: %dx%d, "
+           "%d spp, seed %llu): it was left by an earlier plan (plan --force) or the manifest was "
+           "edited; remove the renders/ folder to render again, or plan into a new folder",
+           path, j->id, info->width, info->height, info->spp, (long long)info->seed, j->width,
+           j->height, j->spp, (unsigned long long)j->seed);
+    rc = -1;
+  }
+  free(info);
+  return rc;
 }

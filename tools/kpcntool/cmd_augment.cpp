@@ -8,6 +8,7 @@
 #include "kpcntool.h"
 
 #include <cmath>
+#include <cstdio>
 #include <memory>
 
 namespace {
@@ -108,6 +109,11 @@ bool cmd_patches(Context &ctx, const Modifiers &m, const std::vector<std::string
   }
   s.size = (int)m.integer("size", 65);
   s.count = m.has("stride") ? 0 : (int)m.integer("count", 400);
+  // kpcn-dataset patches' --per-image limit: 99999999 ran for ten minutes and filled the disk
+  if (s.count > (1 << 20)) {
+    err = "count=" + std::to_string(s.count) + " is more than 1048576 patches per image";
+    return false;
+  }
   s.stride = (int)m.integer("stride", 0);
   s.seed = m.u64("seed", 1);
   s.cull = m.num("cull", 0.9);
@@ -132,14 +138,31 @@ bool cmd_patches(Context &ctx, const Modifiers &m, const std::vector<std::string
     err = "modifier 'out' needs a directory or a .kps file";
     return false;
   }
-  auto imgs = std::make_shared<const std::pair<OIIO::ImageBuf, OIIO::ImageBuf>>(noisy, ref);
-  const int size = s.size;
   const bool kps =
       out.size() > 4 && out.compare(out.size() - 4, 4, ".kps") == 0; // as write_patches
-  ctx.outputs.push_back(
-      {"--patches:out=" + out, out, !kps, [imgs, o, size](const std::string &tmp, std::string &e) {
-         return kpcn::ops::write_patches(tmp, imgs->first, imgs->second, o, size, e);
-       }});
+  if (kps && !pair) { // it failed at write time, naming a missing 'ref.R'
+    err = "a patch store needs the noisy image and its reference on top of it (two images)";
+    return false;
+  }
+  if (o.empty()) { // a store or folder of nothing, which training only refuses later
+    err = "no patch kept (" + std::to_string(st.candidates) +
+          " candidates, all culled at cull=" + m.str("cull", "0.9") + "): nothing to write";
+    return false;
+  }
+  auto imgs = std::make_shared<const std::pair<OIIO::ImageBuf, OIIO::ImageBuf>>(noisy, ref);
+  const int size = s.size;
+  char settings[512];
+  std::snprintf(settings, sizeof settings,
+                "{\"size\":%d,\"count\":%d,\"stride\":%d,\"seed\":%llu,\"cull\":%.9g,"
+                "\"tol\":%.9g,\"abs\":%.9g,\"importance\":%d}",
+                s.size, s.count, s.stride, (unsigned long long)s.seed, s.cull, s.cull_tol,
+                s.cull_abs, s.importance ? 1 : 0);
+  const std::string sj = settings;
+  ctx.outputs.push_back({"--patches:out=" + out, out, !kps,
+                         [imgs, o, size, st, sj](const std::string &tmp, std::string &e) {
+                           return kpcn::ops::write_patches(tmp, imgs->first, imgs->second, o, size,
+                                                           e, &st, sj);
+                         }});
   return true;
 }
 

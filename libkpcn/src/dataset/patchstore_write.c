@@ -358,9 +358,9 @@ kpcn_status kpcn_patchstore_append_aov(kpcn_patchstore_writer *w, const kpcn_pat
     const float *p = s ? aov_plane(s, is_ref ? nm + 4 : nm) : NULL;
     if (!p)
       return kpcn_fail(KPCN_ERR_MISSING_CHANNEL,
-                       "patch store: channel '%s' missing in the %s image%s%s", nm,
-                       is_ref ? "reference" : "noisy", s && s->scene[0] ? " of " : "",
-                       s && s->scene[0] ? s->scene : "");
+                       "patch store: channel '%s' missing in the %s image%s%s%s", nm,
+                       is_ref ? "reference" : "noisy", s && s->scene[0] ? " (rendered from " : "",
+                       s && s->scene[0] ? s->scene : "", s && s->scene[0] ? ")" : "");
     for (int y = 0; y < S; y++)
       memcpy(w->tmpf + ((size_t)c * S + y) * S,
              p + (size_t)(rec->y + y) * (size_t)noisy->width + (size_t)rec->x, sizeof(float) * S);

@@ -61,9 +61,12 @@ bool select_patches(const OIIO::ImageBuf &noisy, const OIIO::ImageBuf &ref,
 
 // Writes the selected patches: `out` ending in ".kps" -> a patch store (the default
 // channel list of kpcn/dataset.h: noisy needs every AOV, ref color/diffuse/specular);
-// otherwise a directory receiving noisy_NNNN.exr (+ ref_NNNN.exr) with all channels.
+// otherwise a directory receiving noisy_NNNN.exr (+ ref_NNNN.exr) with all channels. A store
+// records `stats` (the selection's candidates, kept, culled; none when null) and
+// `settings_json` (a JSON object, e.g. the selection's settings) in its metadata.
 bool write_patches(const std::string &out, const OIIO::ImageBuf &noisy, const OIIO::ImageBuf &ref,
-                   const std::vector<kpcn_patch_origin> &origins, int size, std::string &err);
+                   const std::vector<kpcn_patch_origin> &origins, int size, std::string &err,
+                   const kpcn_patch_stats *stats = nullptr, const std::string &settings_json = "");
 
 } // namespace ops
 } // namespace kpcn
