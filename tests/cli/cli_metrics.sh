@@ -62,4 +62,18 @@ run_ok part.exr q.exr --l1:allow_nonfinite=1 --json
 cp out.txt nf.json
 near "$(json_get nf.json l1)" 0.16666666666666667 1e-12 && near "$(json_get nf.json l1_nonfinite_pixels)" 16 0 \
   && pass "nonfinite excluded and counted" || fail "nonfinite: $(cat nf.json)"
+# session 60: a second metric's count follows its own key (it took the first's); PSNR at an
+# extreme range is the finite figure 20 log10(R) - 10 log10(MSE) (R^2 overflowed to inf)
+run_ok part.exr q.exr --l1:channels=G --l1:allow_nonfinite=1 --json
+cp out.txt nf2.json
+json_get nf2.json l1_2_nonfinite_pixels >/dev/null 2>&1 && ! grep -q '"l1_nonfinite_pixels"' nf2.json &&
+  pass "the count follows its metric's key" || fail "nonfinite key: $(cat nf2.json)"
+oiiotool --pattern constant:color=0.25,0.4,0.5 16x16 3 -o r.exr
+run_ok q.exr r.exr --psnr:range=1e155 --json
+cp out.txt ps.json
+run_ok q.exr r.exr --mse --json
+mse=$(json_get out.txt mse)
+want=$("$PY" -c "import math,sys; print(20*math.log10(1e155) - 10*math.log10(float(sys.argv[1])))" "$mse")
+near "$(json_get ps.json psnr)" "$want" 1e-12 && pass "psnr at range 1e155: $want" ||
+  fail "psnr at range 1e155: $(cat ps.json), want $want"
 finish

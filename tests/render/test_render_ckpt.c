@@ -230,6 +230,18 @@ static void test_cli(void) {
   remove("cli.exr");
   remove("plain.exr");
   remove("cli.err");
+  /* without --checkpoint a signal stops the render too (exit 128 + the signal, nothing written,
+   * no temporary file): the default action used to kill it even while it wrote the output */
+  char *nock[] = {RENDER_BIN,  CORNELL, "-o",           "nock.exr", "--spp", "4096",
+                  "--threads", "1",     "--resolution", "64x64",    NULL};
+  pid = spawn(nock, "nock.err");
+  CHECK(pid > 0);
+  usleep(1500000); /* past the scene's loading, also under the sanitizers */
+  kill(pid, SIGTERM);
+  CHECK(wait_status(pid) == 143);
+  CHECK(file_contains("nock.err", "stopped by signal 15; nothing written"));
+  CHECK(!file_exists("nock.exr") && system("ls nock.exr.tmp* >/dev/null 2>&1") != 0);
+  remove("nock.err");
 
   /* a checkpoint path that is the output or the scene file: a usage error */
   char *alias[] = {RENDER_BIN, CORNELL, "-o", "a.exr", "--checkpoint", "./a.exr", "--quiet", NULL};

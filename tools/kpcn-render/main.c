@@ -5,9 +5,12 @@
  *               [--time-limit M]]
  * A progress line (percent, samples/s, time left) is shown only when stderr is a terminal.
  * The output is written atomically; on any error nothing is written and the exit code is 1
- * (2 for usage errors). With --checkpoint, SIGINT/SIGTERM save the finished rows there and
- * exit 128 + the signal, and --time-limit stops the same way after M minutes (exit 3); the
- * same command resumes, and the file is removed once the output is written. */
+ * (2 for usage errors). SIGINT/SIGTERM stop the render at the next row and exit 128 + the
+ * signal with no output; with --checkpoint the finished rows are saved there first, and
+ * --time-limit stops the same way after M minutes (exit 3); the same command resumes, and the
+ * file is removed once the output is written. A signal never interrupts a file being written
+ * (a checkpoint save or the output): it takes effect once the file is in place, so no
+ * temporary file is left behind. */
 #include "cli_parse.h"
 #include "kpcn/exr.h"
 #include "kpcn/render.h"
@@ -322,28 +325,35 @@ int main(int argc, char **argv) {
   ps.limit_s = time_limit_min >= 0 ? 60.0 * time_limit_min : -1.0;
   ps.row = 1.0 / h;
   ps.show = !quiet && isatty(2);
-  if (ps.show || rs.checkpoint) {
-    rs.progress = on_progress;
-    rs.progress_user = &ps;
-  }
-  if (rs.checkpoint) { /* a signal saves the finished rows instead of losing them */
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_signal;
-    sa.sa_flags = SA_RESETHAND; /* a second signal stops it at once, rows unsaved */
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-  }
+  /* A signal stops the render at the next row (saving the rows with --checkpoint). It only
+   * sets a flag: the default action killed the process in the middle of writing the output or
+   * a checkpoint save and left the temporary file (session 60), and so did a second signal
+   * while the first one's save was under way. */
+  rs.progress = on_progress;
+  rs.progress_user = &ps;
+  struct sigaction sa;
+  memset(&sa, 0, sizeof sa);
+  sa.sa_handler = on_signal;
+  sigaction(SIGINT, &sa, NULL);
+  sigaction(SIGTERM, &sa, NULL);
   kpcn_aov_set *aov = NULL;
   kpcn_render_stats stats;
   kpcn_status st = kpcn_render_ex(scene, &rs, &aov, &stats);
   if (ps.show) fprintf(stderr, "\n");
   kpcn_scene_destroy(scene);
+  /* also with --quiet: a job's log (kpcn-dataset run) should say that it resumed, also when
+   * this run is stopped again */
+  if (stats.rows_resumed)
+    fprintf(stderr, "kpcn-render: resumed %d of %d rows from '%s'\n", stats.rows_resumed, h,
+            rs.checkpoint);
   if (st == KPCN_ERR_CANCELLED && g_signal) {
-    fprintf(stderr,
-            "kpcn-render: stopped by signal %d; finished rows saved in '%s' (the same "
-            "command resumes)\n",
-            (int)g_signal, rs.checkpoint);
+    if (rs.checkpoint)
+      fprintf(stderr,
+              "kpcn-render: stopped by signal %d; finished rows saved in '%s' (the same "
+              "command resumes)\n",
+              (int)g_signal, rs.checkpoint);
+    else
+      fprintf(stderr, "kpcn-render: stopped by signal %d; nothing written\n", (int)g_signal);
     return 128 + g_signal;
   }
   if (st == KPCN_ERR_CANCELLED) { /* the time limit */
@@ -357,10 +367,6 @@ int main(int argc, char **argv) {
     fprintf(stderr, "kpcn-render: %s\n", kpcn_last_error());
     return 1;
   }
-  /* also with --quiet: a job's log (kpcn-dataset run) should say that it resumed */
-  if (stats.rows_resumed)
-    fprintf(stderr, "kpcn-render: resumed %d of %d rows from '%s'\n", stats.rows_resumed, h,
-            rs.checkpoint);
   if (stats.checkpoint_errors)
     fprintf(stderr, "kpcn-render: warning: %d checkpoint save(s) to '%s' failed\n",
             stats.checkpoint_errors, rs.checkpoint);
@@ -398,6 +404,15 @@ int main(int argc, char **argv) {
   if (st != KPCN_OK) {
     fprintf(stderr, "kpcn-render: %s\n", kpcn_last_error());
     return 1;
+  }
+  /* a signal that came while the output was written: the render was complete, and so is the
+   * file, which stays; the exit status still says a signal stopped the command */
+  if (g_signal) {
+    if (rs.checkpoint) remove(rs.checkpoint);
+    fprintf(stderr,
+            "kpcn-render: signal %d arrived while '%s' was written; the output is complete\n",
+            (int)g_signal, out_path);
+    return 128 + g_signal;
   }
   if (rs.checkpoint && remove(rs.checkpoint) != 0 && errno != ENOENT)
     fprintf(stderr, "kpcn-render: warning: cannot remove checkpoint '%s': %s\n", rs.checkpoint,

@@ -69,8 +69,9 @@ bool run_metric(Metric metric, kpcntool::Context &ctx, const kpcntool::Modifiers
     return false;
   }
   if (!check_nonfinite(r, m, x, y, err)) return false;
-  std::string key = kpcn::ops::metric_name(metric);
-  ctx.add_result(key, r.value);
+  // the count's key follows the value's own (l1_2 -> l1_2_nonfinite_pixels: it was
+  // l1_nonfinite_pixels, read as the first --l1's)
+  const std::string key = ctx.add_result(kpcn::ops::metric_name(metric), r.value);
   if (r.nonfinite) ctx.add_result(key + "_nonfinite_pixels", (double)r.nonfinite);
   return true;
 }

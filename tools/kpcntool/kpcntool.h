@@ -62,7 +62,8 @@ struct Context {
   };
   std::vector<Output> outputs;
   // Extension: records a numeric result under a unique key (key, key_2, key_3 ...).
-  void add_result(const std::string &key, double value);
+  // the key as stored: `key`, or key_2, key_3 ... when the line measures it again
+  std::string add_result(const std::string &key, double value);
   // Extension: records a raw JSON result (--info) under a unique key, as add_result does.
   void add_json_item(const std::string &key, std::string json);
   // key, or key_2, key_3 ... : the first not yet taken by a result or a JSON item

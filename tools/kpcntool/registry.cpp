@@ -99,8 +99,10 @@ std::string Context::unique_key(const std::string &key) const {
   }
 }
 
-void Context::add_result(const std::string &key, double value) {
-  results.emplace_back(unique_key(key), value);
+std::string Context::add_result(const std::string &key, double value) {
+  std::string k = unique_key(key);
+  results.emplace_back(k, value);
+  return k;
 }
 
 void Context::add_json_item(const std::string &key, std::string json) {

@@ -132,7 +132,9 @@ static kpcn_status pointwise(kpcn_metric m, const float *x, const float *y, int 
   }
   double mean = total / ((double)valid * (double)nch);
   if (m == KPCN_METRIC_PSNR)
-    res->value = mean > 0.0 ? 10.0 * log10(opt->data_range * opt->data_range / mean) : INFINITY;
+    /* 20 log10(R) - 10 log10(MSE): R^2 overflowed (range 1e155 printed inf) or lost its digits
+     * as a denormal (range 1e-161) where the figure itself is an ordinary number */
+    res->value = mean > 0.0 ? 20.0 * log10(opt->data_range) - 10.0 * log10(mean) : INFINITY;
   else
     res->value = mean;
   return KPCN_OK;
