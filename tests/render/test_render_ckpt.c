@@ -249,6 +249,39 @@ static void test_cli(void) {
   alias[5] = CORNELL;
   CHECK(wait_status(spawn(alias, "a.err")) == 2 && file_contains("a.err", "is the scene file"));
   CHECK(!file_exists("a.exr"));
+  /* an output that is a file the scene reads (here an EXR texture) was written over it */
+  {
+    const char *names[3] = {"R", "G", "B"};
+    kpcn_image *tex = NULL;
+    CHECK(kpcn_image_create(&tex, 2, 2, 3, names) == KPCN_OK);
+    if (tex) {
+      for (int i = 0; i < 12; i++)
+        tex->data[i] = 0.5f;
+      CHECK(kpcn_exr_write_image("tex.exr", tex, NULL) == KPCN_OK);
+      kpcn_image_destroy(tex);
+    }
+    FILE *f = fopen("texscene.json", "w");
+    CHECK(f != NULL);
+    if (f) {
+      fputs("{\"primitives\": [{\"type\": \"quad\", \"bsdf\": {\"type\": \"lambert\", "
+            "\"albedo\": \"tex.exr\"}}, {\"type\": \"infinite_sphere\", \"emission\": 1}], "
+            "\"camera\": {\"type\": \"pinhole\", \"resolution\": 8, \"transform\": {\"position\": "
+            "[0, 2, 0], "
+            "\"look_at\": [0, 0, 0], \"up\": [0, 0, 1]}}}",
+            f);
+      fclose(f);
+    }
+    struct stat before, after;
+    CHECK(stat("tex.exr", &before) == 0);
+    char *clash[] = {RENDER_BIN, "texscene.json", "-o", "./tex.exr", "--spp", "1", "--quiet", NULL};
+    CHECK(wait_status(spawn(clash, "a.err")) == 2 &&
+          file_contains("a.err", "-o './tex.exr' is './tex.exr', a file the scene reads"));
+    CHECK(stat("tex.exr", &after) == 0 && after.st_size == before.st_size &&
+          after.st_mtime == before.st_mtime);
+    clash[3] = "ok.exr"; /* the same scene renders */
+    CHECK(wait_status(spawn(clash, "a.err")) == 0 && file_exists("ok.exr"));
+    remove("ok.exr"), remove("tex.exr"), remove("texscene.json");
+  }
   /* --time-limit without a checkpoint would throw the rows away: a usage error */
   char *nolimit[] = {RENDER_BIN, CORNELL, "-o", "a.exr", "--time-limit", "1", "--quiet", NULL};
   CHECK(wait_status(spawn(nolimit, "a.err")) == 2 && file_contains("a.err", "needs --checkpoint"));

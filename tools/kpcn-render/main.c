@@ -97,50 +97,75 @@ static int hash_file(const char *path, uint64_t *h) {
   return ok;
 }
 
-/* The scene's identity in a checkpoint: the scene file's bytes and those of every file it
- * names (any string in it that is a regular file, absolute or next to it: meshes, textures,
- * environment maps), so that a scene or texture edited between a stop and a resume is refused
- * instead of mixed into one image. */
-static int scene_key(const char *scene_path, uint64_t *out) {
-  uint64_t h = 0xcbf29ce484222325ull;
+/* Calls fn(path, user) for every file the scene names: any string in its JSON that is a regular
+ * file, absolute or next to it (meshes, textures, environment maps). 0 if the scene cannot be
+ * read or fn returns 0. */
+static int for_each_named_file(const char *scene_path, int (*fn)(const char *, void *),
+                               void *user) {
+  size_t n = 0;
   FILE *f = fopen(scene_path, "rb");
   if (!f) return 0;
   fseek(f, 0, SEEK_END);
-  long n = ftell(f);
+  long len = ftell(f);
   fseek(f, 0, SEEK_SET);
-  char *text = n >= 0 && n < (1L << 30) ? malloc((size_t)n + 1) : NULL;
-  int ok = text && fread(text, 1, (size_t)n, f) == (size_t)n;
+  char *text = len >= 0 && len < (1L << 30) ? malloc((size_t)len + 1) : NULL;
+  int ok = text && fread(text, 1, (size_t)len, f) == (size_t)len;
   fclose(f);
   if (!ok) {
     free(text);
     return 0;
   }
+  n = (size_t)len;
   text[n] = 0;
-  for (long i = 0; i < n; i++)
-    h = (h ^ (unsigned char)text[i]) * 0x100000001b3ull;
   const char *slash = strrchr(scene_path, '/');
   const int dirlen = slash ? (int)(slash - scene_path) : 1;
   const char *dir = slash ? scene_path : ".";
-  for (char *q = strchr(text, '"'); q; q = strchr(q + 1, '"')) {
+  for (char *q = strchr(text, '"'); q && ok; q = strchr(q + 1, '"')) {
     char *end = strchr(q + 1, '"');
     if (!end) break;
     char path[8192];
-    const int len = (int)(end - q - 1);
-    if (len > 0 && len < 4096) {
+    const int plen = (int)(end - q - 1);
+    if (plen > 0 && plen < 4096) {
       if (q[1] == '/')
-        snprintf(path, sizeof path, "%.*s", len, q + 1);
+        snprintf(path, sizeof path, "%.*s", plen, q + 1);
       else
-        snprintf(path, sizeof path, "%.*s/%.*s", dirlen, dir, len, q + 1);
+        snprintf(path, sizeof path, "%.*s/%.*s", dirlen, dir, plen, q + 1);
       struct stat sb;
-      if (stat(path, &sb) == 0 && S_ISREG(sb.st_mode) && !hash_file(path, &h)) {
-        free(text);
-        return 0;
-      }
+      if (stat(path, &sb) == 0 && S_ISREG(sb.st_mode)) ok = fn(path, user);
     }
     q = end; /* the closing quote is not the next string's opening one */
   }
   free(text);
+  return ok;
+}
+
+static int hash_named(const char *path, void *h) { return hash_file(path, h); }
+
+/* The scene's identity in a checkpoint: the scene file's bytes and those of every file it
+ * names, so that a scene or texture edited between a stop and a resume is refused instead of
+ * mixed into one image. */
+static int scene_key(const char *scene_path, uint64_t *out) {
+  uint64_t h = 0xcbf29ce484222325ull;
+  if (!hash_file(scene_path, &h) || !for_each_named_file(scene_path, hash_named, &h)) return 0;
   *out = h;
+  return 1;
+}
+
+/* An output (-o, --checkpoint) that is a file the scene reads, a texture or an environment map,
+ * was written over it (session 60); the scene file itself was already refused. */
+typedef struct output_check {
+  const char *path, *what, *named; /* named: the scene's file it is, when found */
+} output_check;
+static int not_named(const char *path, void *user) {
+  output_check *c = user;
+  if (!kpcn_same_file(c->path, path)) return 1;
+  c->named = path;
+  return 0;
+}
+static int output_clashes(const char *scene_path, const char *out, const char *what) {
+  output_check c = {out, what, NULL};
+  if (for_each_named_file(scene_path, not_named, &c) || !c.named) return 0;
+  fprintf(stderr, "kpcn-render: %s '%s' is '%s', a file the scene reads\n", what, out, c.named);
   return 1;
 }
 
@@ -292,6 +317,9 @@ int main(int argc, char **argv) {
     fprintf(stderr, "kpcn-render: -o '%s' is the scene file\n", out_path);
     return 2;
   }
+  if (output_clashes(scene_path, out_path, "-o") ||
+      (rs.checkpoint && output_clashes(scene_path, rs.checkpoint, "--checkpoint")))
+    return 2;
   /* before rendering: a device, FIFO, directory or missing folder is refused now, not after */
   if (kpcn_check_output_path(out_path, "-o") != KPCN_OK ||
       (rs.checkpoint && kpcn_check_output_path(rs.checkpoint, "--checkpoint") != KPCN_OK)) {
