@@ -159,7 +159,9 @@ void ds_progress(double *last, double every, int final, int done, int total, dou
 
 /* A render on disk is the one its job describes: size, spp and seed from its header. A render
  * left by an earlier plan (plan --force into the same folder) or a hand-edited manifest was
- * used as if it were the job's. Returns 0 when it matches, -1 (message given) when not. */
+ * used as if it were the job's. A header without kpcn:spp or kpcn:seed (a --renderer that does
+ * not write them) is checked for its size only. Returns 0 when it matches, -1 (message given)
+ * when not. */
 int ds_check_render(const char *path, const ds_job *j) {
   kpcn_exr_info_t *info = malloc(sizeof *info);
   if (!info) {
@@ -170,8 +172,9 @@ int ds_check_render(const char *path, const ds_job *j) {
   if (kpcn_exr_info(path, info) != KPCN_OK) {
     ds_err("%s: %s", path, kpcn_last_error());
     rc = -1;
-  } else if (info->width != j->width || info->height != j->height || info->spp != j->spp ||
-             (info->seed >= 0 && (uint64_t)info->seed != j->seed)) {
+  } else if (info->width != j->width || info->height != j->height ||
+             (info->spp >= 0 && info->spp != j->spp) ||
+             (info->seed >= 0 && (uint64_t)info->seed != j->seed)) { /* -1: not in the header */
     ds_err("%s is not the render of job %s (the file: %dx%d, %d spp, seed %lld; the job: %dx%d, "
            "%d spp, seed %llu): it was left by an earlier plan (plan --force) or the manifest was "
            "edited; remove the renders/ folder to render again, or plan into a new folder",
