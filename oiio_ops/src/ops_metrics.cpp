@@ -90,6 +90,15 @@ static MetricResult run(const ImageBuf &x, const ImageBuf &ref, Metric m, const 
               "): crop or shift them to the same window first";
     return r;
   }
+  // A scalar metric counts a channel listed twice twice (metrics.md), but an error map would
+  // get two planes of one name (OIIO wrote the second as 'channel1').
+  for (size_t i = 0; map && i < opt.channels.size(); i++)
+    for (size_t j = 0; j < i; j++)
+      if (opt.channels[i] == opt.channels[j]) {
+        r.error = std::string(what) + ": the channel list names '" + opt.channels[i] +
+                  "' twice (an error map has one channel per name)";
+        return r;
+      }
   std::string err;
   const std::vector<std::string> chans =
       opt.channels.empty() ? default_channels(x, ref) : opt.channels;

@@ -12,6 +12,8 @@ expect_fail "image sizes differ ('$NOISY' is 256x256, 'small.exr' is 128x128)" o
 # Images and channels.
 expect_fail "image sizes differ" map.exr "$NOISY" small.exr --errormap -o map.exr
 expect_fail "has no channel 'Q'" "" "$NOISY" "$REF" --relmse:channels=R,Q
+expect_fail "--errormap:channels=G,G: relmse: the channel list names 'G' twice" map.exr "$NOISY" "$REF" \
+  --errormap:channels=G,G -o map.exr
 expect_fail "channel counts differ (test image 1, reference 3)" "" "$NOISY" --ch R "$REF" --l1
 expect_fail "is missing from the test image" "" "$NOISY" \
   --ch albedo.R,albedo.G,albedo.B "$REF" --l1
