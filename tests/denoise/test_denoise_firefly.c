@@ -228,6 +228,50 @@ static void test_denoiser(void) {
   kpcn_model_destroy(m);
 }
 
+/* A 1x1 image has no neighbour: nothing marks its pixel a firefly (the bound fell to the
+ * floor, 0.01 x the exposure, and darkened it ~700-fold). */
+static void test_single_pixel(void) {
+  kpcn_aov_set *a = synth_aov(1, 1, 3), *b = NULL;
+  put(a, 0, 0, 0.09f, 0.2f, 0.3f);
+  CHECK(kpcn_aov_clone(&b, a) == KPCN_OK);
+  int n = -1;
+  CHECK(kpcn_aov_bound_fireflies(b, KPCN_DENOISE_DEFAULT_FIREFLY, EPS, 0.0, &n) == KPCN_OK);
+  CHECK(n == 0 && same_planes(a, b));
+  kpcn_aov_destroy(a);
+  kpcn_aov_destroy(b);
+}
+
+/* The exposure scale a model asks for must be formable in float: an input near the float
+ * limit (scale below FLT_MIN, which flushed to 0 and failed inside the features) is the
+ * documented non-finite error; one so dim that cs^2 overflows is refused naming its
+ * exposure, not denoised from Inf/NaN variances. */
+static void test_exposure_range(void) {
+  kpcn_arch arch;
+  kpcn_model *m = NULL;
+  CHECK(kpcn_arch_preset("tiny", &arch) == KPCN_OK && kpcn_features_set_arch(&arch) == KPCN_OK);
+  CHECK(kpcn_model_create(&arch, 5, &m) == KPCN_OK);
+  CHECK(kpcn_model_set_exposure(m, 0.25f) == KPCN_OK);
+  const double level[2] = {5e37, 1e-18};
+  const kpcn_status want[2] = {KPCN_ERR_NONFINITE, KPCN_ERR_INVALID_ARGUMENT};
+  const char *msg[2] = {"near the float limit", "too dim"};
+  for (int k = 0; k < 2; k++) {
+    kpcn_aov_set *a = wall(8);
+    const size_t P = kpcn_aov_plane_size(a);
+    for (size_t i = 0; i < 3 * P; i++) {
+      a->buf[KPCN_BUF_COLOR][i] = a->buf[KPCN_BUF_DIFFUSE][i] = (float)level[k];
+      a->buf[KPCN_BUF_SPECULAR][i] = 0.0f;
+    }
+    for (int b = 0; b < KPCN_BUF_COUNT; b++)
+      if (a->var[b]) memset(a->var[b], 0, sizeof(float) * P);
+    float *out = malloc(sizeof(float) * 3 * P);
+    CHECK(denoise(m, a, 0.0f, out, NULL) == want[k]);
+    CHECK(strstr(kpcn_last_error(), msg[k]) != NULL);
+    free(out);
+    kpcn_aov_destroy(a);
+  }
+  kpcn_model_destroy(m);
+}
+
 static void test_errors(void) {
   kpcn_aov_set *a = wall(6);
   int n = 7;
@@ -242,6 +286,8 @@ static void test_errors(void) {
 }
 
 int main(void) {
+  test_single_pixel();
+  test_exposure_range();
   test_untouched();
   test_partial_coverage();
   test_equivariance();

@@ -90,18 +90,25 @@ static double naive_ssim(const float *x, const float *y, int w, int h, int nch, 
     long cnt = 0;
     for (int py = 0; py < h; ++py)
       for (int px = 0; px < w; ++px) {
-        double mx = 0, my = 0, mxx = 0, myy = 0, mxy = 0;
-        for (int b = -5; b <= 5; ++b)
-          for (int a = -5; a <= 5; ++a) {
-            size_t i = (size_t)refl(py + b, h) * w + refl(px + a, w);
-            int ok = valid_px(x, y, n, nch, i);
-            double p = ok ? enc(x[c * n + i], srgb) : 0, q = ok ? enc(y[c * n + i], srgb) : 0;
-            double wt = g[a + 5] * g[b + 5];
-            mx += wt * p, my += wt * q, mxx += wt * p * p, myy += wt * q * q, mxy += wt * p * q;
-          }
-        double vx = mxx - mx * mx, vy = myy - my * my, vxy = mxy - mx * my;
-        double S =
-            (2 * mx * my + C1) * (2 * vxy + C2) / ((mx * mx + my * my + C1) * (vx + vy + C2));
+        /* two passes, the means first, then squared deviations from them (no cancellation
+         * at values far above the range), in long double */
+        long double mx = 0, my = 0, vx = 0, vy = 0, vxy = 0;
+        for (int pass = 0; pass < 2; ++pass)
+          for (int b = -5; b <= 5; ++b)
+            for (int a = -5; a <= 5; ++a) {
+              size_t i = (size_t)refl(py + b, h) * w + refl(px + a, w);
+              int ok = valid_px(x, y, n, nch, i);
+              double p = ok ? enc(x[c * n + i], srgb) : 0, q = ok ? enc(y[c * n + i], srgb) : 0;
+              long double wt = (long double)g[a + 5] * g[b + 5];
+              if (pass == 0) {
+                mx += wt * p, my += wt * q;
+              } else {
+                long double dx = p - mx, dy = q - my;
+                vx += wt * dx * dx, vy += wt * dy * dy, vxy += wt * dx * dy;
+              }
+            }
+        double S = (double)((2 * mx * my + C1) / (mx * mx + my * my + C1) *
+                            ((2 * vxy + C2) / (vx + vy + C2)));
         size_t i = (size_t)py * w + px;
         int ok = valid_px(x, y, n, nch, i);
         if (map) map[c * n + i] = ok ? S : NAN;
@@ -315,10 +322,58 @@ static void test_determinism(void) {
   CHECK(run(KPCN_METRIC_SSIM, x, y, w, h, nch, 1, 2.0, -5, NULL, NULL) ==
         run(KPCN_METRIC_SSIM, x, y, w, h, nch, 1, 2.0, 1, NULL, NULL));
   /* identical images: SSIM 1, errors 0, PSNR +inf */
-  CHECK_NEAR(run(KPCN_METRIC_SSIM, x, x, w, h, nch, 0, 1.0, 0, NULL, NULL), 1.0, 1e-12);
+  CHECK(run(KPCN_METRIC_SSIM, x, x, w, h, nch, 0, 1.0, 0, NULL, NULL) == 1.0); /* exactly */
   CHECK(run(KPCN_METRIC_RELMSE, x, x, w, h, nch, 0, 1.0, 0, NULL, NULL) == 0.0);
   CHECK(isinf(run(KPCN_METRIC_PSNR, x, x, w, h, nch, 0, 1.0, 0, NULL, NULL)));
   free(x), free(y);
+}
+
+/* Values far above the data range (a flat emitter at range 1): E[x^2] - E[x]^2 cancels
+ * (SSIM was 1.004 for flat 100010 against 100000), and extreme ranges (identical images gave
+ * NaN at range 1e-80). Truth: the closed form of flat images (no contrast: S is the
+ * luminance term alone) and the two-pass long-double naive_ssim. */
+static void test_large_values(void) {
+  const int w = 16, h = 16;
+  const size_t n = (size_t)w * h;
+  float *x = malloc(sizeof(float) * n * 3), *y = malloc(sizeof(float) * n * 3);
+  const double C1 = 1e-4;
+  for (double level = 1e3; level <= 1e7; level *= 10) {
+    for (size_t i = 0; i < n; ++i)
+      x[i] = (float)(level + level * 1e-4), y[i] = (float)level;
+    long double a = x[0], b = y[0];
+    double flat = (double)((2 * a * b + C1) / (a * a + b * b + C1));
+    double v = run(KPCN_METRIC_SSIM, x, y, w, h, 1, 0, 1.0, 1, NULL, NULL);
+    CHECK_NEAR(v, flat, 1e-12);
+    CHECK(v <= 1.0);
+  }
+  /* texture on a bright base: 1e4 + noise of amplitude 2 (the contrast term matters) */
+  int W = 40, H = 23;
+  float *tx = malloc(sizeof(float) * W * H * 3), *ty = malloc(sizeof(float) * W * H * 3);
+  synthetic(W, H, 3, 17, 2.0f, tx, ty);
+  for (int i = 0; i < W * H * 3; ++i)
+    tx[i] += 1e4f, ty[i] += 1e4f;
+  float *map = malloc(sizeof(float) * W * H * 3);
+  double *nmap = malloc(sizeof(double) * W * H * 3);
+  double ref = naive_ssim(tx, ty, W, H, 3, 0, 1.0, nmap);
+  CHECK_NEAR(run(KPCN_METRIC_SSIM, tx, ty, W, H, 3, 0, 1.0, 2, NULL, map), ref, 1e-9);
+  double worst = 0;
+  for (int i = 0; i < W * H * 3; ++i)
+    worst = fmax(worst, fabs(map[i] - nmap[i]));
+  CHECK(worst < 1e-6); /* the map is float */
+  /* identical images are exactly 1 at any representable range, zeros included */
+  memset(x, 0, sizeof(float) * n);
+  CHECK(run(KPCN_METRIC_SSIM, x, x, w, h, 1, 0, 1e-80, 1, NULL, NULL) == 1.0);
+  CHECK(run(KPCN_METRIC_SSIM, tx, tx, W, H, 3, 0, 1e79, 1, NULL, NULL) == 1.0);
+  /* beyond that, C1 underflows and flat windows are 0/0: an error naming the range */
+  kpcn_metric_options o;
+  kpcn_metric_options_defaults(&o);
+  o.display = KPCN_DISPLAY_LINEAR;
+  o.data_range = 1e-200;
+  kpcn_metric_result r;
+  CHECK(kpcn_metric_planar(KPCN_METRIC_SSIM, x, x, w, h, 1, &o, &r, NULL) ==
+        KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "not finite at data range 1e-200") != NULL);
+  free(x), free(y), free(tx), free(ty), free(map), free(nmap);
 }
 
 static void test_image_form_and_errors(void) {
@@ -408,6 +463,7 @@ int main(void) {
   test_errormaps();
   test_nonfinite();
   test_determinism();
+  test_large_values();
   test_image_form_and_errors();
   return kt_summary("test_metrics");
 }

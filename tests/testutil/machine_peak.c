@@ -108,3 +108,11 @@ void kt_print_vs_peak(const kt_machine_peak *p, int bf16, const char *what, doub
          what, gflops, 100.0 * share, bf16 ? "bf16" : "fp32 FMA", peak, p->isa, share * ref, ref,
          target, 100.0 * target / ref, share * ref >= target ? "met at this share" : "NOT met");
 }
+
+/* Here, not in testutil.c: it reads libkpcn's internal CPU switch, so only tests linking
+ * kpcn_internal may pull it (testutil.c serves the PUBLIC_API tests too). */
+int kt_have_bf16(const char *what) {
+  if (kpcn_cpu_allows_avx512()) return 1;
+  printf("%s: bf16 skipped (no AVX-512 here)\n", what);
+  return 0;
+}

@@ -60,12 +60,6 @@ char *kt_slurp(const char *path, long *len) {
   return b;
 }
 
-int kt_have_bf16(const char *what) {
-  if (kpcn_cpu_allows_avx512()) return 1;
-  printf("%s: bf16 skipped (no AVX-512 here)\n", what);
-  return 0;
-}
-
 uint16_t kt_bf16_round(float f) {
   uint32_t u;
   memcpy(&u, &f, 4);

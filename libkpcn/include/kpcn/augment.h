@@ -158,7 +158,7 @@ double kpcn_patch_flat_fraction(const float *r, const float *g, const float *b, 
                                 int y0, int size, double cull_tol, double cull_abs);
 
 /* Chooses patch origins in noisy (and its reference; may be NULL, must match in size):
- * *out is a kpcn_alloc'ed array of *nout origins (free with free()). Deterministic for
+ * *out is an allocated array of *nout origins (free with free()). Deterministic for
  * (settings, image). Requires the color buffer (and color.var if importance). */
 kpcn_status kpcn_patches_select(kpcn_patch_origin **out, int *nout, kpcn_patch_stats *stats,
                                 const kpcn_aov_set *noisy, const kpcn_aov_set *ref,

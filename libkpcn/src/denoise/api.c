@@ -2,6 +2,7 @@
 #include "core/internal.h"
 #include "denoise_internal.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -341,7 +342,21 @@ static kpcn_status exposure_scale(kpcn_denoiser *d, const kpcn_aov_set *aov, flo
   KPCN_TRY(kpcn_aov_exposure(aov, &e));
   d->stats.exposure = e;
   const double s = e > 0.0 ? t / e : 1.0;
-  if ((float)s > 0.0f && isfinite((float)s)) *scale = (float)s;
+  /* Beyond these the features cannot be formed in float: a scale below FLT_MIN is flushed to
+   * 0 (an input near 5e37 then failed inside with "color scale 0"), and above 1e15 the
+   * colour variance's cs^2 overflows (an input whose exposure is below ~1e-16 of the
+   * model's reached the network as Inf/NaN variances and changed the result silently). */
+  if (!(s >= FLT_MIN))
+    return kpcn_fail(KPCN_ERR_NONFINITE,
+                     "input: values near the float limit in the input (exposure %g; the model's "
+                     "is %g)",
+                     e, t);
+  if (s > 1e15)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "input: exposure %g is too dim to be scaled to the model's %g (a scale of "
+                     "%g; at most 1e15): scale the render up first",
+                     e, t, s);
+  *scale = (float)s;
   return KPCN_OK;
 }
 

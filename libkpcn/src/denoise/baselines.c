@@ -14,6 +14,7 @@
 #include "core/internal.h"
 #include "denoise_internal.h"
 
+#include <float.h>
 #include <math.h>
 #include <string.h>
 #ifdef _OPENMP
@@ -27,6 +28,7 @@ typedef struct guide {
   float in, ia, iz; /* 1/(2 sigma^2) or 0 */
   float zoff, zscale;
   float k2;
+  float veps; /* the colour distance's denominator floor, in the image's units squared */
 } guide;
 
 /* 1 / (2 sigma^2) for a sigma > 0, refused where it overflows (a sigma of 1e-30 gave Inf
@@ -80,6 +82,18 @@ static kpcn_status guide_init(guide *g, const kpcn_aov_set *aov, const kpcn_base
     g->c[c] = aov->buf[KPCN_BUF_COLOR] + c * P;
   g->v = aov->var[KPCN_BUF_COLOR];
   g->k2 = p->k_color * p->k_color;
+  /* Rousselle's floor 1e-10 assumes colours near 1; taken relative to the image's mean
+   * |colour| squared it scales with the render's units, so the filters are exposure-invariant
+   * as documented (a render scaled by 2^-15 with its variances by 2^-30 came out up to 6x
+   * different per pixel: the fixed floor outweighed variances below ~1e-10). Kept a normal
+   * float (a black image: any positive floor; distances are 0 there). */
+  double msum = 0.0;
+  for (int c = 0; c < 3; c++)
+    for (size_t i = 0; i < P; i++)
+      msum += fabs((double)g->c[c][i]);
+  const double m = msum / (3.0 * (double)P);
+  const double veps = 1e-10 * m * m;
+  g->veps = veps >= FLT_MIN ? (float)veps : FLT_MIN;
   if (p->sigma_normal > 0.0f) {
     KPCN_TRY(kpcn_aov_require(aov, KPCN_BUF_NORMAL, 0, what));
     for (int c = 0; c < 3; c++)
@@ -137,7 +151,7 @@ static inline float color_dist(const guide *g, size_t i, size_t j) {
   }
   float vi = g->v[i], vj = g->v[j];
   float vmin = vi < vj ? vi : vj;
-  return (s * (1.0f / 3.0f) - (vi + vmin)) / (1e-10f + g->k2 * (vi + vj));
+  return (s * (1.0f / 3.0f) - (vi + vmin)) / (g->veps + g->k2 * (vi + vj));
 }
 
 /* Both filters run offset-major over square tiles: for every offset o of the search

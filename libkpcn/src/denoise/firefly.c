@@ -39,7 +39,8 @@ kpcn_status kpcn_aov_bound_fireflies(kpcn_aov_set *aov, float ratio, float eps, 
   KPCN_TRY(kpcn_aov_require(aov, KPCN_BUF_ALBEDO, 0, "bound_fireflies"));
   KPCN_TRY(kpcn_aov_require(aov, KPCN_BUF_SPECULAR, 0, "bound_fireflies"));
   if (!(exposure > 0.0)) KPCN_TRY(kpcn_aov_exposure(aov, &exposure));
-  const int W = aov->width, H = aov->height;
+  const int W = aov->width;
+  int H = aov->height;
   const size_t P = kpcn_aov_plane_size(aov);
   float *irr = kpcn_aligned_alloc(sizeof(float) * P, "firefly irradiance");
   if (!irr) return KPCN_ERR_OUT_OF_MEMORY;
@@ -54,6 +55,9 @@ kpcn_status kpcn_aov_bound_fireflies(kpcn_aov_set *aov, float ratio, float eps, 
   }
   const float bound_floor = (float)(FIREFLY_FLOOR * exposure);
   int n = 0;
+  /* a 1x1 image has no neighbour to compare with: nothing says its pixel is a firefly (the
+   * bound fell to the floor and darkened it 700-fold) */
+  if (P == 1) H = 0;
   for (int y = 0; y < H; y++)
     for (int x = 0; x < W; x++) {
       const size_t i = (size_t)y * W + x;

@@ -10,13 +10,27 @@
  * Work items are column strips x row blocks; each thread filters the rows its item needs
  * horizontally into a thread-local ring of double rows, then vertically. Partial sums per
  * (row, strip) in double are added in a fixed order, so the result does not depend on the
- * thread count. */
+ * thread count.
+ *
+ * Precision: sigma^2 = E[x^2] - E[x]^2 cancels where values are large against the data range
+ * (a flat 1e5 region at range 1 gave SSIM 1.004: E[x^2]'s rounding alone exceeds C2). Such
+ * pixels, where the moments' possible rounding could move the denominator by more than 1e-9
+ * of itself, are computed again directly from their window, deviations from the window mean
+ * first (exact_moments); elsewhere (values below ~16x the range) the filtered moments are
+ * kept. The two factors of S are divided separately, so C1 * C2 never overflows or
+ * underflows (identical images gave NaN at range 1e-80), and nothing here is contracted to
+ * an FMA, so mx*mx + my*my equals 2*mx*my when x == y and SSIM(x, x) is exactly 1. */
 #include "core/internal.h"
 #include "metrics/metrics_internal.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC optimize("fp-contract=off")
+#endif
 
 #define SSIM_R 5 /* filter radius: int(truncate * sigma + 0.5) with truncate 3.5, sigma 1.5 */
 #define SSIM_W (2 * SSIM_R + 1)
@@ -94,10 +108,41 @@ static void filter_row(scratch *s, const float *a, const float *b, int w, int r,
   }
 }
 
+/* The moments of pixel (px, py)'s window taken directly: the weighted means first, then the
+ * weighted squared deviations from them, so nothing of the values' magnitude cancels. */
+static void exact_moments(const float *a, const float *b, int w, int h, int px, int py,
+                          const double g[SSIM_W], double m[5]) {
+  double sx = 0.0, sy = 0.0;
+  for (int l = 0; l < SSIM_W; ++l) {
+    const size_t row = (size_t)reflect(py - SSIM_R + l, h) * w;
+    for (int k = 0; k < SSIM_W; ++k) {
+      const double gw = g[l] * g[k];
+      const size_t j = row + reflect(px - SSIM_R + k, w);
+      sx += gw * a[j];
+      sy += gw * b[j];
+    }
+  }
+  double vx = 0.0, vy = 0.0, vxy = 0.0;
+  for (int l = 0; l < SSIM_W; ++l) {
+    const size_t row = (size_t)reflect(py - SSIM_R + l, h) * w;
+    for (int k = 0; k < SSIM_W; ++k) {
+      const double gw = g[l] * g[k];
+      const size_t j = row + reflect(px - SSIM_R + k, w);
+      const double dx = a[j] - sx, dy = b[j] - sy;
+      vx += gw * dx * dx;
+      vy += gw * dy * dy;
+      vxy += gw * dx * dy;
+    }
+  }
+  m[0] = sx, m[1] = sy, m[2] = vx, m[3] = vy, m[4] = vxy;
+}
+
 /* Vertical pass for output row y (ring holds source rows y-R .. y+R), then the SSIM map
- * segment. Adds the valid interior values to *sum, writes the map segment if requested. */
-static void finish_row(scratch *s, int y, int x0, int n, int w, int h, const uint8_t *mask,
-                       double C1, double C2, const double g[SSIM_W], float *map, double *sum) {
+ * segment. Adds the valid interior values to *sum, writes the map segment if requested.
+ * a, b are the channel's planes (for exact_moments). */
+static void finish_row(scratch *s, const float *a, const float *b, int y, int x0, int n, int w,
+                       int h, const uint8_t *mask, double C1, double C2, const double g[SSIM_W],
+                       float *map, double *sum) {
   for (int m = 0; m < 5; ++m) {
     double *restrict acc = s->acc[m];
     const double *restrict hr = s->ring[m] + (size_t)((y - SSIM_R + SSIM_W) % SSIM_W) * SSIM_SW;
@@ -116,7 +161,15 @@ static void finish_row(scratch *s, int y, int x0, int n, int w, int h, const uin
   for (int i = 0; i < n; ++i) {
     double mx = ux[i], my = uy[i];
     double vx = uxx[i] - mx * mx, vy = uyy[i] - my * my, vxy = uxy[i] - mx * my;
-    S[i] = ((2 * mx * my + C1) * (2 * vxy + C2)) / ((mx * mx + my * my + C1) * (vx + vy + C2));
+    /* the moments' rounding is about eps * (E[x^2] + E[y^2] + 2|E[xy]|) (a few ulps of
+     * the sums of 121 positive terms); where that is not negligible against the contrast
+     * term's denominator, the window is summed again directly */
+    if (4.0 * DBL_EPSILON * (uxx[i] + uyy[i] + 2.0 * fabs(uxy[i])) > 1e-9 * (vx + vy + C2)) {
+      double em[5];
+      exact_moments(a, b, w, h, x0 + i, y, g, em);
+      mx = em[0], my = em[1], vx = em[2], vy = em[3], vxy = em[4];
+    }
+    S[i] = ((2 * mx * my + C1) / (mx * mx + my * my + C1)) * ((2 * vxy + C2) / (vx + vy + C2));
   }
   const uint8_t *mrow = mask + (size_t)y * w + x0;
   if (y >= SSIM_R && y < h - SSIM_R) {
@@ -160,7 +213,7 @@ static int ssim_channel(const float *a, const float *b, const uint8_t *mask, int
         filter_row(&s, a, b, w, reflect(r, h), x0, n, (r + SSIM_W) % SSIM_W, g);
         int y = r - SSIM_R;
         if (y >= y0)
-          finish_row(&s, y, x0, n, w, h, mask, C1, C2, g, map, &part[(size_t)strip * h + y]);
+          finish_row(&s, a, b, y, x0, n, w, h, mask, C1, C2, g, map, &part[(size_t)strip * h + y]);
       }
     }
     free(s.mem);
@@ -231,6 +284,13 @@ kpcn_status kpcn_ssim_planar(const float *x, const float *y, int w, int h, int n
     channel_sum += total / (double)valid; /* skimage: mean per channel, then over channels */
   }
   res->value = channel_sum / nch;
+  /* C1 = (0.01 R)^2 underflows to 0 or overflows for R beyond about 1e-160 .. 1e150: flat
+   * windows then give 0/0 */
+  if (!isfinite(res->value))
+    st = kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                   "ssim: the result is not finite at data range %g (C1 = %g, C2 = %g): choose a "
+                   "range nearer the images' values",
+                   R, C1, C2);
 done:
   free(rowsum);
   free(wa);
