@@ -383,12 +383,12 @@ static void test_rotate_any_geometry(void) {
         if (xs < 0 || ys < 0 || xs > W - 1 || ys > H - 1) continue;
         const size_t i = (size_t)y * W + x;
         interior++;
-        maxd = fmax(maxd, fabs(b->buf[KPCN_BUF_COLOR][i] - xs));
-        maxd = fmax(maxd, fabs(b->buf[KPCN_BUF_COLOR][P + i] - ys));
-        maxd = fmax(maxd, fabs(b->buf[KPCN_BUF_COLOR][2 * P + i] - 1.0));
-        maxn = fmax(maxn, fabs(b->buf[KPCN_BUF_NORMAL][i] - cos(t)));
-        maxn = fmax(maxn, fabs(b->buf[KPCN_BUF_NORMAL][P + i] - sin(t)));
-        maxn = fmax(maxn, fabs(b->buf[KPCN_BUF_NORMAL][2 * P + i]));
+        maxd = kt_worst(maxd, fabs(b->buf[KPCN_BUF_COLOR][i] - xs));
+        maxd = kt_worst(maxd, fabs(b->buf[KPCN_BUF_COLOR][P + i] - ys));
+        maxd = kt_worst(maxd, fabs(b->buf[KPCN_BUF_COLOR][2 * P + i] - 1.0));
+        maxn = kt_worst(maxn, fabs(b->buf[KPCN_BUF_NORMAL][i] - cos(t)));
+        maxn = kt_worst(maxn, fabs(b->buf[KPCN_BUF_NORMAL][P + i] - sin(t)));
+        maxn = kt_worst(maxn, fabs(b->buf[KPCN_BUF_NORMAL][2 * P + i]));
       }
     printf("rotate %.0f deg: %d interior pixels, max |colour - source point| %.2e, normal %.2e\n",
            degs[k], interior, maxd, maxn);

@@ -462,6 +462,8 @@ if [ -n "$REAL" ] && [ -x "$REAL" ]; then
   done
   ok '[ $rc -eq 0 ] && [ $same -eq 1 ] && [ -z "$(ls "$T"/ck/renders/*/*.ckpt 2>/dev/null)" ]' \
     "resumed renders equal uninterrupted ones; checkpoints removed"
+elif [ -n "$REAL" ]; then
+  ok 'false' "kpcn-render given as '$REAL' but not executable"
 else
   echo "kpcn-render not built: real render part skipped"
 fi

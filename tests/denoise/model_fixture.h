@@ -7,6 +7,7 @@
 
 #include "core/internal.h"
 #include "kpcn/denoise.h"
+#include "testutil.h"
 
 /* Tiny arch with a wider receptive field than the preset so tiles really overlap; its
  * kernels applied `passes` times, the first with source weights when sw. The pipeline rounds
@@ -72,7 +73,7 @@ static inline kpcn_status run(kpcn_model *m, const kpcn_aov_set *a, int tile, in
 static inline double max_rel(const float *x, const float *y, size_t n) {
   double w = 0;
   for (size_t i = 0; i < n; i++)
-    w = fmax(w, fabs((double)x[i] - y[i]) / (1e-3 + fabs((double)y[i])));
+    w = kt_worst(w, fabs((double)x[i] - y[i]) / (1e-3 + fabs((double)y[i])));
   return w;
 }
 

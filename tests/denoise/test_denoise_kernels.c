@@ -89,7 +89,7 @@ static void test_reproduces_denoiser(int passes) {
         negative += w[b][(size_t)t * P + i] < 0.0f;
         sum += w[b][(size_t)t * P + i];
       }
-      worst_sum = fmax(worst_sum, fabs(sum - 1.0));
+      worst_sum = kt_worst(worst_sum, fabs(sum - 1.0));
     }
   printf("%d pass(es): kernels' |sum - 1| <= %.3g, %d negative weights\n", passes, worst_sum,
          negative);
@@ -100,7 +100,7 @@ static void test_reproduces_denoiser(int passes) {
   double worst = 0;
   for (size_t i = 0; i < 3 * P; i++) {
     const double c = (res[0][i] * ((double)alb[i] + eps) + expm1(res[1][i])) / scale;
-    worst = fmax(worst, fabs(c - out[i]) / (1e-3 + fabs(c)));
+    worst = kt_worst(worst, fabs(c - out[i]) / (1e-3 + fabs(c)));
   }
   printf("%d pass(es): exported kernels applied and recombined vs the denoiser: max rel err %.3g\n",
          passes, worst);

@@ -67,7 +67,7 @@ static void reference(kpcn_model *m, const kpcn_aov_set *a, double *out) {
           size_t i = (size_t)y * W + x;
           double mx = -1e300, z = 0, acc[3] = {0, 0, 0};
           for (int t = 0; t < K * K; t++)
-            mx = fmax(mx, act[(size_t)t * P + i]);
+            mx = kt_worst(mx, act[(size_t)t * P + i]);
           for (int t = 0; t < K * K; t++) {
             double w = exp(act[(size_t)t * P + i] - mx);
             int yy = y + t / K - R, xx = x + t % K - R;
@@ -108,7 +108,7 @@ static void test_reference_and_tiling(int passes, int sw) {
   reference(m, a, ref);
   double worst = 0;
   for (size_t i = 0; i < 3 * P; i++)
-    worst = fmax(worst, fabs(out[i] - ref[i]) / (1e-3 + fabs(ref[i])));
+    worst = kt_worst(worst, fabs(out[i] - ref[i]) / (1e-3 + fabs(ref[i])));
   printf("pipeline (%d kernel passes%s) vs naive reference: max rel err %.3g\n", passes,
          sw ? ", source weights" : "", worst);
   CHECK(worst < 1e-4);
@@ -474,7 +474,7 @@ static void test_ensemble(void) {
     CHECK(kpcn_augment_aov(&t, a, &xi, 1) == KPCN_OK);
     CHECK(run_ensemble(m, t, 8, i == 5 ? 16 : 0, NULL, ens_t) == KPCN_OK);
     xform_rgb(ens, W, H, i, 0, want);
-    worst = fmax(worst, max_rel(ens_t, want, N));
+    worst = kt_worst(worst, max_rel(ens_t, want, N));
     kpcn_aov_destroy(t);
   }
   printf("ensemble 8 equivariance: max rel. difference %.3g\n", worst);

@@ -127,7 +127,7 @@ static void check_crop(const kpcn_image *full, const char *file, int half) {
         double tol = half ? 4.9e-4 * fabs(a) + 6e-8 : 0; /* half: 11-bit mantissa */
         double e = fabs((double)a - b);
         if (e > tol) bad++;
-        if (e > maxerr) maxerr = e;
+        maxerr = kt_worst(maxerr, e);
       }
   }
   CHECK(bad == 0);

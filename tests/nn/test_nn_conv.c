@@ -538,8 +538,8 @@ static void bf16_training_cfg(const cfg *c, double bound) {
     CHECK(kpcn_net_params(net, P, 2 * KPCN_NN_MAX_LAYERS) == KPCN_OK);
     double ew = 0, eb = 0;
     for (int l = 0; l <= c->n_hidden; l++) {
-      ew = fmax(ew, rms_rel(P[2 * l].grad, ref[1].gw[l], P[2 * l].count));
-      eb = fmax(eb, rms_rel(P[2 * l + 1].grad, ref[1].gb[l], P[2 * l + 1].count));
+      ew = kt_worst(ew, rms_rel(P[2 * l].grad, ref[1].gw[l], P[2 * l].count));
+      eb = kt_worst(eb, rms_rel(P[2 * l + 1].grad, ref[1].gb[l], P[2 * l + 1].count));
     }
     float *g0 = malloc(P[0].count * 4);
     for (size_t i = 0; i < P[0].count; i++)
@@ -729,7 +729,7 @@ static void widen(void) {
       CHECK(kpcn_net_forward(nm, in, lm) == KPCN_OK && kpcn_net_forward(nw, in, lw) == KPCN_OK);
       double e = 0, mx = 0;
       for (size_t i = 0; i < nout; i++)
-        e = fmax(e, fabs((double)lm[i] - lw[i])), mx = fmax(mx, fabs((double)lm[i]));
+        e = kt_worst(e, fabs((double)lm[i] - lw[i])), mx = fmax(mx, fabs((double)lm[i]));
       printf("widen 16 -> 32 channels, branch %d: reference logits identical: %s, oneDNN %.2e\n", b,
              same ? "yes" : "no", e / mx);
       CHECK(e <= 1e-5 * mx);

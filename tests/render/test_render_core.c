@@ -54,7 +54,7 @@ static void test_split(const char *path) {
     for (size_t i = 0; i < n; i++) {
       double c = a->buf[KPCN_BUF_COLOR][i], d = a->buf[KPCN_BUF_DIFFUSE][i],
              sp = a->buf[KPCN_BUF_SPECULAR][i];
-      maxerr = fmax(maxerr, fabs(c - (d + sp)) / (1.0 + fabs(c)));
+      maxerr = kt_worst(maxerr, fabs(c - (d + sp)) / (1.0 + fabs(c)));
       sd += d, ss += sp;
     }
     printf("%s: max |color - (diffuse+specular)| %.2e, diffuse sum %.1f, specular sum %.1f\n", path,
@@ -191,8 +191,8 @@ static void test_min_bounces(const kpcn_scene *s) {
     double worst = 0, direct = 0, emit = 0;
     int black = 1;
     for (size_t i = 0; i < n; i++) {
-      worst = fmax(worst, fabs((c0[i] - c1[i]) - e[i]) / (1.0 + e[i]));
-      worst = fmax(worst, fabs((c1[i] - c2[i]) - (d[i] - e[i])) / (1.0 + d[i]));
+      worst = kt_worst(worst, fabs((c0[i] - c1[i]) - e[i]) / (1.0 + e[i]));
+      worst = kt_worst(worst, fabs((c1[i] - c2[i]) - (d[i] - e[i])) / (1.0 + d[i]));
       direct += d[i] - e[i], emit += e[i];
       black &= none->buf[KPCN_BUF_COLOR][i] == 0.0f;
     }
@@ -272,7 +272,8 @@ static void test_mesh_creases(void) {
     const size_t n = 3 * kpcn_aov_plane_size(img[0]);
     double worst = 0, seen = 0;
     for (size_t i = 0; i < n; i++) {
-      worst = fmax(worst, fabs(img[0]->buf[KPCN_BUF_NORMAL][i] - img[1]->buf[KPCN_BUF_NORMAL][i]));
+      worst =
+          kt_worst(worst, fabs(img[0]->buf[KPCN_BUF_NORMAL][i] - img[1]->buf[KPCN_BUF_NORMAL][i]));
       seen += fabs(img[0]->buf[KPCN_BUF_NORMAL][i]);
     }
     printf("mesh creases: worst normal difference to the flat cube %.2e\n", worst);

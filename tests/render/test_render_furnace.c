@@ -35,7 +35,7 @@ static void check_image(const char *what, const kpcn_aov_set *a, const float *wa
     for (int c = 0; c < 3; c++) {
       double v = a->buf[KPCN_BUF_COLOR][c * plane + i], w = want[i];
       double sd = sqrt(a->var[KPCN_BUF_COLOR][i]) + 1e-6;
-      maxz = fmax(maxz, fabs(v - w) / sd);
+      maxz = kt_worst(maxz, fabs(v - w) / sd);
       sum += v;
       sumw += w;
       var += a->var[KPCN_BUF_COLOR][i];

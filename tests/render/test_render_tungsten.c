@@ -73,7 +73,7 @@ static void visibility_check(const kpcn_aov_set *a, const char *vis_path) {
           for (int x = bx; x < bx + BLOCK && x < w; x++, n++)
             d += (double)o[(size_t)y * w + x] - r[(size_t)y * w + x];
         all += d;
-        worst = fmax(worst, fabs(d) / n);
+        worst = kt_worst(worst, fabs(d) / n);
       }
     all /= (double)w * h;
     printf("  visibility: mean %.4f vs Tungsten's %.4f, largest %dx%d block difference %.4f\n",

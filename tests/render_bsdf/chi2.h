@@ -44,6 +44,7 @@ static double kt_gamma_q(double a, double x) {
 static double kt_chi2_test(const double *obs, const double *expd, int n, double min_expected,
                            const char **why) {
   double chsq = 0.0, pool_o = 0.0, pool_e = 0.0;
+  double small_o = 0.0, small_e = INFINITY; /* the regular cell of least expected count */
   int dof = 0;
   *why = NULL;
   for (int i = 0; i < n; ++i) {
@@ -61,15 +62,20 @@ static double kt_chi2_test(const double *obs, const double *expd, int n, double 
       double d = obs[i] - expd[i];
       chsq += d * d / expd[i];
       dof++;
+      if (expd[i] < small_e) small_e = expd[i], small_o = obs[i];
     }
   }
   if (pool_e > 0.0) {
     if (pool_e < min_expected && dof > 0) {
-      /* too small even pooled: fold it into the statistic anyway only when it is sizable */
-      if (pool_o > 0 && pool_e * 50.0 < pool_o) {
-        *why = "pooled low-probability cells received far more samples than expected";
-        return 0.0;
-      }
+      /* too small even pooled: merged with the smallest regular cell, so the low-probability
+       * cells always count (a pool expected at 4.9 that got 240 samples, or none, was left
+       * out unless it got 50 times its share) and the merged cell is large enough for the
+       * chi-square approximation */
+      double d = small_o - small_e;
+      chsq -= d * d / small_e;
+      small_o += pool_o, small_e += pool_e;
+      d = small_o - small_e;
+      chsq += d * d / small_e;
     } else {
       double d = pool_o - pool_e;
       chsq += d * d / pool_e;

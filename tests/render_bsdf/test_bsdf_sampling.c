@@ -68,15 +68,15 @@ static void run_chi2(const char *label, const kpcn_bsdf *b, kpcn_vec3 wo, unsign
     kpcn_bsdf_eval_result e;
     kpcn_bsdf_eval(b, &k_sp, wo, s.wi, &e);
     double rp = fabs(e.pdf - s.pdf) / fmax(s.pdf, 1e-6);
-    if (rp > 2e-3) bad_pdf++;
-    if (e.pdf > 0) {
+    if (!(rp <= 2e-3)) bad_pdf++; /* a NaN pdf counts as bad */
+    if (!(e.pdf <= 0)) {          /* and so do the weights it would give */
       for (int c = 0; c < 3; ++c) {
         double w_eval = kv3_get(e.f_cos, c) / e.pdf, w = kv3_get(s.weight, c);
         double wd_eval = kv3_get(e.f_cos_diffuse, c) / e.pdf, wd = kv3_get(s.weight_diffuse, c);
         double r =
             fabs(w_eval - w) / fmax(fabs(w), 1e-4) + fabs(wd_eval - wd) / fmax(fabs(w), 1e-4);
-        if (r > worst) worst = r;
-        if (r > 2e-3) bad_weight++;
+        worst = kt_worst(worst, r);
+        if (!(r <= 2e-3)) bad_weight++;
       }
     }
   }

@@ -33,6 +33,13 @@ extern int kt_checks;
 #define CHECK_CLOSE(a, b, rtol, atol) CHECK_NEAR(a, b, (atol) + (rtol)*fabs((double)(b)))
 
 /* Prints "N passed, N failed" and returns the process exit code. */
+/* The larger of a running worst error w and a new error e, keeping NaN: fmax(w, NaN) is w,
+ * and `err > worst` is false for NaN, so a NaN result (an unwritten gradient, a NaN kernel)
+ * would pass a `worst < tol` check. Use as w = kt_worst(w, e); then CHECK(w < tol). */
+static inline double kt_worst(double w, double e) {
+  if (isnan(w)) return w;
+  return e <= w ? w : e;
+}
 int kt_summary(const char *suite);
 /* Whether bf16 nets can run here: oneDNN 2.6 has bf16 convolutions on AVX-512 CPUs only (and
  * not under ONEDNN_MAX_CPU_ISA=AVX2, which the *_avx2 tests set); elsewhere nets refuse bf16

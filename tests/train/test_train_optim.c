@@ -37,7 +37,7 @@ static void test_adam(void) {
     }
   }
   for (int i = 0; i < N; i++)
-    maxerr = fmax(maxerr, fabs(pd[i] - p[i]));
+    maxerr = kt_worst(maxerr, fabs(pd[i] - p[i]));
   printf("adam vs double reference (one block at 3x lr): max abs err %.3g\n", maxerr);
   CHECK(maxerr < 6e-5); /* float state vs double reference over 25 steps of size ~3e-2 */
   CHECK(kpcn_adam_steps(a) == STEPS);
