@@ -5,6 +5,7 @@
 
 #include <math.h>
 #include <stdlib.h>
+#include <limits.h>
 #include <string.h>
 
 static unsigned g_rng = 12345;
@@ -438,7 +439,50 @@ static void test_normal_aliases(void) {
   CHECK(ok);
 }
 
+/* Edge cases found in session 61: a shift of INT_MIN (xo - dx overflowed int: 7 wide gave a
+ * roll by 2, not by -2^31 mod 7 = 5) and its inverse (negating INT_MIN); the albedo metadata
+ * kept by augment, crop and arbitrary rotation; a lone N.Y refused by the arbitrary rotation
+ * as by the quarter turns. */
+static void test_edge_cases(void) {
+  kpcn_aov_set *a = random_set(7, 5);
+  a->albedo_spp = 16;
+  a->albedo_footprint = 3;
+  kpcn_augment_xform s, inv;
+  kpcn_augment_identity(&s);
+  s.dx = INT_MIN;
+  s.dy = INT_MIN; /* -2^31 mod 5 = 2 */
+  kpcn_aov_set *b = apply(a, &s);
+  int ok = 1;
+  for (int y = 0; y < 5; y++)
+    for (int x = 0; x < 7; x++)
+      ok &= px(b, KPCN_BUF_COLOR, 0, (x + 5) % 7, (y + 2) % 5) == px(a, KPCN_BUF_COLOR, 0, x, y);
+  CHECK(ok);
+  kpcn_augment_inverse(&inv, &s, 7, 5);
+  kpcn_aov_set *c = apply(b, &inv);
+  CHECK(sets_equal(a, c));
+  CHECK(b->albedo_spp == 16 && b->albedo_footprint == 3);
+  kpcn_aov_set *d = NULL, *e = NULL;
+  CHECK(kpcn_augment_crop_aov(&d, a, 1, 1, 3, 2) == KPCN_OK);
+  CHECK(d && d->albedo_spp == 16 && d->albedo_footprint == 3);
+  CHECK(kpcn_augment_rotate_any_aov(&e, a, 30.0, 1) == KPCN_OK);
+  CHECK(e && e->albedo_spp == 16 && e->albedo_footprint == 3);
+  /* planes R, N.Y: a normal without its N.X */
+  float src[2 * 35], dst[2 * 35];
+  for (int i = 0; i < 70; i++)
+    src[i] = 0.5f;
+  const char *names[2] = {"R", "N.Y"};
+  CHECK(kpcn_augment_rotate_any_planes(dst, src, 2, names, 7, 5, 30.0, 1) ==
+        KPCN_ERR_MISSING_CHANNEL);
+  CHECK(strstr(kpcn_last_error(), "needs its N.X") != NULL);
+  kpcn_aov_destroy(a);
+  kpcn_aov_destroy(b);
+  kpcn_aov_destroy(c);
+  kpcn_aov_destroy(d);
+  kpcn_aov_destroy(e);
+}
+
 int main(void) {
+  test_edge_cases();
   test_normal_aliases();
   test_mirror_twice();
   test_rotations();

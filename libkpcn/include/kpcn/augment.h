@@ -57,7 +57,8 @@ typedef struct kpcn_augment_xform {
 void kpcn_augment_identity(kpcn_augment_xform *x);
 /* Parses "RGB", "BRG", "GBR", ... (case-insensitive) into perm; error names the string. */
 kpcn_status kpcn_augment_parse_perm(const char *s, int perm[3]);
-/* Inverse transform: applying x then inv gives back the input bit-exactly. */
+/* Inverse transform: applying x then inv gives back the input bit-exactly. width x height is
+ * the size of the image x applies to (the shift, any int, is reduced modulo x's output size). */
 void kpcn_augment_inverse(kpcn_augment_xform *inv, const kpcn_augment_xform *x, int width,
                           int height);
 /* Output size of x applied to a width x height input (rot90 odd swaps them). */

@@ -39,6 +39,11 @@ static int mod(int a, int m) {
   int r = a % m;
   return r < 0 ? r + m : r;
 }
+/* a mod m for a difference that may leave int's range (xo - dx with dx = INT_MIN) */
+static int mod64(int64_t a, int m) {
+  int64_t r = a % m;
+  return (int)(r < 0 ? r + m : r);
+}
 
 void kpcn_augment_output_size(const kpcn_augment_xform *x, int width, int height, int *out_w,
                               int *out_h) {
@@ -53,13 +58,15 @@ void kpcn_augment_output_size(const kpcn_augment_xform *x, int width, int height
  *   S(v) then Mv == Mv then S(dx, -dy);  Mh^a Mv^b R^m == R^(m*(-1)^(a+b)) Mh^a Mv^b. */
 void kpcn_augment_inverse(kpcn_augment_xform *inv, const kpcn_augment_xform *x, int width,
                           int height) {
-  (void)width;
-  (void)height;
   kpcn_augment_xform r;
   for (int c = 0; c < 3; c++)
     r.perm[x->perm[c]] = c;
   int a = x->mirror_h ? 1 : 0, b = x->mirror_v ? 1 : 0, k = mod(x->rot90, 4);
-  int dx = -x->dx, dy = -x->dy;
+  /* the shift acts on the forward output (Wo x Ho): reduced there first, so negating it
+   * cannot overflow (dx = INT_MIN) */
+  int Wo, Ho;
+  kpcn_augment_output_size(x, width, height, &Wo, &Ho);
+  int dx = Wo > 0 ? -mod64(x->dx, Wo) : 0, dy = Ho > 0 ? -mod64(x->dy, Ho) : 0;
   /* Move S(-d) left through R^-k (4-k forward turns). */
   for (int t = 0; t < mod(-k, 4); t++) {
     int ndx = dy, ndy = -dx;
@@ -156,7 +163,7 @@ static uint32_t *build_map(const kpcn_augment_xform *x, int W, int H, int *Wo, i
   int k = mod(x->rot90, 4);
   for (int yo = 0; yo < *Ho; yo++) {
     for (int xo = 0; xo < *Wo; xo++) {
-      int px = mod(xo - x->dx, *Wo), py = mod(yo - x->dy, *Ho);
+      int px = mod64((int64_t)xo - x->dx, *Wo), py = mod64((int64_t)yo - x->dy, *Ho);
       int cw = *Wo, ch = *Ho;
       for (int t = 0; t < k; t++) {
         /* One CCW turn maps (x, y) of a Wb x Hb image to (y, Wb-1-x); here Wb = ch. */
@@ -323,6 +330,8 @@ kpcn_status kpcn_aov_like(kpcn_aov_set **out, const kpcn_aov_set *like, int w, i
   }
   o->spp = like->spp;
   o->seed = like->seed;
+  o->albedo_spp = like->albedo_spp;
+  o->albedo_footprint = like->albedo_footprint;
   memcpy(o->scene, like->scene, sizeof o->scene);
   memcpy(o->version, like->version, sizeof o->version);
   *out = o;

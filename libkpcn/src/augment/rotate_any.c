@@ -74,6 +74,12 @@ static kpcn_status rotate_ptrs(float *const *dst, const float *const *src, int n
   }
   /* Rotate normal x/y by the angle, then renormalise (interpolation shortens them). */
   for (int c = 0; c < nch && st == KPCN_OK; c++) {
+    /* a lone N.Y is refused as a lone N.X is (it was resampled but left unrotated) */
+    if (roles.normal_role[c] == 1 && roles.normal_pair[c][0] < 0) {
+      st = kpcn_fail(KPCN_ERR_MISSING_CHANNEL, "rotate: normal channel '%s' needs its N.X",
+                     names[c]);
+      break;
+    }
     if (roles.normal_role[c] != 0) continue;
     int ix = roles.normal_pair[c][0], iy = roles.normal_pair[c][1], iz = roles.normal_pair[c][2];
     if (iy < 0) {

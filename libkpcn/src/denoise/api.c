@@ -394,7 +394,7 @@ static kpcn_status run_ensemble(kpcn_denoiser *d, const kpcn_aov_set *aov, float
       s = kpcn_augment_aov(&t, aov, &x, nt);
       if (s == KPCN_OK) s = run_method(d, t, sc, member);
       kpcn_aov_destroy(t);
-      kpcn_augment_inverse(&inv, &x, tw, th);
+      kpcn_augment_inverse(&inv, &x, W, H);
       if (s == KPCN_OK) s = kpcn_augment_planes(back, member, 3, NULL, tw, th, &inv, nt);
     }
     for (size_t i = 0; s == KPCN_OK && i < N; i++)
