@@ -12,6 +12,7 @@
 #include <assimp/scene.h>
 #include <errno.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -96,12 +97,18 @@ static kpcn_status load_assimp(const char *path, const char *jp, kpcn_mesh *m) {
   FILE *probe = kpcn_fopen_input(path, &why);
   if (!probe) return kpcn_fail(KPCN_ERR_IO, "%s: cannot open mesh '%s': %s", jp, path, why);
   fclose(probe);
+  /* assimp's aiGetErrorString() is one process-wide string every failed import writes
+   * without a lock: import and read it under a lock of our own, so scenes loaded on several
+   * threads each report their own mesh's reason */
+  static pthread_mutex_t assimp_lock = PTHREAD_MUTEX_INITIALIZER;
+  char reason[512] = "";
+  pthread_mutex_lock(&assimp_lock);
   const struct aiScene *sc =
       aiImportFile(path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
                              aiProcess_PreTransformVertices | aiProcess_SortByPType);
-  if (!sc)
-    return kpcn_fail(KPCN_ERR_FORMAT, "%s: cannot read mesh '%s': %s", jp, path,
-                     aiGetErrorString());
+  if (!sc) snprintf(reason, sizeof reason, "%s", aiGetErrorString());
+  pthread_mutex_unlock(&assimp_lock);
+  if (!sc) return kpcn_fail(KPCN_ERR_FORMAT, "%s: cannot read mesh '%s': %s", jp, path, reason);
   uint64_t nv = 0, nt = 0;
   int all_nrm = 1, all_uv = 1;
   for (unsigned i = 0; i < sc->mNumMeshes; i++) {

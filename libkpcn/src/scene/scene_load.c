@@ -684,9 +684,12 @@ kpcn_status kpcn_scene_load_json(const char *text, const char *base_dir, const c
   if (!name) name = "<memory>";
   /* require_null_terminated: text after the document ("{...} garbage") is an error, not
    * ignored */
-  cJSON *root = cJSON_ParseWithOpts(text, NULL, 1);
+  /* the error position comes from this call's own return_parse_end: cJSON_GetErrorPtr() is
+   * one process-wide variable, which another thread's parse resets or overwrites (a pointer
+   * into that thread's text: the line count below then read far past this one) */
+  const char *err = NULL;
+  cJSON *root = cJSON_ParseWithOpts(text, &err, 1);
   if (!root) {
-    const char *err = cJSON_GetErrorPtr();
     long off = err ? (long)(err - text) : -1;
     int line = 1;
     for (long k = 0; k < off; k++)
