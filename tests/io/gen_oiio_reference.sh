@@ -27,8 +27,11 @@ rm -f /tmp/kpcn_gen_crop.exr
 oiiotool "$SRC" --cut 37x23+100+120 --tile 16 16 --compression zip -o "$OUT/crop_tiled.exr"
 oiiotool "$SRC" --cut 37x23+100+120 --origin +3+7 --fullsize 50x40+0+0 --compression piz -o "$OUT/crop_offset.exr"
 oiiotool "$SRC" --cut 37x23+100+120 -d half --compression zip -o "$OUT/crop_half.exr"
-# 8x8 files in codecs OpenEXR Core 3.1 reads wrongly or not at all (session 58), and one it reads
+# 8x8 files in codecs OpenEXR Core 3.1 read wrongly or not at all (session 58; B44 read right since
+# session 61), and one it reads
 oiiotool "$SRC" --cut 8x8+100+120 --ch R,G -d float --compression b44 -o "$OUT/b44_float2.exr"
 oiiotool "$SRC" --cut 8x8+100+120 --ch R,G,B -d half --compression b44 -o "$OUT/b44_half.exr"
+# a B44 half file whose last chunk (one row of 8 pixels) the writer stored raw (session 61)
+oiiotool "$SRC" --cut 8x33+100+120 --ch R,G,B -d half --compression b44 -o "$OUT/b44_lastrow.exr"
 oiiotool "$SRC" --cut 8x8+100+120 --ch R,G,B -d half --compression dwaa -o "$OUT/dwaa.exr"
 echo "wrote $REC, $OUT/crop_*.exr and the codec files"

@@ -415,7 +415,31 @@ static void test_incompressible_chunks(void) {
   CHECK(bad == 0);
 }
 
+/* kpcn_exr_info finds the AOV buffers among all channels, not only the 256 it lists (a
+ * visibility buffer sorting after 300 other channels was reported absent until session 61). */
+static void test_info_many_channels(void) {
+  enum { NX = 300, NC = NX + 2 };
+  static char buf[NX][8];
+  const char *names[NC];
+  for (int i = 0; i < NX; i++) {
+    snprintf(buf[i], sizeof buf[i], "a%03d", i);
+    names[i] = buf[i];
+  }
+  names[NX] = "visibility.V";
+  names[NX + 1] = "visibility.var";
+  kpcn_image *img = make_image(2, 2, NC, names, 3);
+  const char *path = kt_tmpfile("many.exr");
+  CHECK(img && kpcn_exr_write_image(path, img, NULL) == KPCN_OK);
+  kpcn_exr_info_t info;
+  CHECK(kpcn_exr_info(path, &info) == KPCN_OK);
+  CHECK(info.nchannels == NC && strcmp(info.channels[0], "a000") == 0);
+  CHECK(info.has_buffer[KPCN_BUF_VISIBILITY] && info.has_variance[KPCN_BUF_VISIBILITY]);
+  CHECK(!info.has_buffer[KPCN_BUF_COLOR]);
+  kpcn_image_destroy(img);
+}
+
 int main(void) {
+  test_info_many_channels();
   test_roundtrips();
   test_incompressible_chunks();
   test_threads();

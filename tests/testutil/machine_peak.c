@@ -52,7 +52,10 @@ PROBE_KERNEL(dpbf16, "avx512f,avx512bf16", __m512, __m512bh, _mm512_set1_ps,
 /* kind 0: fp32 512-bit, 1: fp32 256-bit, 2: bf16. Returns GFLOP/s, best of three tries. */
 static double probe(int kind, int nthreads) {
   const double flop_per_iter = CHAINS * (kind == 0 ? 32.0 : kind == 1 ? 16.0 : 64.0);
-  const long iters = 3000000; /* ~0.1 s per try at ~3.5 GHz */
+  /* CHAINS independent FMAs per iteration at 2 per cycle: 6 cycles, so ~0.1 s per try at
+   * ~3.5 GHz (3e6 was ~5 ms, too short for the untimed first try to lift a core out of a
+   * slow start) */
+  const long iters = 60000000;
   static int warmed[3];       /* kind's untimed first try done (probes run on one thread) */
   double best = 0.0;
   volatile float sink = 0.0f;

@@ -5,6 +5,7 @@
 #include "core/internal.h"
 
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 kpcn_status kpcn_exr_read_aov(const char *path, kpcn_aov_set **out) {
@@ -115,12 +116,18 @@ kpcn_status kpcn_exr_info(const char *path, kpcn_exr_info_t *out) {
   out->tiled = storage == EXR_STORAGE_TILED;
   out->nchannels = chl->num_channels;
   snprintf(out->compression, sizeof out->compression, "%s", compression_name(comp));
-  const char *names[KPCN_EXR_MAX_INFO_CHANNELS];
-  int n = chl->num_channels < KPCN_EXR_MAX_INFO_CHANNELS ? chl->num_channels
-                                                         : KPCN_EXR_MAX_INFO_CHANNELS;
+  /* the first KPCN_EXR_MAX_INFO_CHANNELS are listed; the buffers are found among all of
+   * them (a buffer whose channels sort past the 256th was reported absent) */
+  const int n = chl->num_channels;
+  const char **names = kpcn_calloc((size_t)n, sizeof *names, "EXR channel names");
+  if (!names) {
+    exr_finish(&ctx);
+    return kpcn_last_status();
+  }
   for (int c = 0; c < n; c++) {
-    snprintf(out->channels[c], sizeof out->channels[c], "%s", chl->entries[c].name.str);
     names[c] = chl->entries[c].name.str;
+    if (c >= KPCN_EXR_MAX_INFO_CHANNELS) continue;
+    snprintf(out->channels[c], sizeof out->channels[c], "%s", chl->entries[c].name.str);
     exr_pixel_type_t t = chl->entries[c].pixel_type;
     out->channel_is_half[c] = t == EXR_PIXEL_HALF ? 1 : t == EXR_PIXEL_UINT ? 2 : 0;
   }
@@ -129,6 +136,7 @@ kpcn_status kpcn_exr_info(const char *path, kpcn_exr_info_t *out) {
   int chan[KPCN_BUF_COUNT][3], var[KPCN_BUF_COUNT];
   /* A partial buffer is not an error for --info: it is simply reported as absent. */
   if (kpcn_aov_map_channels(names, n, chan, var, path) != KPCN_OK) kpcn_clear_error();
+  free(names);
   for (int b = 0; b < KPCN_BUF_COUNT; b++) {
     out->has_buffer[b] = chan[b][0] >= 0;
     out->has_variance[b] = var[b] >= 0;

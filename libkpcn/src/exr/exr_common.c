@@ -46,11 +46,11 @@ void kpcn_exr_record_error(kpcn_exr_chunk_error *e, kpcn_status st, int chunk) {
   }
 }
 
-/* Compressions the OpenEXR Core library decodes wrongly or not at all, refused at open rather
- * than read: Debian 12's 3.1.5 has no DWAA/DWAB decoder (the pixel read failed as "corrupt"),
- * and its B44/B44A decoder scrambles files with two or more float or uint channels (values in
- * the wrong channel and row, without an error; the C++ reader and OIIO read them right). */
-static kpcn_status check_codec(exr_context_t ctx, const exr_attr_chlist_t *chl, const char *path) {
+/* Compressions the OpenEXR Core library cannot decode, refused at open rather than read:
+ * Debian 12's 3.1.5 has no DWAA/DWAB decoder (the pixel read failed as "corrupt"). (B44/B44A
+ * files with two or more float channels were refused here until session 61: their chunks are
+ * stored raw, which exr_read.c now reads as such.) */
+static kpcn_status check_codec(exr_context_t ctx, const char *path) {
   exr_compression_t comp = EXR_COMPRESSION_NONE;
   if (exr_get_compression(ctx, 0, &comp) != EXR_ERR_SUCCESS) return KPCN_OK;
   int maj = 0, min = 0, patch = 0;
@@ -60,17 +60,6 @@ static kpcn_status check_codec(exr_context_t ctx, const exr_attr_chlist_t *chl, 
                      "'%s': %s compression cannot be decoded by this OpenEXR library (%d.%d.%d); "
                      "save it with another (oiiotool IN --compression zip -o OUT)",
                      path, comp == EXR_COMPRESSION_DWAA ? "DWAA" : "DWAB", maj, min, patch);
-  if (comp == EXR_COMPRESSION_B44 || comp == EXR_COMPRESSION_B44A) {
-    int wide = 0;
-    for (int c = 0; c < chl->num_channels; c++)
-      wide += chl->entries[c].pixel_type != EXR_PIXEL_HALF;
-    if (wide > 1)
-      return kpcn_fail(KPCN_ERR_UNSUPPORTED,
-                       "'%s': %s compression with %d float or uint channels is not read (the "
-                       "OpenEXR Core decoder mixes their rows up); save it with another "
-                       "compression (oiiotool IN --compression zip -o OUT) or as half",
-                       path, comp == EXR_COMPRESSION_B44 ? "B44" : "B44A", wide);
-  }
   return KPCN_OK;
 }
 
@@ -127,7 +116,7 @@ kpcn_status kpcn_exr_open_read(const char *path, exr_context_t *ctx) {
         s = kpcn_fail(KPCN_ERR_UNSUPPORTED, "'%s': channel '%s' is subsampled (%dx%d)", path,
                       chl->entries[c].name.str, chl->entries[c].x_sampling,
                       chl->entries[c].y_sampling);
-    if (s == KPCN_OK) s = check_codec(*ctx, chl, path);
+    if (s == KPCN_OK) s = check_codec(*ctx, path);
   }
   if (s != KPCN_OK) {
     exr_finish(ctx);

@@ -28,10 +28,19 @@ static kpcn_status bind_channels(exr_decode_pipeline_t *dec, kpcn_image *img, in
   return KPCN_OK;
 }
 
-/* Decodes one chunk into img. `first` selects initialize vs update (OpenEXR call order). */
-static kpcn_status decode_chunk(exr_context_t ctx, const exr_chunk_info_t *ci,
-                                exr_decode_pipeline_t *dec, int *first, kpcn_image *img, int x0,
-                                int y0, const char *path) {
+/* One thread's decoder: `first` selects initialize vs update (OpenEXR call order). */
+typedef struct chunk_decoder {
+  exr_decode_pipeline_t dec;
+  int first;
+  int b44;                                             /* the part is B44/B44A compressed */
+  exr_result_t (*decompress)(exr_decode_pipeline_t *); /* the library's default routine */
+} chunk_decoder;
+
+/* Decodes one chunk into img. */
+static kpcn_status decode_chunk(exr_context_t ctx, const exr_chunk_info_t *ci, chunk_decoder *cd,
+                                kpcn_image *img, int x0, int y0, const char *path) {
+  exr_decode_pipeline_t *dec = &cd->dec;
+  int *first = &cd->first;
   exr_result_t rv;
   if (x0 < 0 || y0 < 0 || x0 + ci->width > img->width || y0 + ci->height > img->height)
     return kpcn_fail(KPCN_ERR_FORMAT, "'%s': chunk %d lies outside the data window", path, ci->idx);
@@ -47,8 +56,15 @@ static kpcn_status decode_chunk(exr_context_t ctx, const exr_chunk_info_t *ci,
     rv = exr_decoding_choose_default_routines(ctx, 0, dec);
     if (rv != EXR_ERR_SUCCESS)
       return kpcn_exr_fail(rv, KPCN_ERR_UNSUPPORTED, "cannot decode", path);
+    cd->decompress = dec->decompress_fn;
     *first = 0;
   }
+  /* A writer stores a chunk raw when compressing would not make it smaller (packed size ==
+   * unpacked size), as the C++ library reads it. OpenEXR Core 3.1 takes that shortcut for
+   * every codec but B44/B44A, whose decoder it runs on the raw bytes: rows and channels came
+   * out scrambled (≥ 2 float channels: every chunk is raw) or wrong (a last chunk of one half
+   * row), or the chunk was called corrupt. The raw bytes are the pixels: no decompression. */
+  if (cd->b44) dec->decompress_fn = ci->packed_size == ci->unpacked_size ? NULL : cd->decompress;
   rv = exr_decoding_run(ctx, 0, dec);
   if (rv != EXR_ERR_SUCCESS)
     return kpcn_exr_fail(rv, KPCN_ERR_FORMAT, "truncated or corrupt pixel data in", path);
@@ -57,8 +73,8 @@ static kpcn_status decode_chunk(exr_context_t ctx, const exr_chunk_info_t *ci,
 
 /* Reads chunk k: scanline block k, or tile (k % ntx, k / ntx) of level 0. */
 static kpcn_status read_one_chunk(exr_context_t ctx, int k, int tiled, int spc, int tw, int th,
-                                  int ntx, const exr_attr_box2i_t *dw, exr_decode_pipeline_t *dec,
-                                  int *first, kpcn_image *img, const char *path) {
+                                  int ntx, const exr_attr_box2i_t *dw, chunk_decoder *cd,
+                                  kpcn_image *img, const char *path) {
   exr_chunk_info_t ci;
   exr_result_t rv;
   if (tiled) {
@@ -66,12 +82,12 @@ static kpcn_status read_one_chunk(exr_context_t ctx, int k, int tiled, int spc, 
     rv = exr_read_tile_chunk_info(ctx, 0, tx, ty, 0, 0, &ci);
     if (rv != EXR_ERR_SUCCESS)
       return kpcn_exr_fail(rv, KPCN_ERR_FORMAT, "truncated or corrupt file (tile table)", path);
-    return decode_chunk(ctx, &ci, dec, first, img, tx * tw, ty * th, path);
+    return decode_chunk(ctx, &ci, cd, img, tx * tw, ty * th, path);
   }
   rv = exr_read_scanline_chunk_info(ctx, 0, dw->min.y + k * spc, &ci);
   if (rv != EXR_ERR_SUCCESS)
     return kpcn_exr_fail(rv, KPCN_ERR_FORMAT, "truncated or corrupt file", path);
-  return decode_chunk(ctx, &ci, dec, first, img, 0, ci.start_y - dw->min.y, path);
+  return decode_chunk(ctx, &ci, cd, img, 0, ci.start_y - dw->min.y, path);
 }
 
 /* Decodes all chunks; chunks are independent, so threads split them (read contexts are
@@ -96,29 +112,30 @@ static kpcn_status read_pixels(exr_context_t ctx, kpcn_image *img, const exr_att
       return kpcn_exr_fail(rv, KPCN_ERR_FORMAT, "bad scanline chunking in", path);
     nchunks = (int)((img->height + (int64_t)spc - 1) / spc);
   }
+  exr_compression_t comp = EXR_COMPRESSION_NONE;
+  exr_get_compression(ctx, 0, &comp);
+  const int b44 = comp == EXR_COMPRESSION_B44 || comp == EXR_COMPRESSION_B44A;
   int nt = kpcn_resolve_threads(nthreads);
   if (nt > nchunks) nt = nchunks;
   kpcn_exr_chunk_error err = {KPCN_OK, 0, ""};
   int failed = 0;
 #pragma omp parallel num_threads(nt)
   {
-    exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
-    int first = 1;
+    chunk_decoder cd = {EXR_DECODE_PIPELINE_INITIALIZER, 1, b44, NULL};
 #pragma omp for schedule(dynamic, 1)
     for (int k = 0; k < nchunks; k++) {
       int stop;
 #pragma omp atomic read
       stop = failed;
       if (stop) continue;
-      kpcn_status s =
-          read_one_chunk(ctx, k, tiled, spc, (int)tw, (int)th, ntx, dw, &dec, &first, img, path);
+      kpcn_status s = read_one_chunk(ctx, k, tiled, spc, (int)tw, (int)th, ntx, dw, &cd, img, path);
       if (s != KPCN_OK) {
         kpcn_exr_record_error(&err, s, k);
 #pragma omp atomic write
         failed = 1;
       }
     }
-    exr_decoding_destroy(ctx, &dec);
+    exr_decoding_destroy(ctx, &cd.dec);
   }
   if (err.st != KPCN_OK) return kpcn_fail(err.st, "%s", err.msg);
   return KPCN_OK;
