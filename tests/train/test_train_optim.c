@@ -94,10 +94,22 @@ static void test_xavier_rng(void) {
   CHECK(mx > 0.99 * a);
   CHECK_NEAR(mean, 0.0, 5 * a / sqrt(3.0 * N));
   CHECK_CLOSE(var, a * a / 3, 0.02, 0); /* U(-a,a) variance = a^2/3 = 2/(fan_in+fan_out) */
-  /* same seed, same sequence; the state is the whole generator */
+  /* same seed, same sequence (two generators seeded apart), other seeds other sequences;
+   * the state is the whole generator (a copy continues the same sequence) */
   kpcn_rng_next(&r2);
   kpcn_rng r3 = r2;
   CHECK(kpcn_rng_next(&r2) == kpcn_rng_next(&r3));
+  kpcn_rng s1, s2, s3;
+  kpcn_rng_seed(&s1, 7);
+  kpcn_rng_seed(&s2, 7);
+  kpcn_rng_seed(&s3, 8);
+  int same = 1, differ = 0;
+  for (int i = 0; i < 16; i++) {
+    const uint64_t v1 = kpcn_rng_next(&s1), v2 = kpcn_rng_next(&s2), v3 = kpcn_rng_next(&s3);
+    same &= v1 == v2;
+    differ += v1 != v3;
+  }
+  CHECK(same && differ == 16);
   unsigned hist[10] = {0};
   for (int i = 0; i < 100000; i++)
     hist[kpcn_rng_below(&r, 10)]++;
