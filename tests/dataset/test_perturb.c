@@ -116,6 +116,12 @@ static void test_scene(const char *file) {
   free(z);
   cJSON_Delete(orig);
   free(base);
+  /* JSON that parses but is not a scene object is named as such; a syntax error names where */
+  char *bad = NULL;
+  CHECK(kpcn_perturb_scene(&bad, "[1]", 42, 1, NULL, NULL, 0) == KPCN_ERR_FORMAT && !bad);
+  CHECK(strstr(kpcn_last_error(), "is not an object") != NULL);
+  CHECK(kpcn_perturb_scene(&bad, "{\"a\": 1,, }", 42, 1, NULL, NULL, 0) == KPCN_ERR_FORMAT);
+  CHECK(strstr(kpcn_last_error(), "does not parse near:") != NULL);
 }
 
 /* ---- texture swaps ---- */

@@ -250,6 +250,20 @@ static void test_tool(void) {
 /* Values that passed a check on the JSON double but not as the float the renderer uses, and
  * fields whose wrong type or sign was silently accepted. */
 static void test_scene_values(void) {
+  /* messages name what the file holds (session 61): a texture given as a number list is
+   * path[i], not path.value[i]; a degenerate view names the fields that made it; the
+   * offending value is printed */
+  expect_fail("albedo list item",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"lambert\","
+              "\"albedo\":[0.5,\"x\",0.5]}}]}",
+              "primitives[0].bsdf.albedo[1]: expected a finite number", NULL);
+  expect_fail("degenerate lookAt",
+              CAM("\"type\":\"pinhole\",\"position\":[0,0,2],\"lookAt\":[0,0,2]"),
+              "camera.lookAt / camera.up: degenerate view", NULL);
+  expect_fail("negative ior",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"dielectric\","
+              "\"ior\":-1.5}}]}",
+              "ior: -1.5 must be > 0", NULL);
   /* 0 or a denormal as a float: 1/tan(fov/2) was Inf and Embree aborted */
   expect_fail("tiny fov", CAM("\"type\":\"pinhole\",\"fov\":1e-38"), "camera.fov", NULL);
   expect_fail("fov rounding to 180", CAM("\"type\":\"pinhole\",\"fov\":179.99999999"), "camera.fov",

@@ -79,7 +79,7 @@ static void usage(FILE *f) {
         "  itself); the denoiser shows the network every input at that exposure\n"
         "\n"
         "usage: kpcn-train --set-eps OUT.safetensors MODEL EPS\n"
-        "  a copy of MODEL (same weights) with the albedo epsilon EPS (0 < EPS < 1) in its\n"
+        "  a copy of MODEL (same weights) with the albedo epsilon EPS (1e-9 <= EPS <= 0.5) in its\n"
         "  diffuse demodulation, diffuse / (albedo + EPS)\n"
         "\n"
         "usage: kpcn-train --graft OUT.safetensors MODEL diffuse|specular FROM\n"

@@ -90,7 +90,7 @@ static kpcn_status parse_meta(kpcn_patchstore *ps, const char *path) {
     if (!cJSON_IsString(v) || !v->valuestring[0])
       st = kpcn_fail(KPCN_ERR_FORMAT, "patch store '%s': channels[%u] is not a name", path, c);
     else if (!(ps->channels[c] = strdup(v->valuestring)))
-      st = kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "channel names");
+      st = kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "out of memory for the channel names");
   }
   for (int i = 0; st == KPCN_OK && i < ps->nsrc; i++) {
     const cJSON *o = cJSON_GetArrayItem(srcs, i);

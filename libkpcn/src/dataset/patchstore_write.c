@@ -200,7 +200,7 @@ kpcn_status kpcn_patchstore_create(kpcn_patchstore_writer **out, const char *pat
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_patchstore_create: NULL argument");
   *out = NULL;
   if (s->patch_size <= 0 || s->patch_size > 4096)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch store '%s': patch size %d out of range",
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch store '%s': patch size %d not in [1, 4096]",
                      path, s->patch_size);
   if (!kps_dtype_size((uint32_t)s->dtype))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch store '%s': unknown dtype %d", path,
@@ -208,9 +208,11 @@ kpcn_status kpcn_patchstore_create(kpcn_patchstore_writer **out, const char *pat
   const char *const *names = s->channels ? s->channels : kpcn_patchstore_default_channels;
   int C = s->channels ? s->nchannels : KPCN_PATCHSTORE_NUM_DEFAULT;
   if (C <= 0 || C > 1024)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch store '%s': %d channels", path, C);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch store '%s': %d channels (1 to 1024)", path,
+                     C);
   if (strlen(path) >= 4000)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "patch store path too long");
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "patch store path too long (%zu bytes, at most 3999)", strlen(path));
   char tmp[sizeof((kpcn_patchstore_writer *)0)->tmp];
   KPCN_TRY(kpcn_temp_path(tmp, sizeof tmp, path));
   kpcn_patchstore_writer *w = kpcn_calloc(1, sizeof *w, "patch store writer");
@@ -268,7 +270,7 @@ kpcn_status kpcn_patchstore_add_source(kpcn_patchstore_writer *w, const kpcn_pat
   if (w->nsrc == w->capsrc) {
     uint32_t cap = w->capsrc ? 2 * w->capsrc : 16;
     kpcn_patch_source *n = realloc(w->src, sizeof *n * cap);
-    if (!n) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "patch store sources");
+    if (!n) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "out of memory for the patch store sources");
     w->src = n;
     w->capsrc = cap;
   }
@@ -320,7 +322,7 @@ kpcn_status kpcn_patchstore_append(kpcn_patchstore_writer *w, const kpcn_patch_r
   if (w->nrec == w->caprec) {
     uint64_t cap = w->caprec ? 2 * w->caprec : 1024;
     kpcn_patch_record *n = realloc(w->rec, sizeof *n * cap);
-    if (!n) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "patch store index");
+    if (!n) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "out of memory for the patch store index");
     w->rec = n;
     w->caprec = cap;
   }
@@ -431,7 +433,8 @@ kpcn_status kpcn_patchstore_finish(kpcn_patchstore_writer *w) {
   cJSON_Delete(j);
   kpcn_status st = KPCN_OK;
   if (!text) {
-    st = kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "patch store '%s': metadata", w->path);
+    st = kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "patch store '%s': out of memory for the metadata",
+                   w->path);
     goto fail;
   }
   h.meta_length = strlen(text);

@@ -405,7 +405,9 @@ static kpcn_status load_dir_pool(const char *dir, tex_pool *p) {
   }
   closedir(d);
   free(rd);
-  if (!ok) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "perturb: listing texture_dir '%s'", dir);
+  if (!ok)
+    return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "perturb: out of memory listing texture_dir '%s'",
+                     dir);
   if (p->n == 0)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
                      "perturb: texture_dir '%s' holds no image file (.png .jpg .jpeg .tga .bmp "
@@ -547,7 +549,7 @@ static kpcn_status perturb_textures(cJSON *root, rng *r, const kpcn_perturb_sett
         gather_bitmaps(cJSON_GetObjectItemCaseSensitive(p, "bsdf"), &pool);
     if (!ok) {
       pool_free(&pool);
-      return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "perturb: texture pool");
+      return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "perturb: out of memory for the texture pool");
     }
   }
   tex_log lg = {0, 0, ""};
@@ -573,12 +575,16 @@ kpcn_status kpcn_perturb_scene(char **out_json, const char *scene_json, uint64_t
   if (!s) s = &def;
   summary sm = {summary_buf, summary_size};
   if (summary_buf && summary_size) summary_buf[0] = 0;
-  cJSON *root = cJSON_Parse(scene_json);
-  if (!root || !cJSON_IsObject(root)) {
-    const char *e = cJSON_GetErrorPtr();
-    cJSON_Delete(root);
+  /* the error position from this call's own end pointer (cJSON_GetErrorPtr() is one
+   * process-wide variable other threads' parses change) */
+  const char *e = NULL;
+  cJSON *root = cJSON_ParseWithOpts(scene_json, &e, 0);
+  if (!root)
     return kpcn_fail(KPCN_ERR_FORMAT, "scene JSON does not parse%s%.40s", e ? " near: " : "",
                      e ? e : "");
+  if (!cJSON_IsObject(root)) {
+    cJSON_Delete(root);
+    return kpcn_fail(KPCN_ERR_FORMAT, "scene JSON is not an object (a scene is {...})");
   }
   if (variant > 0) {
     rng r = {seed * 0x9e3779b97f4a7c15ull ^ ((uint64_t)variant * 0xd1b54a32d192ed03ull)};
@@ -613,7 +619,7 @@ kpcn_status kpcn_perturb_scene(char **out_json, const char *scene_json, uint64_t
   }
   char *txt = cJSON_Print(root);
   cJSON_Delete(root);
-  if (!txt) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "perturb: printing JSON");
+  if (!txt) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "perturb: out of memory printing the JSON");
   *out_json = txt;
   return KPCN_OK;
 }

@@ -101,7 +101,8 @@ kpcn_status kpcn_denoiser_create(kpcn_denoiser **out, const kpcn_denoiser_option
   if (o.method == KPCN_DENOISE_KPCN) {
     d->model_path = strdup(o.model_path);
     kpcn_status s = d->model_path ? kpcn_model_load(o.model_path, &d->model)
-                                  : kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "denoiser model path");
+                                  : kpcn_fail(KPCN_ERR_OUT_OF_MEMORY,
+                                              "out of memory for the denoiser model path");
     if (s == KPCN_OK) s = kpcn_features_check_arch(kpcn_model_arch(d->model));
     if (s != KPCN_OK) {
       kpcn_fail_context("denoiser model '%s'", o.model_path);

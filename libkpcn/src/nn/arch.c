@@ -116,7 +116,7 @@ kpcn_status kpcn_arch_validate(const kpcn_arch *a) {
   if (!(a->eps > 0.0f && a->eps < 1.0f))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.eps = %g not in (0, 1)", (double)a->eps);
   if (a->kpa_passes < 0 || a->kpa_passes > KPCN_NN_MAX_KPA_PASSES)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.kpa_passes = %d not in [1, %d]",
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.kpa_passes = %d not in [0, %d] (0 = 1)",
                      a->kpa_passes, KPCN_NN_MAX_KPA_PASSES);
   if (a->source_weight != 0 && a->source_weight != 1)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "arch.source_weight = %d: must be 0 or 1",

@@ -274,10 +274,10 @@ kpcn_status kpcn_model_set_meta(kpcn_model *m, const char *key, const char *valu
       return KPCN_OK;
     }
   char **k2 = realloc(m->meta_key, (size_t)(m->n_meta + 1) * sizeof *k2);
-  if (!k2) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "metadata table");
+  if (!k2) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "out of memory for the metadata table");
   m->meta_key = k2;
   char **v2 = realloc(m->meta_val, (size_t)(m->n_meta + 1) * sizeof *v2);
-  if (!v2) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "metadata table");
+  if (!v2) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "out of memory for the metadata table");
   m->meta_val = v2;
   char *k = dupstr(key), *v = dupstr(value);
   if (!k || !v) {

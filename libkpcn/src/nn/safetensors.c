@@ -29,7 +29,7 @@ void kpcn_model_tensor_name(char *buf, size_t n, kpcn_branch b, int layer, int i
 static kpcn_status build_header(const kpcn_model *m, char **out_json) {
   const kpcn_arch *a = &m->arch;
   cJSON *h = cJSON_CreateObject();
-  if (!h) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "safetensors header");
+  if (!h) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "out of memory for the safetensors header");
   cJSON *meta = cJSON_AddObjectToObject(h, "__metadata__");
   char *arch = kpcn_arch_to_json(a);
   cJSON *inputs = cJSON_CreateArray();
@@ -71,7 +71,8 @@ static kpcn_status build_header(const kpcn_model *m, char **out_json) {
       }
   *out_json = cJSON_PrintUnformatted(h);
   cJSON_Delete(h);
-  if (!*out_json) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "safetensors header");
+  if (!*out_json)
+    return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "out of memory for the safetensors header");
   return KPCN_OK;
 }
 

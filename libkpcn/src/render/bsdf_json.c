@@ -166,8 +166,12 @@ kpcn_status kpcn_texture_parse(kpcn_material_lib *lib, const cJSON *node, const 
   if (!lib || !node || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: NULL texture", path);
   if (cJSON_IsNumber(node) || cJSON_IsArray(node)) {
     kpcn_vec3 v;
-    /* json_vec3 names path.key; split the last component off for a readable message */
-    KPCN_TRY(json_vec3(node, path, "value", &v));
+    /* json_vec3 names path.key: the last component of path is the key (bsdf.albedo[1], not
+     * bsdf.albedo.value[1], a key the file does not have) */
+    const char *dot = strrchr(path, '.');
+    char parent[256];
+    snprintf(parent, sizeof parent, "%.*s", dot ? (int)(dot - path) : 0, path);
+    KPCN_TRY(json_vec3(node, dot ? parent : "", dot ? dot + 1 : path, &v));
     return kpcn_texture_constant(lib->tex, v, out);
   }
   kpcn_bitmap_options opt;
@@ -324,7 +328,9 @@ static kpcn_status parse_object(kpcn_material_lib *lib, const cJSON *node, const
       KPCN_TRY(kpcn_texture_parse(lib, f, sub, 1, &p.roughness));
     float lo = p.roughness_value, hi;
     if (p.roughness) kpcn_texture_range(p.roughness, &lo, &hi);
-    if (lo < 0.0f) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.roughness: must be >= 0", path);
+    if (lo < 0.0f)
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.roughness: %g must be >= 0", path,
+                       (double)lo);
   }
   if ((f = cJSON_GetObjectItemCaseSensitive(node, "distribution"))) {
     if (!cJSON_IsString(f) || !kpcn_mf_from_name(f->valuestring, &p.distribution))
@@ -348,19 +354,22 @@ static kpcn_status parse_object(kpcn_material_lib *lib, const cJSON *node, const
   }
   if ((f = cJSON_GetObjectItemCaseSensitive(node, "ior"))) {
     KPCN_TRY(json_float(f, path, "ior", &p.ior));
-    if (!(p.ior > 0.0f)) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.ior: must be > 0", path);
+    if (!(p.ior > 0.0f))
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.ior: %g must be > 0", path, (double)p.ior);
   }
   if ((f = cJSON_GetObjectItemCaseSensitive(node, "enable_refraction")))
     KPCN_TRY(json_bool(f, path, "enable_refraction", &p.enable_refraction));
   if ((f = cJSON_GetObjectItemCaseSensitive(node, "thickness"))) {
     KPCN_TRY(json_float(f, path, "thickness", &p.thickness));
     if (p.thickness < 0.0f)
-      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.thickness: must be >= 0", path);
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.thickness: %g must be >= 0", path,
+                       (double)p.thickness);
   }
   if ((f = cJSON_GetObjectItemCaseSensitive(node, "sigma_a"))) {
     KPCN_TRY(json_vec3(f, path, "sigma_a", &p.sigma_a));
     if (kv3_min_comp(p.sigma_a) < 0.0f)
-      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.sigma_a: must be >= 0", path);
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.sigma_a: %g must be >= 0", path,
+                       (double)kv3_min_comp(p.sigma_a));
   }
   if (type == KPCN_BSDF_SMOOTH_COAT) {
     /* Tungsten's smooth_coat never applies its own albedo; accept only the neutral value

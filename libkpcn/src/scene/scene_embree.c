@@ -12,9 +12,20 @@
 
 static void set_v3(float *dst, kpcn_vec3 v) { dst[0] = v.x, dst[1] = v.y, dst[2] = v.z; }
 
-static kpcn_status embree_error(RTCDevice dev, const char *what) {
-  return kpcn_fail(KPCN_ERR_INTERNAL, "Embree failed while %s (error %d)", what,
-                   (int)rtcGetDeviceError(dev));
+/* rtcGetDeviceError clears the error it returns: the callers read it once and pass it in
+ * (it was read twice, and the message always said "error 0") */
+static kpcn_status embree_error(enum RTCError e, const char *what, int prim) {
+  const char *why = e == RTC_ERROR_OUT_OF_MEMORY       ? "out of memory"
+                    : e == RTC_ERROR_UNSUPPORTED_CPU   ? "this CPU is not supported"
+                    : e == RTC_ERROR_INVALID_ARGUMENT  ? "an invalid argument"
+                    : e == RTC_ERROR_INVALID_OPERATION ? "an invalid operation"
+                    : e == RTC_ERROR_CANCELLED         ? "cancelled"
+                    : e == RTC_ERROR_NONE              ? "no error reported"
+                                                       : "an unknown error";
+  if (prim >= 0)
+    return kpcn_fail(KPCN_ERR_INTERNAL, "Embree failed while %s for primitives[%d]: %s (%d)", what,
+                     prim, why, (int)e);
+  return kpcn_fail(KPCN_ERR_INTERNAL, "Embree failed while %s: %s (%d)", what, why, (int)e);
 }
 
 static RTCGeometry make_geometry(RTCDevice dev, const kpcn_prim *p) {
@@ -149,7 +160,7 @@ kpcn_status kpcn_scene_build_embree(kpcn_scene *s) {
                      (int)rtcGetDeviceError(NULL));
   s->rtc_device = dev;
   RTCScene sc = rtcNewScene(dev);
-  if (!sc) return embree_error(dev, "creating the scene");
+  if (!sc) return embree_error(rtcGetDeviceError(dev), "creating the scene", -1);
   s->rtc_scene = sc;
   rtcSetSceneBuildQuality(sc, RTC_BUILD_QUALITY_HIGH);
   s->geom_to_prim = kpcn_calloc((size_t)s->nprims + 1, sizeof(unsigned), "geometry table");
@@ -158,9 +169,10 @@ kpcn_status kpcn_scene_build_embree(kpcn_scene *s) {
     kpcn_prim *p = &s->prims[i];
     if (p->type == KPCN_PRIM_INFINITE_SPHERE) continue;
     RTCGeometry g = make_geometry(dev, p);
-    if (!g || rtcGetDeviceError(dev) != RTC_ERROR_NONE) {
+    const enum RTCError ge = rtcGetDeviceError(dev);
+    if (!g || ge != RTC_ERROR_NONE) {
       if (g) rtcReleaseGeometry(g);
-      return embree_error(dev, "creating a geometry");
+      return embree_error(ge, "creating the geometry", i);
     }
     rtcCommitGeometry(g);
     p->geom_id = rtcAttachGeometry(sc, g);
@@ -169,7 +181,8 @@ kpcn_status kpcn_scene_build_embree(kpcn_scene *s) {
     s->ngeoms = (int)p->geom_id + 1;
   }
   rtcCommitScene(sc);
-  if (rtcGetDeviceError(dev) != RTC_ERROR_NONE) return embree_error(dev, "building the BVH");
+  const enum RTCError be = rtcGetDeviceError(dev);
+  if (be != RTC_ERROR_NONE) return embree_error(be, "building the BVH", -1);
   struct RTCBounds b;
   rtcGetSceneBounds(sc, &b);
   float r = 1.0f;

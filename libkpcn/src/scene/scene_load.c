@@ -406,6 +406,7 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
   /* view direction kept as a direction: (pos + dir) - pos in float loses it far from the
    * origin (ulp(1e7) = 1) */
   kpcn_vec3 pos = kv3(0, 0, 2), dir = kv3(0, 0, -3), up = kv3(0, 1, 0);
+  int from_transform = 0; /* the view came from camera.transform (for the error below) */
   if (!cj) goto finish;
   if (!cJSON_IsObject(cj)) return kpcn_fail(KPCN_ERR_FORMAT, "camera: expected an object");
   static const char *known[] = {"type",
@@ -455,7 +456,9 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
     }
     if (!(w >= 1 && h >= 1 && w <= KPCN_MAX_DIM && h <= KPCN_MAX_DIM) || w != floor(w) ||
         h != floor(h))
-      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera.resolution: invalid size %gx%g", w, h);
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                       "camera.resolution: invalid size %gx%g (integers in [1, %d])", w, h,
+                       KPCN_MAX_DIM);
     c->width = (int)w, c->height = (int)h;
   }
   double fov = c->fov_deg;
@@ -501,6 +504,7 @@ static kpcn_status parse_camera(kpcn_scene *s, const cJSON *cj) {
   if (!(ap >= 0.0))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera.aperture_size: %g is negative", ap);
   const cJSON *tj = cJSON_GetObjectItemCaseSensitive(cj, "transform");
+  from_transform = tj != NULL;
   /* Tungsten's older camera fields, the view when there is no transform */
   static const char *const old_keys[3] = {"position", "lookAt", "up"};
   if (tj) {
@@ -555,7 +559,12 @@ finish:
   c->fwd = kv3_normalize(dir);
   c->right = kv3_normalize(kv3_cross(c->fwd, up));
   if (!(kv3_length2(c->fwd) > 0.5f) || !(kv3_length2(c->right) > 0.5f))
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "camera.transform: degenerate view (look_at/up)");
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     from_transform
+                         ? "camera.transform: degenerate view (its look_at equals its position, or "
+                           "its up is parallel to the view direction)"
+                         : "camera.lookAt / camera.up: degenerate view (lookAt equals position, or "
+                           "up is parallel to the view direction)");
   c->up = kv3_normalize(kv3_cross(c->right, c->fwd));
   c->plane_dist = 1.0f / tanf(c->fov_deg * (KPCN_PI / 180.0f) * 0.5f);
   return KPCN_OK;

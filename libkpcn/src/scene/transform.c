@@ -169,7 +169,10 @@ kpcn_status kpcn_xform_parse(const void *node_, const char *path, kpcn_xform *ou
   if (f) z = tmp, ez = 1;
   if ((ex && kv3_length2(x) == 0.0f) || (ey && kv3_length2(y) == 0.0f) ||
       (ez && kv3_length2(z) == 0.0f))
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: zero-length axis", path);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: zero-length axis (%s)", path,
+                     ex && kv3_length2(x) == 0.0f   ? "x_axis"
+                     : ey && kv3_length2(y) == 0.0f ? "up / y_axis"
+                                                    : "look_at / z_axis");
   switch ((ez ? 4 : 0) + (ey ? 2 : 0) + (ex ? 1 : 0)) {
   case 1: gram_schmidt(&x, &z, &y); break;
   case 2: gram_schmidt(&y, &z, &x); break;

@@ -56,7 +56,8 @@ kpcn_status kpcn_model_average(const char *const *paths, int n, kpcn_model **out
   double *sum = kpcn_calloc(KPCN_N_BRANCHES * kpcn_arch_param_count(kpcn_model_arch(first)),
                             sizeof *sum, "weight average");
   kpcn_status st = arch && sum ? walk(first, sum, NULL, 0) : kpcn_last_status();
-  if (!arch && st == KPCN_OK) st = kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "weight average");
+  if (!arch && st == KPCN_OK)
+    st = kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "out of memory for the weight average");
   for (int i = 1; i < n && st == KPCN_OK; i++) {
     kpcn_model *m = NULL;
     if ((st = load_any(paths[i], &m)) != KPCN_OK) break;

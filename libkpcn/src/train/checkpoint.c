@@ -152,7 +152,7 @@ kpcn_status kt_checkpoint_save(kpcn_trainer *t, const char *path) {
   cJSON_Delete(root);
   if (!hdr) {
     free(ts);
-    return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "checkpoint header");
+    return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "out of memory for the checkpoint header");
   }
   size_t hl = strlen(hdr), padded = (hl + 7) / 8 * 8;
   char tmp[4096];

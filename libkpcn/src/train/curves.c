@@ -70,7 +70,7 @@ static kpcn_status read_columns(const char *path, const char *xcol, const char *
       if (!nr) {
         free(rows);
         fclose(in);
-        return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "plot data of '%s'", path);
+        return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "out of memory for the plot data of '%s'", path);
       }
       rows = nr, cap *= 2;
     }
