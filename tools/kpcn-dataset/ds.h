@@ -58,7 +58,8 @@ int ds_mkdir_p(const char *path);
 int ds_exists(const char *path);
 int ds_check_render(const char *path, const ds_job *j);
 void ds_join(char *out, size_t n, const char *a, const char *b);
-char *ds_slurp(const char *path, size_t *len);
+/* The whole file, NUL-terminated (NULL on failure; why, if given, then says why). */
+char *ds_slurp(const char *path, size_t *len, const char **why);
 int ds_write_atomic(const char *path, const char *data, size_t len);
 /* A comma list of distinct integers in [1, hi] ("4,16,64"): no empty item, at most cap of
  * them. Returns how many, or -1. */

@@ -121,9 +121,11 @@ int ds_manifest_read(const char *dir, ds_manifest *m) {
   char path[DS_PATH];
   ds_join(path, sizeof path, dir, "manifest.jsonl");
   size_t len = 0;
-  char *text = ds_slurp(path, &len);
+  const char *why = NULL;
+  char *text = ds_slurp(path, &len, &why);
   if (!text) {
-    ds_err("cannot read '%s' (run `kpcn-dataset plan` first)", path);
+    ds_err("cannot read '%s': %s%s", path, why ? why : "?",
+           ds_exists(path) ? "" : " (run `kpcn-dataset plan` first)");
     return -1;
   }
   /* a NUL ends the C string early: the lines after it were silently dropped */

@@ -25,7 +25,7 @@ static int rejected(const char *dir, const ds_job *j) {
   char tmp[DS_PATH + 16];
   snprintf(tmp, sizeof tmp, "%s.verdict.json", rel);
   ds_join(vp, sizeof vp, dir, tmp);
-  char *t = ds_slurp(vp, NULL);
+  char *t = ds_slurp(vp, NULL, NULL);
   if (!t) return 0;
   cJSON *o = cJSON_Parse(t);
   free(t);

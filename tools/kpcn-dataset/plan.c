@@ -31,7 +31,7 @@ static int cmp_scene(const void *a, const void *b) {
 static int find_scenes(const char *dir, base_scene **out, int *n) {
   DIR *d = opendir(dir);
   if (!d) {
-    ds_err("--scenes: cannot open directory '%s'", dir);
+    ds_err("--scenes: cannot open directory '%s': %s", dir, strerror(errno));
     return -1;
   }
   base_scene *v = NULL;
@@ -393,9 +393,10 @@ typedef struct plan_ctx {
  * run only once every scene passed, perturbs again (deterministic) and writes the variant
  * JSONs and variants.jsonl. So a bad later scene leaves no files of the earlier ones. */
 static int plan_scene(plan_ctx *c, const base_scene *sc, int write) {
-  char *base = ds_slurp(sc->file, NULL);
+  const char *why = NULL;
+  char *base = ds_slurp(sc->file, NULL, &why);
   if (!base) {
-    ds_err("plan: scene '%s': cannot read '%s'", sc->name, sc->file);
+    ds_err("plan: scene '%s': cannot read '%s': %s", sc->name, sc->file, why ? why : "?");
     return 1;
   }
   int sw = c->W, sh = c->H;
@@ -636,7 +637,7 @@ int ds_cmd_plan(int argc, char **argv) {
       /* Absolute, so plan.json names the same images from any working directory. */
       char *rp = realpath(v, NULL);
       if (!rp) {
-        ds_err("plan: --texture-dir '%s' does not exist", v);
+        ds_err("plan: --texture-dir '%s': %s", v, strerror(errno));
         return 2;
       }
       snprintf(texture_dir, sizeof texture_dir, "%s", rp);
@@ -724,7 +725,7 @@ int ds_cmd_plan(int argc, char **argv) {
   cJSON_Delete(pj);
   char path[DS_PATH];
   ds_join(path, sizeof path, outdir, "plan.json");
-  char *old = ds_slurp(path, NULL);
+  char *old = ds_slurp(path, NULL, NULL);
   if (old && strcmp(old, ptxt) != 0 && !force) {
     ds_err("plan: '%s' holds a different plan; use another directory or --force "
            "(existing renders would no longer match their jobs)",

@@ -51,11 +51,16 @@ void ds_join(char *out, size_t n, const char *a, const char *b) {
     snprintf(out, n, "%s%s%s", a, a[la - 1] == '/' ? "" : "/", b);
 }
 
-char *ds_slurp(const char *path, size_t *len) {
-  FILE *f = kpcn_fopen_input(path, NULL);
+char *ds_slurp(const char *path, size_t *len, const char **why) {
+  FILE *f = kpcn_fopen_input(path, why);
   if (!f) return NULL;
   size_t cap = 1 << 16, n = 0;
   char *b = malloc(cap);
+  if (why) *why = "out of memory";
+  if (!b) {
+    fclose(f);
+    return NULL;
+  }
   for (;;) {
     if (n + 4096 > cap) {
       cap *= 2;

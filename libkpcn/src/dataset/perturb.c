@@ -15,6 +15,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <errno.h>
 #include <strings.h>
 #include <sys/stat.h>
 
@@ -386,7 +387,9 @@ static int is_image_name(const char *n) {
 /* Image files of a directory, absolute and sorted (readdir order is not deterministic). */
 static kpcn_status load_dir_pool(const char *dir, tex_pool *p) {
   DIR *d = opendir(dir);
-  if (!d) return kpcn_fail(KPCN_ERR_IO, "perturb: texture_dir '%s' cannot be opened", dir);
+  if (!d)
+    return kpcn_fail(KPCN_ERR_IO, "perturb: texture_dir '%s' cannot be opened: %s", dir,
+                     strerror(errno));
   char *rd = realpath(dir, NULL);
   struct dirent *e;
   int ok = rd != NULL;
