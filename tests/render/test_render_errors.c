@@ -395,6 +395,11 @@ static void test_scene_values(void) {
 }
 
 /* Settings the library refuses, and how it stores values beyond float range. */
+static int cancel_always(void *user, double f) {
+  (void)user, (void)f;
+  return 1;
+}
+
 static void test_render_limits(void) {
   kpcn_scene *s = NULL;
   CHECK(kpcn_scene_load_json("{\"primitives\":[" LIGHT "]}", NULL, "light.json", &s) == KPCN_OK);
@@ -408,7 +413,45 @@ static void test_render_limits(void) {
   rs.crop_x = rs.crop_y = 2147483647, rs.crop_w = rs.crop_h = 1; /* cx + cw overflowed */
   CHECK(kpcn_render(s, &rs, &aov) == KPCN_ERR_INVALID_ARGUMENT && aov == NULL);
   CHECK(strstr(kpcn_last_error(), "crop") != NULL);
+  /* session 61: a negative crop size at offset 0 rendered the whole image; a light strategy
+   * outside the enum rendered a wrong estimate (and a checkpoint took it for BSDF-only) */
+  rs.crop_x = rs.crop_y = 0, rs.crop_w = -5, rs.crop_h = 0;
+  CHECK(kpcn_render(s, &rs, &aov) == KPCN_ERR_INVALID_ARGUMENT && aov == NULL);
+  CHECK(strstr(kpcn_last_error(), "crop 0,0,-5,0 is empty") != NULL);
+  rs.crop_w = 0;
+  rs.lights = (kpcn_light_strategy)99;
+  CHECK(kpcn_render(s, &rs, &aov) == KPCN_ERR_INVALID_ARGUMENT && aov == NULL);
+  CHECK(strstr(kpcn_last_error(), "lights = 99") != NULL);
+  rs.lights = KPCN_LIGHTS_SCENE;
+  /* the camera samples of an albedo pass are counted (2 + 6 per pixel) */
+  kpcn_render_stats rst;
+  rs.spp = 2, rs.albedo_spp = 6;
+  CHECK(kpcn_render_ex(s, &rs, &aov, &rst) == KPCN_OK && rst.samples == 8u * 8u * 8u);
+  kpcn_aov_destroy(aov);
+  aov = NULL;
+  rs.spp = 1, rs.albedo_spp = 0;
+  /* a callback that always cancels cancels a render whose rows other threads finish: the
+   * final call's answer counts (14 of 40 such renders returned an image) */
+  rs.progress = cancel_always, rs.nthreads = 8, rs.height = 1;
+  for (int k = 0; k < 40; k++) {
+    CHECK(kpcn_render(s, &rs, &aov) == KPCN_ERR_CANCELLED && aov == NULL);
+    kpcn_aov_destroy(aov);
+    aov = NULL;
+  }
+  rs.progress = NULL, rs.nthreads = 1, rs.height = 8;
   kpcn_scene_destroy(s);
+  /* a scene path longer than the loader holds is refused, not cut (a shortened folder read
+   * another folder's textures) */
+  {
+    char longdir[5000];
+    memset(longdir, 'd', sizeof longdir - 1);
+    longdir[sizeof longdir - 1] = 0;
+    longdir[0] = '/';
+    CHECK(kpcn_scene_load_json("{\"primitives\":[" LIGHT "]}", longdir, "x.json", &s) ==
+              KPCN_ERR_INVALID_ARGUMENT &&
+          s == NULL);
+    CHECK(strstr(kpcn_last_error(), "longer than 4095") != NULL);
+  }
 
   /* the buffer estimate against the memory available: 16384^2 x 24 planes is 25.8 GB */
   CHECK(kpcn_render_check_memory(16384, 16384, 24, 23000000000ull) == KPCN_ERR_OUT_OF_MEMORY);

@@ -58,7 +58,9 @@ typedef struct kpcn_render_settings {
    * samples. Composes with albedo_spp. 0 or 1 = off; at most 16 (docs/renderer.md). */
   int albedo_footprint;
   kpcn_light_strategy lights;
-  kpcn_progress_fn progress; /* called from the calling thread; non-zero return cancels */
+  /* called from the calling thread after its rows and once with 1.0 when all rows are done;
+   * a non-zero return cancels (that last answer too) */
+  kpcn_progress_fn progress;
   void *progress_user;
   /* Checkpoints (DESIGN.md §9). When not NULL: if this file holds finished rows of the same
    * render (scene_key, every setting above that changes pixels, size, crop, kpcn version) the

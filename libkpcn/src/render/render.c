@@ -160,6 +160,11 @@ kpcn_status kpcn_render_ctx_init(kpcn_render_ctx *ctx, const kpcn_scene *scene,
   }
   ctx->max_bounces = st->max_bounces >= 0 ? st->max_bounces : scene->max_bounces;
   ctx->min_bounces = scene->min_bounces;
+  if (st->lights < KPCN_LIGHTS_SCENE || st->lights > KPCN_LIGHTS_NEE_ONLY)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "render settings: lights = %d is not a kpcn_light_strategy (0 scene, 1 MIS, "
+                     "2 BSDF only, 3 NEE only)",
+                     (int)st->lights);
   kpcn_light_strategy ls = st->lights;
   if (ls == KPCN_LIGHTS_SCENE) ls = scene->light_sampling ? KPCN_LIGHTS_MIS : KPCN_LIGHTS_BSDF_ONLY;
   ctx->nee = ls == KPCN_LIGHTS_MIS || ls == KPCN_LIGHTS_NEE_ONLY;
@@ -253,12 +258,17 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   kpcn_render_ctx fctx = ctx;                               /* the albedo pass: features only */
   fctx.features_only = 1;
   int cx = 0, cy = 0, cw = ctx.width, chh = ctx.height;
-  if (st.crop_w > 0 || st.crop_h > 0 || st.crop_x || st.crop_y) {
+  /* all four 0 = no crop; anything else is a crop (a negative size at offset 0 was ignored) */
+  if (st.crop_w || st.crop_h || st.crop_x || st.crop_y) {
     cx = st.crop_x, cy = st.crop_y, cw = st.crop_w, chh = st.crop_h;
     /* in 64 bits: cx + cw overflows an int for a crop near INT_MAX */
     if (cx < 0 || cy < 0 || cw <= 0 || chh <= 0 || (int64_t)cx + cw > ctx.width ||
         (int64_t)cy + chh > ctx.height)
-      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "crop %d,%d,%d,%d lies outside the %dx%d image",
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                       cw <= 0 || chh <= 0
+                           ? "crop %d,%d,%d,%d is empty (its size must be positive; the "
+                             "image is %dx%d)"
+                           : "crop %d,%d,%d,%d lies outside the %dx%d image",
                        cx, cy, cw, chh, ctx.width, ctx.height);
   }
 
@@ -309,6 +319,7 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
 
   int nthreads = kpcn_resolve_threads(st.nthreads);
   volatile int cancel = 0;
+  int reported_all = 0; /* the calling thread's callback has seen 1.0 */
   int rows_done = resumed;
   uint64_t total_rays = 0; /* traced by this call */
   int save_errors = 0;
@@ -347,6 +358,7 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
 #pragma omp atomic read
           done = rows_done;
           if (st.progress(st.progress_user, (double)done / chh)) cancel = 1;
+          if (done == chh) reported_all = 1;
         }
         if (st.checkpoint && st.checkpoint_every_s > 0 &&
             now_s() - last_save >= st.checkpoint_every_s) {
@@ -359,6 +371,11 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
   }
   kpcn_fast_fp_end(saved_csr, nthreads);
   double secs = now_s() - t0;
+  /* Only the calling thread calls back (inside the loop, after its rows): when the other
+   * threads finished the last rows, 1.0 is reported here, and its answer counts too (a
+   * few-row render on several threads could not be cancelled: the only call was this one,
+   * whose return value was dropped). Reported once. */
+  if (!cancel && st.progress && !reported_all && st.progress(st.progress_user, 1.0)) cancel = 1;
   if (cancel) {
     kpcn_status r = kpcn_render_ckpt_save(ck);
     if (r == KPCN_OK)
@@ -368,7 +385,6 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
     kpcn_aov_destroy(set);
     return r;
   }
-  if (st.progress) st.progress(st.progress_user, 1.0);
   /* every row, in case writing the result fails (a full disk, a missing folder): then the
    * same call again returns at once */
   if (st.checkpoint && resumed < chh && kpcn_render_ckpt_save(ck) != KPCN_OK) save_errors++;
@@ -376,7 +392,8 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
     uint64_t all_rays, nonfinite;
     kpcn_render_ckpt_totals(ck, &all_rays, &nonfinite);
     stats->seconds = secs;
-    stats->samples = (uint64_t)(chh - resumed) * (uint64_t)cw * (uint64_t)spp;
+    /* the albedo pass's camera samples too (aspp per pixel, 0 without one) */
+    stats->samples = (uint64_t)(chh - resumed) * (uint64_t)cw * (uint64_t)(spp + aspp);
     stats->rays = total_rays;
     stats->rows_resumed = resumed;
     stats->checkpoint_errors = save_errors;

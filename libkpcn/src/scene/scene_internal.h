@@ -81,7 +81,7 @@ typedef struct kpcn_light {
 
 struct kpcn_scene {
   char name[256];
-  char base_dir[1024];
+  char base_dir[4096]; /* PATH_MAX: a longer one is refused, never truncated */
   kpcn_material_lib *mats;
   kpcn_prim *prims;
   int nprims;

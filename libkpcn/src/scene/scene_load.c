@@ -100,11 +100,11 @@ static const char *get_string(const cJSON *obj, const char *key) {
   return cJSON_IsString(it) ? it->valuestring : NULL;
 }
 
-static void join_path(char *out, size_t n, const char *dir, const char *file) {
-  if (file[0] == '/' || !dir || !dir[0])
-    snprintf(out, n, "%s", file);
-  else
-    snprintf(out, n, "%s/%s", dir, file);
+/* dir/file into out; 0 when it does not fit (a truncated path could name another file) */
+static int join_path(char *out, size_t n, const char *dir, const char *file) {
+  const int w = file[0] == '/' || !dir || !dir[0] ? snprintf(out, n, "%s", file)
+                                                  : snprintf(out, n, "%s/%s", dir, file);
+  return w >= 0 && (size_t)w < n;
 }
 
 /* ---- primitives ---- */
@@ -319,8 +319,10 @@ static kpcn_status parse_primitive_into_slot(kpcn_scene *s, const cJSON *pj, int
   if (p->type == KPCN_PRIM_MESH) {
     const char *file = get_string(pj, "file");
     if (!file) return kpcn_fail(KPCN_ERR_FORMAT, "%s.file: missing or not a string", path);
-    char full[2048];
-    join_path(full, sizeof(full), s->base_dir, file);
+    char full[8192];
+    if (!join_path(full, sizeof(full), s->base_dir, file))
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.file: the path is longer than %zu bytes",
+                       path, sizeof(full) - 1);
     snprintf(sub, sizeof(sub), "%s.file", path);
     KPCN_TRY(kpcn_mesh_load(full, sub, &p->mesh));
     p->mesh.smooth =
@@ -726,6 +728,14 @@ kpcn_status kpcn_scene_load_json(const char *text, const char *base_dir, const c
     return kpcn_fail(KPCN_ERR_FORMAT, "scene '%s': invalid JSON near line %d (byte %ld)%s", name,
                      line, off, why);
   }
+  const size_t max_dir = sizeof(((kpcn_scene *)0)->base_dir) - 1;
+  if (base_dir && strlen(base_dir) > max_dir) {
+    cJSON_Delete(root);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "scene '%s': its folder's path is %zu bytes, longer than %zu (a shortened "
+                     "one would read other files)",
+                     name, strlen(base_dir), max_dir);
+  }
   kpcn_scene *s = kpcn_calloc(1, sizeof(*s), "scene");
   if (!s) {
     cJSON_Delete(root);
@@ -775,7 +785,12 @@ kpcn_status kpcn_scene_load(const char *path, kpcn_scene **out) {
     return kpcn_fail(KPCN_ERR_FORMAT, "scene '%s': NUL byte at byte %ld (not a JSON text)", path,
                      off);
   }
-  char dir[1024];
+  char dir[4096];
+  if (strlen(path) >= sizeof(dir)) {
+    free(text);
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "scene path of %zu bytes is longer than %zu",
+                     strlen(path), sizeof(dir) - 1);
+  }
   snprintf(dir, sizeof(dir), "%s", path);
   char *slash = strrchr(dir, '/');
   if (slash)
