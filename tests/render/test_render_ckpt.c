@@ -123,6 +123,27 @@ static void test_library(const kpcn_scene *s) {
   rs.albedo_footprint = 2;
   CHECK(render(s, &rs, &st, NULL) == NULL &&
         strstr(kpcn_last_error(), "its albedo_footprint is 0") != NULL);
+  /* every other setting that changes a pixel (renderer.md, "Checkpoints"): each refused by
+   * its name, so no render mixes its rows with another's */
+  for (int k = 0; k < 7; k++) {
+    static const char *const field[7] = {"seed",       "resolution",  "crop",  "albedo_spp",
+                                         "color_only", "max_bounces", "lights"};
+    rs = settings(2, "c.ckpt");
+    switch (k) {
+    case 0: rs.seed = 8; break;
+    case 1: rs.width = W + 2; break;
+    case 2: rs.crop_x = 0, rs.crop_y = 0, rs.crop_w = W, rs.crop_h = H - 1; break;
+    case 3: rs.albedo_spp = 2 * SPP; break;
+    case 4: rs.color_only = 1; break;
+    case 5: rs.max_bounces = 1; break;
+    default: rs.lights = KPCN_LIGHTS_NEE_ONLY; break;
+    }
+    char want[64];
+    snprintf(want, sizeof want, "its %s is", field[k]);
+    CHECK(render(s, &rs, &st, NULL) == NULL && st == KPCN_ERR_INVALID_ARGUMENT);
+    if (!strstr(kpcn_last_error(), want)) fprintf(stderr, "%s: %s\n", field[k], kpcn_last_error());
+    CHECK(strstr(kpcn_last_error(), want) != NULL);
+  }
 
   /* damaged files: a flipped pixel bit, a truncation, something else entirely */
   static const struct {
