@@ -34,4 +34,6 @@ oiiotool "$SRC" --cut 8x8+100+120 --ch R,G,B -d half --compression b44 -o "$OUT/
 # a B44 half file whose last chunk (one row of 8 pixels) the writer stored raw (session 61)
 oiiotool "$SRC" --cut 8x33+100+120 --ch R,G,B -d half --compression b44 -o "$OUT/b44_lastrow.exr"
 oiiotool "$SRC" --cut 8x8+100+120 --ch R,G,B -d half --compression dwaa -o "$OUT/dwaa.exr"
+# uint channels: kpcn keeps the integer value (session 61)
+oiiotool --pattern constant:color=0.5,0.25,1 3x2 3 -d uint32 -o "$OUT/uint32.exr"
 echo "wrote $REC, $OUT/crop_*.exr and the codec files"

@@ -214,6 +214,21 @@ int main(void) {
     CHECK(kpcn_exr_read_image(KPCN_TESTDATA "/io/dwaa.exr", &cod) == KPCN_ERR_UNSUPPORTED);
     CHECK(strstr(kpcn_last_error(), "DWAA compression cannot be decoded") != NULL);
   }
+  /* a uint channel keeps its integer value (aov-exr.md; OIIO normalises by 2^32 - 1): the
+   * file holds 0.5, 0.25 and 1 of 2^32 - 1, rounded to integers by oiiotool */
+  CHECK(kpcn_exr_read_image(KPCN_TESTDATA "/io/uint32.exr", &cod) == KPCN_OK);
+  if (cod) {
+    const int r = kpcn_image_find_channel(cod, "R"), g = kpcn_image_find_channel(cod, "G"),
+              bl = kpcn_image_find_channel(cod, "B");
+    CHECK(r >= 0 && g >= 0 && bl >= 0 && cod->width == 3 && cod->height == 2);
+    if (r >= 0 && g >= 0 && bl >= 0)
+      for (int i = 0; i < 6; i++)
+        CHECK(kpcn_image_plane(cod, r)[i] == 2147483648.0f &&
+              kpcn_image_plane(cod, g)[i] == 1073741824.0f &&
+              kpcn_image_plane(cod, bl)[i] == (float)4294967295u);
+    kpcn_image_destroy(cod);
+    cod = NULL;
+  }
   CHECK(kpcn_exr_read_image(KPCN_TESTDATA "/io/b44_half.exr", &cod) == KPCN_OK);
   kpcn_image_destroy(cod);
 
