@@ -201,3 +201,9 @@ kpcn_status kpcn_commit_file(const char *tmp, const char *path) {
 }
 
 void kpcn_abort_file(const char *tmp) { unlink(tmp); }
+
+int kpcn_path_join(char *out, size_t n, const char *dir, const char *file) {
+  const int w = file[0] == '/' || !dir || !dir[0] ? snprintf(out, n, "%s", file)
+                                                  : snprintf(out, n, "%s/%s", dir, file);
+  return w >= 0 && (size_t)w < n;
+}

@@ -34,6 +34,9 @@ kpcn_status kpcn_check_size(int width, int height, const char *what);
  * target (kpcn_abort_file removes it). */
 kpcn_status kpcn_temp_path(char *out, size_t outsz, const char *path);
 kpcn_status kpcn_commit_file(const char *tmp, const char *path);
+/* file resolved against dir (absolute files and an empty dir as they are) into out; 0 when
+ * it does not fit, since a truncated path could name another file */
+int kpcn_path_join(char *out, size_t n, const char *dir, const char *file);
 void kpcn_abort_file(const char *tmp);
 
 /* Denormal floats take a slow microcode path in the SIMD units (many times the cost of a

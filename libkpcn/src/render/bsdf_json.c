@@ -152,14 +152,6 @@ static kpcn_status check_keys(const cJSON *obj, const char *path, const char *wh
   return KPCN_OK;
 }
 
-/* scene_dir/file into out; 0 when it does not fit (a truncated path could name another file) */
-static int resolve_path(const kpcn_material_lib *lib, const char *file, char *out, size_t n) {
-  const int w = file[0] == '/' || !lib->scene_dir[0]
-                    ? snprintf(out, n, "%s", file)
-                    : snprintf(out, n, "%s/%s", lib->scene_dir, file);
-  return w >= 0 && (size_t)w < n;
-}
-
 /* ---- textures ---- */
 
 kpcn_status kpcn_texture_parse(kpcn_material_lib *lib, const cJSON *node, const char *path,
@@ -242,7 +234,7 @@ kpcn_status kpcn_texture_parse(kpcn_material_lib *lib, const cJSON *node, const 
   }
   if (!file[0]) return kpcn_fail(KPCN_ERR_FORMAT, "%s: empty texture file name", path);
   char full[8192];
-  if (!resolve_path(lib, file, full, sizeof(full)))
+  if (!kpcn_path_join(full, sizeof(full), lib->scene_dir, file))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: the texture path is longer than %zu bytes",
                      path, sizeof(full) - 1);
   kpcn_status s = kpcn_texture_bitmap(lib->tex, full, &opt, out);

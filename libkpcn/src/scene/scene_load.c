@@ -100,13 +100,6 @@ static const char *get_string(const cJSON *obj, const char *key) {
   return cJSON_IsString(it) ? it->valuestring : NULL;
 }
 
-/* dir/file into out; 0 when it does not fit (a truncated path could name another file) */
-static int join_path(char *out, size_t n, const char *dir, const char *file) {
-  const int w = file[0] == '/' || !dir || !dir[0] ? snprintf(out, n, "%s", file)
-                                                  : snprintf(out, n, "%s/%s", dir, file);
-  return w >= 0 && (size_t)w < n;
-}
-
 /* ---- primitives ---- */
 
 /* Emission is radiance in [0, KPCN_MAX_EMISSION], for a constant and for every value of a
@@ -320,7 +313,7 @@ static kpcn_status parse_primitive_into_slot(kpcn_scene *s, const cJSON *pj, int
     const char *file = get_string(pj, "file");
     if (!file) return kpcn_fail(KPCN_ERR_FORMAT, "%s.file: missing or not a string", path);
     char full[8192];
-    if (!join_path(full, sizeof(full), s->base_dir, file))
+    if (!kpcn_path_join(full, sizeof(full), s->base_dir, file))
       return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.file: the path is longer than %zu bytes",
                        path, sizeof(full) - 1);
     snprintf(sub, sizeof(sub), "%s.file", path);
