@@ -32,7 +32,7 @@ expect_fail "modifier 'tol' needs a finite number (got 'inf')" "" "$NOISY" "$REF
 expect_fail "modifier 'eps' must be > 0 (got '0')" "" "$REF" "$REF" --relmse:eps=0
 expect_fail "modifier 'dx' needs an integer in [-2147483648, 2147483647] (got '4294967297')" "" \
   "$REF" --shift:dx=4294967297
-expect_fail "modifier 'seed' needs an integer in [0, 2^64) (got '-1')" "" "$NOISY" --augment:seed=-1
+expect_fail "modifier 'seed' needs an integer in [0, 2^64-1] (got '-1')" "" "$NOISY" --augment:seed=-1
 expect_fail "modifier 'allow_nonfinite' must be 0 or 1 (got 'maybe')" "" "$REF" "$REF" \
   --l1:allow_nonfinite=maybe
 expect_fail "modifier 'bf16' must be 0 or 1 (got '5')" "" "$NOISY" --denoise:model=m.safetensors:bf16=5

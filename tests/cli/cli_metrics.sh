@@ -76,4 +76,75 @@ mse=$(json_get out.txt mse)
 want=$("$PY" -c "import math,sys; print(20*math.log10(1e155) - 10*math.log10(float(sys.argv[1])))" "$mse")
 near "$(json_get ps.json psnr)" "$want" 1e-12 && pass "psnr at range 1e155: $want" ||
   fail "psnr at range 1e155: $(cat ps.json), want $want"
+# metrics.md: SSIM needs a finite pixel inside its 5-pixel border, so an 11x11 image with a
+# NaN centre fails SSIM alone (exit 1, a runtime error: kpcntool.md), even with allow_nonfinite,
+# and fails the command line it is on; L1 on the pair averages the other 120 pixels.
+oiiotool --pattern constant:color=nan,0.5,0.5 1x1 3 --pattern constant:color=0.5,0.5,0.5 11x11 3 \
+  --paste +5+5 -o nanc.exr
+oiiotool --pattern constant:color=0.25,0.5,0.75 11x11 3 -o q11.exr
+# expect_rc RC PATTERN ARGS...: kpcntool exits with RC, naming PATTERN on stderr
+expect_rc() {
+  local want=$1 pat=$2
+  shift 2
+  "$KT" "$@" >out.txt 2>err.txt
+  local rc=$?
+  if [ $rc -eq "$want" ] && grep -qF -- "$pat" err.txt; then
+    pass "exit $rc naming '$pat': kpcntool $*"
+  else
+    fail "kpcntool $*: exit $rc (want $want, naming '$pat'), stderr: $(cat err.txt)"
+  fi
+}
+expect_rc 1 "ssim: no finite pixel in the interior" nanc.exr q11.exr --ssim:allow_nonfinite=1 --json
+expect_rc 1 "--ssim" nanc.exr q11.exr --l1:allow_nonfinite=1 --ssim:allow_nonfinite=1 --json
+# without allow_nonfinite the NaN is the error, reported as every non-finite pixel is: with the
+# count and both file names (metrics.md, "Non-finite values"); so is an all-NaN image, where
+# no pixel is left for any metric
+expect_rc 1 "1 pixel(s) hold NaN/Inf in 'nanc.exr' or 'q11.exr'" nanc.exr q11.exr --ssim
+oiiotool --pattern constant:color=nan,0.5,0.5 16x16 3 -o allnan.exr
+expect_rc 1 "256 pixel(s) hold NaN/Inf in 'allnan.exr' or 'q.exr'" allnan.exr q.exr --l1
+run_ok nanc.exr q11.exr --l1:allow_nonfinite=1 --json
+cp out.txt nc.json
+# 120 pixels: |0.5 - 0.25| + 0 + |0.5 - 0.75| over 3 channels
+near "$(json_get nc.json l1)" 0.16666666666666667 1e-12 && near "$(json_get nc.json l1_nonfinite_pixels)" 1 0 \
+  && pass "NaN centre: l1 over the other 120 pixels" || fail "NaN centre l1: $(cat nc.json)"
+run_ok q11.exr q11.exr --ssim --json
+near "$(json_get out.txt ssim)" 1 0 && pass "11x11 without NaN: ssim 1" || fail "11x11 ssim: $(cat out.txt)"
+# one more column: the interior is two pixels, one finite; SSIM is that pixel's, as skimage
+# computes it with the NaN pixel set to 0 in both images (metrics.md)
+oiiotool --pattern constant:color=nan,0.5,0.5 1x1 3 --pattern checker:width=3:height=2:color1=0.9,0.2,0.6:color2=0.1,0.7,0.3 12x11 3 \
+  --paste +5+5 -o nanc12.exr
+oiiotool --pattern checker:width=2:height=3:color1=0.8,0.3,0.5:color2=0.2,0.6,0.4 12x11 3 -o q12.exr
+run_ok nanc12.exr q12.exr --ssim:allow_nonfinite=1 --json
+cp out.txt nc12.json
+want=$("$PY" -c '
+import sys, numpy as np, OpenImageIO as oiio
+from skimage.metrics import structural_similarity
+x = oiio.ImageBuf(sys.argv[1]).get_pixels(oiio.FLOAT).astype(np.float64)
+y = oiio.ImageBuf(sys.argv[2]).get_pixels(oiio.FLOAT).astype(np.float64)
+bad = ~(np.isfinite(x).all(axis=2) & np.isfinite(y).all(axis=2))
+assert bad.sum() == 1 and bad[5, 5]
+x[bad] = 0; y[bad] = 0
+_, S = structural_similarity(x, y, gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
+                             data_range=1.0, channel_axis=-1, full=True)
+print(repr(float(S[5, 6].mean())))' nanc12.exr q12.exr)
+near "$(json_get nc12.json ssim)" "$want" 1e-7 && near "$(json_get nc12.json ssim_nonfinite_pixels)" 1 0 \
+  && pass "12x11, NaN at (5,5): ssim of pixel (6,5) = $want" || fail "12x11 NaN: $(cat nc12.json), want $want"
+# A figure that leaves double range (eps=1e-320 against a black reference pixel: 1/1e-320)
+# prints as null in JSON, like PSNR's +inf: valid JSON (no Infinity/NaN tokens), exit 0.
+oiiotool --pattern constant:color=0,0.5,0.25 16x16 3 -o black.exr
+oiiotool --pattern constant:color=1,0.5,0.25 16x16 3 -o lit.exr
+run_ok lit.exr black.exr --relmse:eps=1e-320 --rell1:eps=1e-320 --l1 --json
+cp out.txt eps.json
+"$PY" -c '
+import json, sys
+def bad(tok): raise ValueError("non-JSON token " + tok)
+d = json.load(open(sys.argv[1]), parse_constant=bad)
+assert set(d) == {"relmse", "rell1", "l1"}, d
+assert d["relmse"] is None and d["rell1"] is None, d
+assert abs(d["l1"] - 1 / 3) < 1e-12, d' eps.json && grep -q '"relmse": null' eps.json &&
+  pass "eps=1e-320: relmse and rell1 null in valid JSON" || fail "eps=1e-320: $(cat eps.json)"
+# the same figures stay finite where no reference pixel is black
+run_ok black.exr lit.exr --relmse:eps=1e-320 --json
+near "$(json_get out.txt relmse)" 0.33333333333333333 1e-12 && pass "eps=1e-320 finite elsewhere" ||
+  fail "eps=1e-320 against lit: $(cat out.txt)"
 finish

@@ -186,7 +186,12 @@ ok '[ $rc -eq 2 ]' "bad shard rejected"
 export FAKE_LOG="$T/log1" FAKE_SLEEP=0.3
 "$DS" run "$T/d" --jobs 2 --renderer "$FAKE" > /dev/null 2>&1 &
 pid=$!
-sleep 1.2
+# stop it once a render has finished (polled: a fixed sleep was too short on a loaded machine)
+i=0
+while [ $i -lt 200 ] && [ -z "$(ls "$T"/d/renders/*/*.exr 2>/dev/null | grep -v part)" ]; do
+  sleep 0.05
+  i=$((i + 1))
+done
 kill -TERM $pid
 wait $pid
 rc=$?
@@ -273,6 +278,13 @@ ok '[ "$(grep -c "^\[" "$T/prog.err")" -ge 1 ] && tail -n 1 "$T/prog.err" | grep
   "patches: a final progress line ($(tail -n 1 "$T/prog.err"))"
 "$DS" patches "$T/r" --size 8 --per-image 5 -o "$T/r/prog.kps" --progress-every 0 > /dev/null 2> "$T/prog.err"
 ok '[ "$(grep -c "^\[[0-9]*/10\] " "$T/prog.err")" -eq 10 ]' "patches --progress-every 0: a line per pair"
+# a store that cannot be written (a file-size limit far below its 430 KB; SIGXFSZ ignored,
+# so writes fail with EFBIG): exit 1 with the system's reason, not a guess, and no temporary
+(trap '' XFSZ; ulimit -f 100 && exec "$DS" patches "$T/r" --size 8 --per-image 5 \
+  -o "$T/r/fsz.kps") > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && grep -q "patch store .*fsz.kps.*: write failed: File too large" "$T/err" &&
+  [ -z "$(ls "$T"/r/fsz.kps* 2> /dev/null)" ]' "patches over a file-size limit: its reason (rc $rc: $(cat "$T/err"))"
 # session 60 (a review of the dataset pipeline): a NUL byte in the manifest cut it short
 # silently, a job listed twice was cut into patches twice, an empty manifest was 0 jobs done,
 # and renders left by an earlier plan (plan --force into the same folder, or a manifest edited
@@ -467,5 +479,105 @@ elif [ -n "$REAL" ]; then
 else
   echo "kpcn-render not built: real render part skipped"
 fi
+# ---- a stop signal during patches and run (docs/dataset.md: "SIGINT or SIGTERM between two
+# pairs stops it with exit 128 + the signal and removes the unfinished store"; the store is
+# written atomically, so a store already at -o stays as it was) ----
+# Input slow enough to be stopped half-way: one plan of 256x256 renders (about 40 ms a pair),
+# seen through 64 dataset directories that link to it (384 pairs, many seconds in all).
+"$DS" plan --scenes "$TD/scenes" --variants 0 --seed 3 --spp 2,4 --ref-spp 128 --no-preview \
+  --resolution 256x256 --split train:cornell-box+cornell-teal+cornell-wide -o "$T/sg" > /dev/null
+FAKE_LOG=/dev/null FAKE_SLEEP=0 "$DS" run "$T/sg" --jobs 2 --renderer "$FAKE" > /dev/null 2>&1
+rc=$?
+ok '[ $rc -eq 0 ]' "signal test: the 256x256 dataset renders (rc $rc)"
+sgdirs=""
+for i in $(seq 64); do
+  mkdir "$T/sg$i"
+  for f in manifest.jsonl plan.json scenes renders; do ln -s "$T/sg/$f" "$T/sg$i/$f"; done
+  sgdirs="$sgdirs $T/sg$i"
+done
+# stop_patches SIG OUT: start patches into OUT, send SIG once the temporary store exists and a
+# first pair is done (the handler is installed by then), wait; sets rc, sp_sent (1 when the
+# signal was sent while patches ran) and sp_err (its stderr)
+stop_patches() {
+  sp_sent=0; sp_err="$T/sig_$1.err"
+  # shellcheck disable=SC2086 # the directories
+  "$DS" patches $sgdirs --size 8 --per-image 2 --progress-every 0 -o "$2" > "$T/sig_$1.out" 2> "$sp_err" &
+  sp_pid=$!
+  for _ in $(seq 400); do # 20 s at most
+    kill -0 $sp_pid 2> /dev/null || break
+    if [ -n "$(ls "$2".tmp.* 2> /dev/null)" ] && grep -q '^\[1/' "$sp_err"; then
+      kill -"$1" $sp_pid && sp_sent=1
+      break
+    fi
+    sleep 0.05
+  done
+  [ $sp_sent -eq 1 ] || kill -KILL $sp_pid 2> /dev/null # never left running
+  wait $sp_pid
+  rc=$?
+}
+stop_patches TERM "$T/sig.kps"
+ok '[ $sp_sent -eq 1 ]' "patches SIGTERM: the signal was sent while patches ran (it had ended or never \
+started writing first: rc $rc, $(tail -n 2 "$sp_err" | tr '\n' '|'))"
+ok '[ $rc -eq 143 ]' "patches stopped by SIGTERM exits 143 (got $rc)"
+ok '[ ! -e "$T/sig.kps" ] && [ -z "$(ls "$T"/sig.kps.* 2> /dev/null)" ]' \
+  "patches SIGTERM: no store and no temporary left ($(cd "$T" && echo sig.kps*))"
+ok 'grep -q "stopped by signal 15 after [0-9]* of 384 pairs; nothing written" "$sp_err" &&
+  ! grep -q "stopped by signal 15 after 384 of" "$sp_err" && [ ! -s "$T/sig_TERM.out" ]' \
+  "patches SIGTERM: stopped half-way, said so, no summary ($(grep stopped "$sp_err"))"
+# SIGINT (^C) with a store already at -o: that store is kept as it was
+cp "$T/r/train.kps" "$T/sig2.kps" && cp "$T/r/train.kps" "$T/sig2.bak"
+stop_patches INT "$T/sig2.kps"
+ok '[ $sp_sent -eq 1 ]' "patches SIGINT: the signal was sent while patches ran (it had ended or never \
+started writing first: rc $rc, $(tail -n 2 "$sp_err" | tr '\n' '|'))"
+ok '[ $rc -eq 130 ]' "patches stopped by SIGINT exits 130 (got $rc)"
+ok 'cmp -s "$T/sig2.kps" "$T/sig2.bak" && [ -z "$(ls "$T"/sig2.kps.* 2> /dev/null)" ]' \
+  "patches SIGINT: the earlier store at -o intact, no temporary left ($(cd "$T" && echo sig2.kps*))"
+ok 'grep -q "stopped by signal 2 after [0-9]* of 384 pairs; nothing written" "$sp_err"' \
+  "patches SIGINT: said so ($(grep stopped "$sp_err"))"
+rm -rf "$T"/sg*
+# A signal during the last pair stops the run too (it used to be noticed only at the top of
+# the next pair, so the store was finished and the exit was 0): three 1024x1024 pairs, the
+# signal sent once the second is done, while the third (about a second) is read.
+"$DS" plan --scenes "$TD/scenes" --variants 0 --seed 3 --spp 2 --ref-spp 128 --no-preview \
+  --resolution 1024x1024 --split train:cornell-box+cornell-teal+cornell-wide -o "$T/sl" > /dev/null
+FAKE_LOG=/dev/null FAKE_SLEEP=0 "$DS" run "$T/sl" --jobs 2 --renderer "$FAKE" > /dev/null 2>&1
+"$DS" patches "$T/sl" --size 8 --per-image 2 --progress-every 0 -o "$T/sl.kps" > /dev/null 2> "$T/sl.err" &
+pid=$!
+sent=0
+for _ in $(seq 400); do # 20 s at most
+  kill -0 $pid 2> /dev/null || break
+  if grep -q '^\[2/3' "$T/sl.err"; then
+    kill -TERM $pid && sent=1
+    break
+  fi
+  sleep 0.02
+done
+[ $sent -eq 1 ] || kill -KILL $pid 2> /dev/null
+wait $pid
+rc=$?
+ok '[ $sent -eq 1 ] && [ $rc -eq 143 ] && [ ! -e "$T/sl.kps" ] && [ -z "$(ls "$T"/sl.kps.* 2> /dev/null)" ]' \
+  "patches SIGTERM during the last pair: exit 143, no store (sent $sent, rc $rc, $(tail -n 1 "$T/sl.err"))"
+ok 'grep -q "stopped by signal 15 after [23] of 3 pairs; nothing written" "$T/sl.err"' "patches SIGTERM during the last pair: said so ($(grep stopped "$T/sl.err"))"
+rm -rf "$T"/sl*
+# run: SIGINT (^C) exits 130 and removes the part files (SIGTERM is checked above)
+"$DS" plan --scenes "$TD/scenes" --variants 0 --seed 3 --spp 2 --ref-spp 128 --no-preview \
+  --split train:cornell-box+cornell-teal+cornell-wide -o "$T/si" > /dev/null
+FAKE_LOG="$T/logsi" FAKE_SLEEP=1 "$DS" run "$T/si" --jobs 2 --renderer "$FAKE" > /dev/null 2>&1 &
+pid=$!
+sent=0
+for _ in $(seq 200); do # 10 s at most: once two renderers run
+  kill -0 $pid 2> /dev/null || break
+  if [ -f "$T/logsi" ] && [ "$(grep -c '^start' "$T/logsi")" -ge 2 ]; then
+    kill -INT $pid && sent=1
+    break
+  fi
+  sleep 0.05
+done
+[ $sent -eq 1 ] || kill -KILL $pid 2> /dev/null
+wait $pid
+rc=$?
+ok '[ $sent -eq 1 ] && [ $rc -eq 130 ]' "a run stopped by SIGINT exits 130 (sent $sent, got $rc)"
+ok '[ -z "$(ls "$T"/si/renders/*/*.part* 2> /dev/null)" ]' "run SIGINT: no part file left"
+
 echo "dataset_tool: $checks checks, $((checks-fails)) passed, $fails failed"
 [ $fails -eq 0 ]

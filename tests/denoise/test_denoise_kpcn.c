@@ -6,8 +6,10 @@
 #include <limits.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "core/internal.h"
+#include "denoise/denoise_internal.h" /* kpcn_tile_budget_bytes */
 #include "kpcn/augment.h"
 #include "kpcn/denoise.h"
 #include "model_fixture.h"
@@ -503,6 +505,166 @@ static void test_ensemble(void) {
   kpcn_model_destroy(m);
 }
 
+/* The automatic tile grid and its memory budget (docs/denoiser.md, "tile"; denoise.h's
+ * kpcn_denoiser_options.tile): the budget is an eighth of the machine's physical memory kept
+ * within [1, 3] GiB, and tile = 0 picks the grid with the least padded area whose largest
+ * padded tile's buffers fit it. Truth, rebuilt here from the documentation: padded tiles are
+ * the (even) core grown by the pad (the overlap plus at least one pixel, rounded up to a
+ * multiple of 8) on each side, as far as the image reaches; a padded pixel costs the features
+ * and colour (noisy and filtered, four planes each) in float, two hidden activations and the
+ * logits (channels rounded up to 16) in float, or in bf16 for a bf16 net, which also holds a
+ * bf16 copy of its input (kpcn_pipeline.c's estimate). The grid is read from the stats of an
+ * execute on a 3840x2160 frame cancelled at its first progress call (before any network is
+ * built: the stats already hold the grid).
+ * "Fits" is taken as the grid search takes it: every tile bounded by its core plus a pad on
+ * both sides and one pixel for the even origin (clipped to the image). A grid whose largest
+ * padded tile fits only because its edge tiles are padded on one side (or by that pixel) is
+ * passed over, so on some memory sizes the literal "least padded area whose largest padded
+ * tile fits" would be up to ~2 % less padding (printed below when it is, not checked). */
+static int g_progress_calls;
+static int cancel_first(void *u, double f) {
+  (void)u;
+  (void)f;
+  g_progress_calls++;
+  return 1;
+}
+
+/* Sum of padded extents and the largest padded extent of cores of size t along n pixels. */
+static void padded_axis(int n, int t, int pad, double *sum, int *maxext) {
+  *sum = 0;
+  *maxext = 0;
+  for (int c0 = 0; c0 < n; c0 += t) {
+    const int c1 = c0 + t < n ? c0 + t : n;
+    const int p0 = c0 - pad > 0 ? (c0 - pad) & ~1 : 0, p1 = c1 + pad < n ? c1 + pad : n;
+    *sum += p1 - p0;
+    if (p1 - p0 > *maxext) *maxext = p1 - p0;
+  }
+}
+
+static void test_tile_budget(void) {
+  /* the budget: exactly clamp(pages * page size / 8, 1 GiB, 3 GiB) (the implementation's
+   * sysconf), and /proc/meminfo's MemTotal agrees to within a page */
+  const long pages = sysconf(_SC_PHYS_PAGES), psz = sysconf(_SC_PAGESIZE);
+  CHECK(pages > 0 && psz > 0);
+  const uint64_t gib = 1073741824ull, mem = (uint64_t)pages * (uint64_t)psz;
+  uint64_t want = mem / 8;
+  want = want < gib ? gib : want > 3 * gib ? 3 * gib : want;
+  const size_t budget = kpcn_tile_budget_bytes();
+  CHECK((uint64_t)budget == want);
+  FILE *mi = fopen("/proc/meminfo", "r");
+  if (mi) {
+    unsigned long long kb = 0;
+    char line[256];
+    while (fgets(line, sizeof line, mi))
+      if (sscanf(line, "MemTotal: %llu kB", &kb) == 1) break;
+    fclose(mi);
+    uint64_t m2 = (uint64_t)kb * 1024 / 8;
+    m2 = m2 < gib ? gib : m2 > 3 * gib ? 3 * gib : m2;
+    CHECK(kb > 0 && (m2 > budget ? m2 - budget : budget - m2) <= (uint64_t)psz);
+  }
+  printf("tile budget: %.3f GiB (physical memory %.2f GiB)\n", (double)budget / (double)gib,
+         (double)mem / (double)gib);
+
+  const int W = 3840, H = 2160;
+  kpcn_aov_set *a = synth_aov(W, H, 3);
+  float *out = malloc(sizeof(float) * 3 * (size_t)W * H);
+  CHECK(a && out);
+  const char *presets[2] = {"paper", "cpu"};
+  for (int p = 0; a && out && p < 2; p++)
+    for (int bf16 = 0; bf16 < 2; bf16++) {
+      kpcn_arch arch;
+      kpcn_model *m = NULL;
+      CHECK(kpcn_arch_preset(presets[p], &arch) == KPCN_OK);
+      CHECK(kpcn_features_set_arch(&arch) == KPCN_OK);
+      CHECK(kpcn_model_create(&arch, 7, &m) == KPCN_OK);
+      if (!m) continue;
+      const int overlap = kpcn_denoise_tile_overlap(&arch);
+      const int pad = (overlap + 1 + 7) / 8 * 8; /* >= overlap + 1, a multiple of 8 */
+      const size_t es = bf16 ? 2 : 4;
+      const size_t bpp = 4 * (KPCN_FEATURES_COUNT + 4 + 4) + 2 * (size_t)arch.channels * es +
+                         (((size_t)kpcn_arch_logit_channels(&arch) + 15) / 16 * 16) * es +
+                         (bf16 ? 2 * KPCN_FEATURES_COUNT : 0);
+      kpcn_denoiser_options o;
+      kpcn_denoiser_options_defaults(&o);
+      o.tile = 0;
+      o.bf16 = bf16;
+      o.firefly = 0.0f; /* no copy of the frame's buffers: the grid does not depend on it */
+      o.nthreads = 2;
+      kpcn_denoiser *d = NULL;
+      CHECK(kpcn_denoiser_create_with_model(&d, m, &o) == KPCN_OK);
+      if (!d) {
+        kpcn_model_destroy(m);
+        continue;
+      }
+      kpcn_denoiser_set_progress(d, cancel_first, NULL);
+      g_progress_calls = 0;
+      CHECK(kpcn_denoiser_execute_aov(d, a, out) == KPCN_ERR_CANCELLED);
+      kpcn_denoise_stats st;
+      kpcn_denoiser_get_stats(d, &st);
+      CHECK(g_progress_calls == 1 && st.tiles == 0 && st.nets_created == 0);
+      const int tw = st.tile_w, th = st.tile_h;
+      CHECK(tw > 0 && th > 0 && tw % 2 == 0 && th % 2 == 0);
+      if (!(tw > 0 && th > 0)) {
+        kpcn_denoiser_destroy(d);
+        kpcn_model_destroy(m);
+        continue;
+      }
+      double sx, sy;
+      int mx, my;
+      padded_axis(W, tw, pad, &sx, &mx);
+      padded_axis(H, th, pad, &sy, &my);
+      CHECK(st.tiles_total == ((W + tw - 1) / tw) * ((H + th - 1) / th));
+      const double chosen = sx * sy, chosen_bytes = (double)mx * my * (double)bpp;
+      /* within the budget, and not one piece (which the frame cannot be: the test is void
+       * otherwise) */
+      CHECK(chosen_bytes <= (double)budget);
+      CHECK((double)W * H * (double)bpp > (double)budget && st.tiles_total > 1);
+      /* no grid of even cores with less padded area fits the budget (bounding each tile by
+       * core + 2 pad + 1, above); `literal` bounds it by its true largest padded tile */
+      double best = -1, literal = -1;
+      int bx = 0, by = 0;
+      double *ax = malloc(sizeof(double) * (W / 2 + 1));
+      int *axm = malloc(sizeof(int) * (W / 2 + 1));
+      for (int t = 2; t <= W; t += 2)
+        padded_axis(W, t, pad, &ax[t / 2], &axm[t / 2]);
+      for (int ty = 2; ty <= H; ty += 2) {
+        double syy;
+        int myy;
+        padded_axis(H, ty, pad, &syy, &myy);
+        const double bound_y = ty + 2 * pad + 1 < H ? ty + 2 * pad + 1 : H;
+        for (int t = 2; t <= W; t += 2) {
+          const double area = ax[t / 2] * syy, bound_x = t + 2 * pad + 1 < W ? t + 2 * pad + 1 : W;
+          if ((double)axm[t / 2] * myy * (double)bpp <= (double)budget &&
+              (literal < 0 || area < literal))
+            literal = area;
+          if (bound_x * bound_y * (double)bpp > (double)budget) continue;
+          if (best < 0 || area < best) best = area, bx = t, by = ty;
+        }
+      }
+      free(ax);
+      free(axm);
+      CHECK(best > 0 && chosen <= best);
+      if (literal > 0 && literal < chosen)
+        printf("  (%s %s: a grid whose true largest padded tile fits has %.2f %% less padded "
+               "area)\n",
+               presets[p], bf16 ? "bf16" : "fp32", 100.0 * (1.0 - literal / chosen));
+      if (!(chosen <= best) || !(chosen_bytes <= (double)budget))
+        fprintf(stderr,
+                "  %s %s: grid %dx%d tiles of %dx%d (padded area %.0f, largest padded tile %d x %d "
+                "= %.0f bytes); least padded area that fits: %dx%d tiles (%.0f)\n",
+                presets[p], bf16 ? "bf16" : "fp32", (W + tw - 1) / tw, (H + th - 1) / th, tw, th,
+                chosen, mx, my, chosen_bytes, bx, by, best);
+      printf("%s %s 3840x2160: %d tiles of %dx%d, largest padded tile %.0f MiB of %.0f, %.1f %% "
+             "padding\n",
+             presets[p], bf16 ? "bf16" : "fp32", st.tiles_total, tw, th, chosen_bytes / 1048576.0,
+             (double)budget / 1048576.0, 100.0 * (chosen / ((double)W * H) - 1.0));
+      kpcn_denoiser_destroy(d);
+      kpcn_model_destroy(m);
+    }
+  free(out);
+  kpcn_aov_destroy(a);
+}
+
 int main(void) {
   test_reference_and_tiling(1, 0);
   test_reference_and_tiling(2, 0);
@@ -512,5 +674,6 @@ int main(void) {
   test_reuse_between_executes();
   test_api();
   test_ensemble();
+  test_tile_budget();
   return kt_summary("test_denoise_kpcn");
 }

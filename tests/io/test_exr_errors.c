@@ -1,10 +1,13 @@
 /* Bad input to the EXR reader/writer: missing, garbage, truncated and corrupted files, absurd
- * header sizes, failing writes (which must leave neither a partial file nor a temp file). */
+ * header sizes, failing writes (which must leave neither a partial file nor a temp file);
+ * files the reader refuses by design (deep, subsampled channels) or converts (uint, half),
+ * written here at test time with OpenEXR Core from raw uncompressed chunks. */
 #include "kpcn/exr.h"
 
 #include "testutil.h"
 
 #include <dirent.h>
+#include <openexr.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -61,6 +64,242 @@ static void expect_read_fails(const char *path, const char *tag, int header_ok) 
   kpcn_exr_info_t info;
   s = kpcn_exr_info(path, &info);
   if (!header_ok) CHECK(s != KPCN_OK && strstr(kpcn_last_error(), path));
+}
+
+/* ---- EXR files written at test time with OpenEXR Core (no committed binaries) ----
+ * Uncompressed chunks are laid out by hand (a scanline chunk holds, per line, each channel in
+ * name order, a subsampled channel only on lines y % ys == 0 and with w / xs values), so the
+ * files do not depend on kpcn's writer. Checked once by hand against independent readers:
+ * OpenEXR's C++ InputFile (with xSampling/ySampling slices) read the subsampled files with
+ * the values written here; OpenImageIO 2.4 read the deep ones as deep with the sample counts
+ * and values written here, the mixed-type one with these values (uint divided by 2^32 - 1),
+ * and refuses the subsampled ones, as kpcn does. */
+typedef struct gen_channel {
+  const char *name;
+  exr_pixel_type_t type;
+  int xs, ys;
+} gen_channel;
+
+/* half bit patterns and the floats they are; uint values and the nearest floats (above 2^24
+ * a uint is not a float: it becomes the nearest one, as a C conversion gives) */
+static const uint16_t k_half_bits[8] = {0x0000, 0x3c00, 0xb800, 0x4900,
+                                        0x0001, 0x7bff, 0x7c00, 0x8000};
+static const float k_half_vals[8] = {0.0f, 1.0f, -0.5f, 10.0f, 0x1p-24f, 65504.0f, INFINITY, -0.0f};
+static const uint32_t k_uints[8] = {0u,        1u,        7u,          65535u,
+                                    16777216u, 16777217u, 2147483649u, 4294967295u};
+
+/* The value channel c holds at (x, y) (sample coordinates of a subsampled channel), as the
+ * float the reader should give; its bytes in the file go to `bytes` (when non-NULL). */
+static float gen_value(const gen_channel *ch, int c, int x, int y, unsigned char *bytes) {
+  const int k = (x + 3 * y + c) & 7;
+  if (ch->type == EXR_PIXEL_HALF) {
+    if (bytes) memcpy(bytes, &k_half_bits[k], 2); /* little-endian host, as EXR */
+    return k_half_vals[k];
+  }
+  if (ch->type == EXR_PIXEL_UINT) {
+    if (bytes) memcpy(bytes, &k_uints[k], 4);
+    return (float)k_uints[k];
+  }
+  const float f = -0.125f - (float)(100 * c + 10 * y + x);
+  if (bytes) memcpy(bytes, &f, 4);
+  return f;
+}
+
+static void gen_error(exr_const_context_t ctxt, exr_result_t code, const char *msg) {
+  (void)ctxt;
+  fprintf(stderr, "  OpenEXR (generator): %s (%d)\n", msg ? msg : "", (int)code);
+}
+
+/* Starts a one-part file of w x h, no compression, with the channels (given in name order). */
+static exr_context_t gen_start(const char *path, exr_storage_t storage, int w, int h,
+                               const gen_channel *ch, int nch) {
+  exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+  init.error_handler_fn = gen_error;
+  exr_context_t ctx = NULL;
+  int part = -1;
+  int ok =
+      exr_start_write(&ctx, path, EXR_WRITE_FILE_DIRECTLY, &init) == EXR_ERR_SUCCESS &&
+      exr_add_part(ctx, "", storage, &part) == EXR_ERR_SUCCESS &&
+      exr_initialize_required_attr_simple(ctx, part, w, h, EXR_COMPRESSION_NONE) == EXR_ERR_SUCCESS;
+  for (int c = 0; ok && c < nch; c++)
+    ok = exr_add_channel(ctx, part, ch[c].name, ch[c].type, EXR_PERCEPTUALLY_LINEAR, ch[c].xs,
+                         ch[c].ys) == EXR_ERR_SUCCESS;
+  if (ok && storage == EXR_STORAGE_DEEP_TILED)
+    ok = exr_set_tile_descriptor(ctx, part, (uint32_t)w, (uint32_t)h, EXR_TILE_ONE_LEVEL,
+                                 EXR_TILE_ROUND_DOWN) == EXR_ERR_SUCCESS; /* one tile */
+  if (ok && (storage == EXR_STORAGE_DEEP_SCANLINE || storage == EXR_STORAGE_DEEP_TILED))
+    ok = exr_set_version(ctx, part, 1) == EXR_ERR_SUCCESS;
+  if (ok) ok = exr_write_header(ctx) == EXR_ERR_SUCCESS;
+  if (!ok) exr_finish(&ctx);
+  return ok ? ctx : NULL;
+}
+
+/* A scanline file whose channels may be subsampled and of any pixel type. */
+static int gen_scanline(const char *path, int w, int h, const gen_channel *ch, int nch) {
+  exr_context_t ctx = gen_start(path, EXR_STORAGE_SCANLINE, w, h, ch, nch);
+  if (!ctx) return 0;
+  unsigned char line[4096];
+  int ok = 1;
+  for (int y = 0; ok && y < h; y++) {
+    size_t n = 0;
+    for (int c = 0; c < nch; c++) {
+      if (y % ch[c].ys) continue;
+      for (int x = 0; x < w / ch[c].xs; x++) {
+        gen_value(&ch[c], c, x, y / ch[c].ys, line + n);
+        n += ch[c].type == EXR_PIXEL_HALF ? 2 : 4;
+      }
+    }
+    ok = exr_write_scanline_chunk(ctx, 0, y, line, n) == EXR_ERR_SUCCESS;
+  }
+  return exr_finish(&ctx) == EXR_ERR_SUCCESS && ok;
+}
+
+/* A deep file (scanline, or one tile) of w x h <= 8x8 with one float channel Z: pixel (x, y)
+ * holds (x + y) % 3 samples. The sample counts are stored cumulative along a chunk's line (a
+ * tile's restart on each of its rows). */
+static int gen_deep(const char *path, int tiled, int w, int h) {
+  const gen_channel z = {"Z", EXR_PIXEL_FLOAT, 1, 1};
+  exr_context_t ctx =
+      gen_start(path, tiled ? EXR_STORAGE_DEEP_TILED : EXR_STORAGE_DEEP_SCANLINE, w, h, &z, 1);
+  if (!ctx) return 0;
+  int32_t counts[64];
+  float data[128];
+  int ok = 1, np = 0, ns = 0;
+  for (int y = 0; y < h; y++) {
+    if (!tiled) np = ns = 0;
+    int row = 0;
+    for (int x = 0; x < w; x++) {
+      for (int s = 0; s < (x + y) % 3; s++, row++)
+        data[ns++] = (float)(100 * y + 10 * x + s);
+      counts[np++] = row;
+    }
+    if (!tiled)
+      ok = ok && exr_write_deep_scanline_chunk(ctx, 0, y, data, sizeof(float) * (size_t)ns,
+                                               sizeof(float) * (size_t)ns, counts,
+                                               sizeof(int32_t) * (size_t)np) == EXR_ERR_SUCCESS;
+  }
+  if (tiled)
+    ok = exr_write_deep_tile_chunk(ctx, 0, 0, 0, 0, 0, data, sizeof(float) * (size_t)ns,
+                                   sizeof(float) * (size_t)ns, counts,
+                                   sizeof(int32_t) * (size_t)np) == EXR_ERR_SUCCESS;
+  return exr_finish(&ctx) == EXR_ERR_SUCCESS && ok;
+}
+
+/* Every reader entry point refuses `path` as unsupported, naming it and `why`; *out stays
+ * NULL (and ASan in CI sees nothing leaked on the way). */
+static void expect_unsupported(const char *path, const char *why) {
+  kpcn_image *img = (kpcn_image *)1;
+  CHECK(kpcn_exr_read_image(path, &img) == KPCN_ERR_UNSUPPORTED && img == NULL);
+  const char *e = kpcn_last_error();
+  CHECK(strstr(e, path) != NULL && strstr(e, why) != NULL);
+  if (!strstr(e, path) || !strstr(e, why))
+    fprintf(stderr, "  %s: want '%s' in '%s'\n", path, why, e);
+  img = (kpcn_image *)1;
+  CHECK(kpcn_exr_read_image_mt(path, 2, &img) == KPCN_ERR_UNSUPPORTED && img == NULL);
+  kpcn_aov_set *set = (kpcn_aov_set *)1;
+  CHECK(kpcn_exr_read_aov(path, &set) == KPCN_ERR_UNSUPPORTED && set == NULL);
+  CHECK(strstr(kpcn_last_error(), path) != NULL && strstr(kpcn_last_error(), why) != NULL);
+  set = (kpcn_aov_set *)1;
+  CHECK(kpcn_exr_read_aov_mt(path, 1, &set) == KPCN_ERR_UNSUPPORTED && set == NULL);
+  expect_read_fails(path, why, 1);
+}
+
+/* exr.h / aov-exr.md: "subsampled channels (x/y sampling != 1) and deep files give
+ * KPCN_ERR_UNSUPPORTED", every message naming the file. The same generator with 1x1 sampling
+ * makes a file the reader takes, value for value, so the refusals are the sampling's. */
+static void test_deep_and_subsampled(void) {
+  const int w = 8, h = 4;
+  gen_channel ch[2] = {{"A", EXR_PIXEL_FLOAT, 1, 1}, {"C", EXR_PIXEL_FLOAT, 1, 1}};
+  const char *plain = kt_tmpfile("sampling_1x1.exr");
+  CHECK(gen_scanline(plain, w, h, ch, 2));
+  kpcn_image *img = NULL;
+  CHECK(kpcn_exr_read_image(plain, &img) == KPCN_OK);
+  if (img) {
+    CHECK(img->width == w && img->height == h && img->nchannels == 2);
+    int bad = 0;
+    for (int c = 0; c < 2 && img->nchannels == 2; c++)
+      for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++)
+          bad += img->data[((size_t)c * h + y) * w + x] != gen_value(&ch[c], c, x, y, NULL);
+    CHECK(bad == 0 && strcmp(img->names[0], "A") == 0 && strcmp(img->names[1], "C") == 0);
+    kpcn_image_destroy(img);
+  }
+  const int samp[3][2] = {{2, 2}, {2, 1}, {1, 2}};
+  for (int k = 0; k < 3; k++) {
+    ch[1].xs = samp[k][0];
+    ch[1].ys = samp[k][1];
+    char name[64], why[64];
+    snprintf(name, sizeof name, "sampling_%dx%d.exr", ch[1].xs, ch[1].ys);
+    snprintf(why, sizeof why, "channel 'C' is subsampled (%dx%d)", ch[1].xs, ch[1].ys);
+    const char *path = kt_tmpfile(name);
+    CHECK(gen_scanline(path, w, h, ch, 2));
+    expect_unsupported(path, why);
+  }
+  for (int tiled = 0; tiled < 2; tiled++) {
+    const char *path = kt_tmpfile(tiled ? "deep_tiled.exr" : "deep_scanline.exr");
+    CHECK(gen_deep(path, tiled, 5, 3));
+    expect_unsupported(path, "deep EXR files are not supported");
+  }
+}
+
+/* exr.h: "half/float/uint channels are all converted to float32"; aov-exr.md: "a uint keeps
+ * its integer value" (OIIO divides by 2^32 - 1; test_exr_oiio reads oiiotool's uint file).
+ * Here uint values across the whole range (exact up to 2^24, the nearest float above), half
+ * values including a denormal, 65504, +inf and -0, and floats, mixed in one chunk (each
+ * channel's bytes at its own offset), through the image and the AOV reader. */
+static void test_uint_and_half(void) {
+  const int w = 7, h = 5;
+  const gen_channel ch[5] = {{"B", EXR_PIXEL_UINT, 1, 1},
+                             {"G", EXR_PIXEL_HALF, 1, 1},
+                             {"R", EXR_PIXEL_FLOAT, 1, 1},
+                             {"Z", EXR_PIXEL_UINT, 1, 1},
+                             {"Z.var", EXR_PIXEL_HALF, 1, 1}};
+  const char *path = kt_tmpfile("mixed_types.exr");
+  CHECK(gen_scanline(path, w, h, ch, 5));
+  kpcn_exr_info_t info;
+  CHECK(kpcn_exr_info(path, &info) == KPCN_OK);
+  CHECK(info.nchannels == 5 && info.channel_is_half[0] == 2 && info.channel_is_half[1] == 1 &&
+        info.channel_is_half[2] == 0 && info.channel_is_half[3] == 2);
+  kpcn_image *img = NULL;
+  CHECK(kpcn_exr_read_image_mt(path, 3, &img) == KPCN_OK);
+  if (img) {
+    int bad = 0, misnamed = 0;
+    for (int c = 0; c < 5; c++) {
+      const int p = kpcn_image_find_channel(img, ch[c].name);
+      misnamed += p < 0;
+      for (int y = 0; p >= 0 && y < h; y++)
+        for (int x = 0; x < w; x++) {
+          const float got = kpcn_image_plane(img, p)[(size_t)y * w + x];
+          const float want = gen_value(&ch[c], c, x, y, NULL);
+          /* bit for bit: -0 stays -0 */
+          bad += memcmp(&got, &want, sizeof got) != 0;
+          if (memcmp(&got, &want, sizeof got) != 0 && bad <= 3)
+            fprintf(stderr, "  %s (%d,%d): %.9g, want %.9g\n", ch[c].name, x, y, got, want);
+        }
+    }
+    CHECK(img->width == w && img->height == h && img->nchannels == 5);
+    CHECK(misnamed == 0 && bad == 0);
+    kpcn_image_destroy(img);
+  }
+  kpcn_aov_set *set = NULL;
+  CHECK(kpcn_exr_read_aov(path, &set) == KPCN_OK);
+  if (set) {
+    const size_t P = (size_t)w * h;
+    CHECK(set->buf[KPCN_BUF_COLOR] && set->buf[KPCN_BUF_DEPTH] && set->var[KPCN_BUF_DEPTH]);
+    int bad = 0;
+    for (int y = 0; set->buf[KPCN_BUF_COLOR] && set->buf[KPCN_BUF_DEPTH] && y < h; y++)
+      for (int x = 0; x < w; x++) {
+        const size_t i = (size_t)y * w + x;
+        bad += set->buf[KPCN_BUF_COLOR][0 * P + i] != gen_value(&ch[2], 2, x, y, NULL); /* R */
+        bad += set->buf[KPCN_BUF_COLOR][1 * P + i] != gen_value(&ch[1], 1, x, y, NULL); /* G */
+        bad += set->buf[KPCN_BUF_COLOR][2 * P + i] != gen_value(&ch[0], 0, x, y, NULL); /* B */
+        bad += set->buf[KPCN_BUF_DEPTH][i] != gen_value(&ch[3], 3, x, y, NULL);
+        if (set->var[KPCN_BUF_DEPTH])
+          bad += set->var[KPCN_BUF_DEPTH][i] != gen_value(&ch[4], 4, x, y, NULL);
+      }
+    CHECK(bad == 0);
+    kpcn_aov_destroy(set);
+  }
 }
 
 static void test_missing_and_garbage(void) {
@@ -246,5 +485,7 @@ int main(void) {
   test_truncated();
   test_absurd_header();
   test_atomic_writes();
+  test_deep_and_subsampled();
+  test_uint_and_half();
   return kt_summary("test_exr_errors");
 }

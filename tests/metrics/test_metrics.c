@@ -306,6 +306,92 @@ static void test_nonfinite(void) {
   free(x), free(y), free(map);
 }
 
+/* metrics.md, "Channels" / "Non-finite values": SSIM averages only its interior (5 pixels in
+ * from each edge), so an 11x11 image with a NaN (or Inf) centre has no valid SSIM pixel and
+ * fails SSIM alone (KPCN_ERR_NONFINITE), while the pointwise metrics average the other 120
+ * pixels; one more column (two interior pixels, one finite) is an ordinary SSIM of that one
+ * pixel. And a figure beyond double range (relMSE / relL1 at eps = 1e-320 with a black
+ * reference pixel: 1 / 1e-320) is +inf, a success, as PSNR of equal images is (kpcntool prints
+ * both as JSON null; cli_metrics.sh). */
+static void test_ssim_nan_centre_and_overflow(void) {
+  const int nch = 3;
+  float *x = malloc(sizeof(float) * 12 * 11 * nch), *y = malloc(sizeof(float) * 12 * 11 * nch);
+  float *map = malloc(sizeof(float) * 12 * 11 * nch);
+  kpcn_metric_options o;
+  kpcn_metric_options_defaults(&o);
+  kpcn_metric_result r;
+  for (int k = 0; k < 3; k++) { /* NaN in x, +Inf in y, -Inf in x: the centre (5, 5) */
+    const int w = 11, h = 11;
+    const size_t n = (size_t)w * h;
+    synthetic(w, h, nch, 21 + k, 1.0f, x, y);
+    const size_t ctr = 5 * (size_t)w + 5;
+    if (k == 0) x[0 * n + ctr] = NAN;
+    if (k == 1) y[2 * n + ctr] = INFINITY;
+    if (k == 2) x[1 * n + ctr] = -INFINITY;
+    for (int m = 0; m < KPCN_METRIC_COUNT; ++m) {
+      for (int withmap = 0; withmap < 2; withmap++) { /* without and with an error map */
+        const kpcn_status s =
+            kpcn_metric_planar((kpcn_metric)m, x, y, w, h, nch, &o, &r, withmap ? map : NULL);
+        if (m == KPCN_METRIC_SSIM) {
+          CHECK(s == KPCN_ERR_NONFINITE);
+          CHECK(strstr(kpcn_last_error(), "ssim") != NULL);
+          CHECK(r.nonfinite == 1 && r.npixels == 0 && !isfinite(r.value));
+        } else {
+          CHECK(s == KPCN_OK);
+          CHECK(r.nonfinite == 1 && r.npixels == (int64_t)n - 1);
+          CHECK_CLOSE(r.value, naive_pointwise((kpcn_metric)m, x, y, w, h, nch, 0, 1.0), 1e-12, 0);
+          if (withmap) CHECK(isnan(map[ctr]) && isnan(map[2 * n + ctr]) && !isnan(map[ctr + 1]));
+        }
+      }
+    }
+  }
+  /* 12 wide or 12 high: the interior is (5,5) and one more pixel, which is finite */
+  const int sizes[2][2] = {{12, 11}, {11, 12}};
+  for (int k = 0; k < 2; k++) {
+    const int w = sizes[k][0], h = sizes[k][1];
+    const size_t n = (size_t)w * h;
+    synthetic(w, h, nch, 31 + k, 1.0f, x, y);
+    x[0 * n + 5 * (size_t)w + 5] = NAN;
+    CHECK(kpcn_metric_planar(KPCN_METRIC_SSIM, x, y, w, h, nch, &o, &r, NULL) == KPCN_OK);
+    CHECK(r.nonfinite == 1 && r.npixels == 1);
+    CHECK_CLOSE(r.value, naive_ssim(x, y, w, h, nch, 0, 1.0, NULL), 1e-9, 1e-12);
+  }
+  /* eps = 1e-320 (a denormal, so > 0 and accepted): a black reference pixel against a
+   * non-black one is 1 / 1e-320 = +inf, beyond double range; elsewhere it is negligible */
+  {
+    const int w = 11, h = 11;
+    const size_t n = (size_t)w * h;
+    synthetic(w, h, 1, 41, 1.0f, x, y);
+    for (size_t i = 0; i < n; i++) /* away from 0, so every other term is finite */
+      x[i] = 0.5f + 0.25f * fabsf(x[i]), y[i] = 0.25f + 0.25f * fabsf(y[i]);
+    o.eps = 1e-320;
+    CHECK(o.eps > 0.0);
+    double want[2] = {0, 0};
+    for (size_t i = 0; i < n; i++) {
+      const double d = (double)x[i] - y[i];
+      want[0] += d * d / ((double)y[i] * y[i] + 1e-320);
+      want[1] += fabs(d) / (fabs((double)y[i]) + 1e-320);
+    }
+    const kpcn_metric rel[2] = {KPCN_METRIC_RELMSE, KPCN_METRIC_RELL1};
+    for (int j = 0; j < 2; j++) {
+      CHECK(kpcn_metric_planar(rel[j], x, y, w, h, 1, &o, &r, NULL) == KPCN_OK);
+      CHECK(isfinite(want[j]));
+      CHECK_CLOSE(r.value, want[j] / (double)n, 1e-12, 0);
+    }
+    y[17] = 0.0f; /* x[17] = 0.5 or more */
+    for (int j = 0; j < 2; j++) {
+      const kpcn_status s = kpcn_metric_planar(rel[j], x, y, w, h, 1, &o, &r, NULL);
+      CHECK(s == KPCN_OK);
+      if (s != KPCN_OK)
+        fprintf(stderr, "  %s at eps 1e-320: %s\n", kpcn_metric_name(rel[j]), kpcn_last_error());
+      CHECK(isinf(r.value) && r.value > 0);
+      CHECK(r.nonfinite == 0 && r.npixels == (int64_t)n);
+    }
+    o.eps = 0.01;
+  }
+  free(x), free(y), free(map);
+}
+
 /* Same bits for 1, 2, 3 and 7 threads (fixed-order reductions). */
 static void test_determinism(void) {
   int w = 601, h = 131, nch = 3; /* 3 column strips x 3 row blocks for SSIM */
@@ -465,6 +551,7 @@ int main(void) {
   test_reference();
   test_errormaps();
   test_nonfinite();
+  test_ssim_nan_centre_and_overflow();
   test_determinism();
   test_large_values();
   test_image_form_and_errors();

@@ -3,7 +3,9 @@
 # store's training images; same weights; bad inputs named, no output file. --set-eps: the
 # same weights with another demodulation epsilon; set back, the original function bit for bit.
 # --graft: one branch from another model, mismatches named. --freeze: usage and provenance.
-# --firefly: bad ratios named.
+# --firefly: bad ratios named. --time-limit: exit 0, model and checkpoint, bit-exact resume.
+# A periodic checkpoint that cannot be written (full disk, file-size limit): exit 1, named,
+# nothing half-written.
 # usage: test_train_cli.sh KPCN_TRAIN KPCNTOOL TESTDATA
 set -u
 K=$1; T=$2; TD=$3
@@ -283,4 +285,159 @@ wait $pid
 rc=$?
 [ $rc -eq 143 ] || fail "SIGTERM: exit $rc, not 143: $(cat "$D/err")"
 [ -e "$D/s.safetensors" ] && [ -e "$D/s.safetensors.ckpt" ] || fail "SIGTERM: no model or checkpoint: $(ls "$D")"
+# --- checkpoint helpers for the sections below. st_cmp same A B: two safetensors files (models
+# or checkpoints) are equal bit for bit but for the wall-clock metadata (train.seconds,
+# train.elapsed_s: docs/training.md, "Determinism"); st_cmp weights MODEL CKPT: every tensor
+# of the model is in the checkpoint with the same bytes; st_cmp meta FILE KEY prints a
+# metadata value
+st_cmp() {
+  /usr/bin/python3 - "$@" <<'PYEOF'
+import json, struct, sys
+def load(p):
+    b = open(p, "rb").read()
+    n = struct.unpack("<Q", b[:8])[0]
+    return json.loads(b[8:8 + n]), b[8 + n:]
+mode, a = sys.argv[1], sys.argv[2]
+ha, da = load(a)
+if mode == "meta":
+    print(ha.get("__metadata__", {}).get(sys.argv[3], ""))
+    sys.exit(0)
+hb, db = load(sys.argv[3])
+if mode == "same":
+    wall = ("train.seconds", "train.elapsed_s")
+    ma = {k: v for k, v in ha.pop("__metadata__", {}).items() if k not in wall}
+    mb = {k: v for k, v in hb.pop("__metadata__", {}).items() if k not in wall}
+    for k in sorted(set(ma) | set(mb)):
+        if ma.get(k) != mb.get(k):
+            sys.exit("metadata %s: %r against %r" % (k, ma.get(k), mb.get(k)))
+    if ha != hb:
+        sys.exit("tensor lists differ")
+    if da != db:
+        bad = [k for k, e in ha.items()
+               if da[e["data_offsets"][0]:e["data_offsets"][1]] != db[e["data_offsets"][0]:e["data_offsets"][1]]]
+        sys.exit("tensor data differ: %s" % ", ".join(bad[:5]))
+elif mode == "weights":
+    for k, e in ha.items():
+        if k == "__metadata__":
+            continue
+        if k not in hb:
+            sys.exit("tensor %s is not in %s" % (k, sys.argv[3]))
+        (a0, a1), (b0, b1) = e["data_offsets"], hb[k]["data_offsets"]
+        if da[a0:a1] != db[b0:b1]:
+            sys.exit("tensor %s differs from the checkpoint's" % k)
+PYEOF
+}
+# tiny runs on the store above; the same thread count everywhere (determinism holds for one)
+tr_run() { "$K" --store "$D/p.kps" --preset tiny --batch 2 --patch 16 --plot '' --threads 2 "$@"; }
+# --time-limit MINUTES (checked before each iteration): a run it stops exits 0 (the run's plan,
+# not a failure) and writes the checkpoint and the model so far (a valid model: it denoises,
+# and its weights are the checkpoint's); --resume continues from there, and the result equals
+# the uninterrupted run of the same --iters bit for bit: model, checkpoint, and the CSV's
+# iter/stage/lr/loss columns. The limit is 0.002 minutes (0.12 s): where it stops varies
+# with the machine, so only 0 < stop < iters is asked, and the iteration 2000 it runs to
+# lies past it on any machine (this one does 2000 iterations in about 1 s)
+tr_run --iters 2000 -o "$D/tl.safetensors" --time-limit 0.002 2>"$D/log"
+rc=$?
+[ $rc -eq 0 ] || fail "--time-limit stop: exit $rc, not 0: $(cat "$D/log")"
+stop=$(sed -n 's/.*time limit reached at iteration \([0-9]*\): checkpointing$/\1/p' "$D/log")
+[ -n "$stop" ] && [ "$stop" -gt 0 ] && [ "$stop" -lt 2000 ] ||
+  fail "--time-limit 0.002 did not stop the run between iterations 1 and 1999: $(cat "$D/log")"
+grep -qF "stopped at iteration $stop; model '$D/tl.safetensors' (resume with --resume)" "$D/log" ||
+  fail "--time-limit stop line: $(cat "$D/log")"
+[ -e "$D/tl.safetensors" ] && [ -e "$D/tl.safetensors.ckpt" ] ||
+  fail "--time-limit: no model or checkpoint: $(ls "$D")"
+[ "$(st_cmp meta "$D/tl.safetensors.ckpt" train.iteration)" = "$stop" ] ||
+  fail "--time-limit: checkpoint at iteration $(st_cmp meta "$D/tl.safetensors.ckpt" train.iteration), stopped at $stop"
+[ "$(st_cmp meta "$D/tl.safetensors" train.iterations)" = "$stop" ] ||
+  fail "--time-limit: model records $(st_cmp meta "$D/tl.safetensors" train.iterations) iterations, stopped at $stop"
+# not before the limit: 0.002 minutes are 0.12 s of training time
+el=$(st_cmp meta "$D/tl.safetensors.ckpt" train.elapsed_s)
+awk -v e="$el" 'BEGIN { exit !(e >= 0.12) }' || fail "--time-limit 0.002 (minutes) stopped after $el s"
+st_cmp weights "$D/tl.safetensors" "$D/tl.safetensors.ckpt" || fail "--time-limit: the model is not the checkpoint's"
+"$T" "$N" --denoise:model="$D/tl.safetensors" -o "$D/tl.exr" || fail "the --time-limit model does not denoise"
+# the same options with --resume (a time limit it does not reach) end where the uninterrupted
+# run ends
+tr_run --iters 2000 -o "$D/tl.safetensors" --time-limit 10 --resume 2>"$D/log" ||
+  fail "--resume after --time-limit: $(cat "$D/log")"
+grep -qF "finished at iteration 2000; model '$D/tl.safetensors'" "$D/log" || fail "resume did not finish: $(cat "$D/log")"
+tr_run --iters 2000 -o "$D/tu.safetensors" 2>"$D/log" || fail "2000 iterations: $(cat "$D/log")"
+st_cmp same "$D/tu.safetensors" "$D/tl.safetensors" ||
+  fail "stopped by --time-limit at $stop and resumed: the model differs from the uninterrupted run's"
+st_cmp same "$D/tu.safetensors.ckpt" "$D/tl.safetensors.ckpt" ||
+  fail "stopped by --time-limit at $stop and resumed: the checkpoint differs from the uninterrupted run's"
+cut -d, -f1-4 "$D/tu.safetensors.csv" >"$D/tu.cols"
+cut -d, -f1-4 "$D/tl.safetensors.csv" >"$D/tl.cols"
+cmp -s "$D/tu.cols" "$D/tl.cols" ||
+  fail "stopped by --time-limit at $stop and resumed: the CSV differs: $(diff "$D/tu.cols" "$D/tl.cols" | head -5)"
+# a periodic checkpoint that cannot be written fails the run (exit 1), naming the file and the
+# reason; the file it would replace is kept whole (written to a temporary name, renamed only
+# once complete) and no temporary is left; no model is written.
+# (1) the disk fills up at the second periodic save (a tmpfs with room for one checkpoint,
+# not two: the old one stays until the new one is complete): the first is kept, and --resume
+# from it ends at the uninterrupted run's state bit for bit. Needs a mount namespace (root,
+# CAP_SYS_ADMIN): skipped, saying so, where that is refused
+C=$(wc -c <"$D/tu.safetensors.ckpt")
+SZ=$(((C + 4095) / 4096 * 6)) # kB: 1.5 checkpoints (rounded up to pages: 6 kB per 4 kB page)
+mkdir "$D/tf"
+# shellcheck disable=SC2016
+if ! unshare -m sh -c 'mount -t tmpfs -o size=4k tmpfs "$1"' sh "$D/tf" 2>"$D/err"; then
+  echo "SKIP: full-disk checkpoint check: cannot mount a tmpfs in a mount namespace: $(cat "$D/err")"
+else
+  # shellcheck disable=SC2016 # the script's own positional parameters
+  unshare -m sh -c 'mount -t tmpfs -o size="$1"k tmpfs "$2" || exit 1
+    d=$3
+    shift 3
+    "$@" 2>"$d/err"
+    echo $? >"$d/frc"
+    ls -A "$d/tf" >"$d/fleft"
+    [ ! -e "$d/tf/x.ckpt" ] || cp "$d/tf/x.ckpt" "$d/fb.ckpt"' sh "$SZ" "$D/tf" "$D" \
+    "$K" --store "$D/p.kps" --preset tiny --batch 2 --patch 16 --plot '' --threads 2 \
+    --iters 20 --ckpt-every 5 -o "$D/fb.safetensors" --ckpt "$D/tf/x.ckpt" ||
+    fail "full-disk run: tmpfs of ${SZ}k: $(cat "$D/err")"
+  rc=$(cat "$D/frc")
+  [ "$rc" = 1 ] || fail "checkpoint on a full disk: exit $rc, not 1: $(cat "$D/err")"
+  grep -F "'$D/tf/x.ckpt'" "$D/err" | grep -Eiq "disk full|no space left" ||
+    fail "full-disk checkpoint error names no file or reason: $(cat "$D/err")"
+  [ "$(cat "$D/fleft")" = x.ckpt ] || fail "full disk: left on it: $(cat "$D/fleft")"
+  [ "$(st_cmp meta "$D/fb.ckpt" train.iteration)" = 5 ] ||
+    fail "full disk: the checkpoint kept is at iteration $(st_cmp meta "$D/fb.ckpt" train.iteration), not 5"
+  [ ! -e "$D/fb.safetensors" ] || fail "full disk: a model was written by a failed run"
+  for f in "$D"/*.tmp.* "$D"/.*.tmp.*; do
+    [ ! -e "$f" ] || fail "full disk: temporary file left: $f"
+  done
+  tr_run --iters 20 --ckpt-every 5 -o "$D/fb.safetensors" --ckpt "$D/fb.ckpt" --resume 2>"$D/log" ||
+    fail "resume from the checkpoint a full disk left: $(cat "$D/log")"
+  tr_run --iters 20 --ckpt-every 5 -o "$D/fu.safetensors" 2>"$D/log" || fail "20 iterations: $(cat "$D/log")"
+  st_cmp same "$D/fu.safetensors" "$D/fb.safetensors" || fail "full disk, resumed: the model differs"
+  st_cmp same "$D/fu.safetensors.ckpt" "$D/fb.ckpt" || fail "full disk, resumed: the checkpoint differs"
+  cut -d, -f1-4 "$D/fu.safetensors.csv" >"$D/fu.cols"
+  cut -d, -f1-4 "$D/fb.safetensors.csv" >"$D/fb.cols"
+  cmp -s "$D/fu.cols" "$D/fb.cols" || fail "full disk, resumed: the CSV differs: $(diff "$D/fu.cols" "$D/fb.cols")"
+fi
+# (2) the first periodic save cannot be written (a file-size limit below a checkpoint's size,
+# SIGXFSZ ignored so the write fails with EFBIG; no privilege needed): an earlier run's model,
+# checkpoint and CSV under those names stay as they were (the CSV is written under a temporary
+# name until the first checkpoint), and nothing else is left. ulimit -f counts 512-byte
+# blocks in dash, 1024-byte in bash: C/2048 blocks is below one checkpoint either way
+mkdir "$D/ul" "$D/ul0"
+tr_run --iters 20 --ckpt-every 5 -o "$D/ul/m.safetensors" 2>"$D/log" || fail "earlier run: $(cat "$D/log")"
+cp -p "$D/ul/m.safetensors" "$D/ul/m.safetensors.ckpt" "$D/ul/m.safetensors.csv" "$D/ul0"
+ls -A "$D/ul" >"$D/ul.before"
+(
+  trap '' XFSZ
+  ulimit -f $((C / 2048)) || exit 97
+  exec "$K" --store "$D/p.kps" --preset tiny --batch 2 --patch 16 --plot '' --threads 2 \
+    --iters 20 --ckpt-every 5 --seed 2 -o "$D/ul/m.safetensors"
+) 2>"$D/err"
+rc=$?
+[ $rc -eq 1 ] || fail "checkpoint over the file-size limit: exit $rc, not 1: $(cat "$D/err")"
+grep -qF "checkpoint '$D/ul/m.safetensors.ckpt'" "$D/err" ||
+  fail "unwritable checkpoint: the error names no file: $(cat "$D/err")"
+# the system's reason, not a guess ("disk full?" was printed for every failure until session 62)
+grep -qi "file too large" "$D/err" && ! grep -qi "disk full" "$D/err" ||
+  fail "checkpoint over the file-size limit: the error does not give the system's reason: $(cat "$D/err")"
+for f in m.safetensors m.safetensors.ckpt m.safetensors.csv; do
+  cmp -s "$D/ul0/$f" "$D/ul/$f" || fail "a failed checkpoint save changed the earlier run's $f"
+done
+ls -A "$D/ul" | cmp -s - "$D/ul.before" || fail "a failed checkpoint save left: $(ls -A "$D/ul")"
 echo "test_train_cli: ok"

@@ -329,10 +329,20 @@ int ds_cmd_patches(int argc, char **argv) {
     return 1;
   }
   ss.settings_json = settings;
+  /* A stop removes the unfinished store (its temporary can be gigabytes). The handlers are
+   * in place from before the temporary exists until it is renamed or removed, so a signal
+   * in no gap between them ends the process with the temporary left behind. */
+  struct sigaction sa, old_int, old_term;
+  memset(&sa, 0, sizeof sa);
+  sa.sa_handler = on_signal;
+  sigaction(SIGINT, &sa, &old_int);
+  sigaction(SIGTERM, &sa, &old_term);
   kpcn_patchstore_writer *w = NULL;
   kpcn_status cst = kpcn_patchstore_create(&w, out, &ss); /* keeps a copy of settings */
   free(settings);
   if (cst != KPCN_OK) {
+    sigaction(SIGINT, &old_int, NULL);
+    sigaction(SIGTERM, &old_term, NULL);
     ds_err("patches: %s", kpcn_last_error());
     free(pairs);
     for (int d = 0; d < ndirs; d++)
@@ -341,20 +351,8 @@ int ds_cmd_patches(int argc, char **argv) {
   }
   kpcn_patch_stats tot = {0, 0, 0};
   double t0 = ds_now(), last_line = -1e300;
-  /* a stop between two pairs removes the unfinished store (its temporary can be gigabytes) */
-  struct sigaction sa, old_int, old_term;
-  memset(&sa, 0, sizeof sa);
-  sa.sa_handler = on_signal;
-  sigaction(SIGINT, &sa, &old_int);
-  sigaction(SIGTERM, &sa, &old_term);
-  for (int p = 0; p < np && rc == 0; p++) {
-    if (g_patch_stop) {
-      if (ds_isatty()) fputc('\n', stderr);
-      ds_err("patches: stopped by signal %d after %d of %d pairs; nothing written",
-             (int)g_patch_stop, p, np);
-      rc = 128 + g_patch_stop;
-      break;
-    }
+  int done = 0; /* pairs read whole */
+  for (int p = 0; p < np && rc == 0 && !g_patch_stop; p++) {
     const char *dir = dirs[pairs[p].dir];
     const ds_job *j = &m[pairs[p].dir].jobs[pairs[p].job], *r = &m[pairs[p].dir].jobs[pairs[p].ref];
     char a[DS_PATH], b[DS_PATH];
@@ -406,10 +404,16 @@ int ds_cmd_patches(int argc, char **argv) {
     const double el = ds_now() - t0;
     ds_progress(&last_line, progress_every, p + 1 == np || rc != 0, p + 1, np, el,
                 el / (p + 1) * (np - p - 1), detail);
+    if (rc == 0) done = p + 1;
   }
-  sigaction(SIGINT, &old_int, NULL);
-  sigaction(SIGTERM, &old_term, NULL);
-  if (ds_isatty() && rc < 128) fputc('\n', stderr);
+  if (ds_isatty()) fputc('\n', stderr);
+  /* A signal during the last pair stops the run too, and one that broke a read (EINTR on a
+   * slow device) is reported as the stop it was, not only as the read's error. */
+  if (g_patch_stop) {
+    ds_err("patches: stopped by signal %d after %d of %d pairs; nothing written", (int)g_patch_stop,
+           done, np);
+    rc = 128 + g_patch_stop;
+  }
   if (rc == 0 && tot.kept == 0) { /* a store of nothing, which kpcn-train refuses only later */
     ds_err("patches: no patch kept (%lld candidates, all culled at --cull %g): no store written",
            (long long)tot.candidates, ps.cull);
@@ -421,6 +425,8 @@ int ds_cmd_patches(int argc, char **argv) {
   } else if (rc != 0) {
     kpcn_patchstore_abort(w);
   }
+  sigaction(SIGINT, &old_int, NULL);
+  sigaction(SIGTERM, &old_term, NULL);
   if (rc == 0) {
     struct stat sb;
     stat(out, &sb);

@@ -64,11 +64,13 @@ bool run_metric(Metric metric, kpcntool::Context &ctx, const kpcntool::Modifiers
   if (!top_pair(ctx, m, o, err)) return false;
   const OIIO::ImageBuf &x = ctx.stack[ctx.stack.size() - 2], &y = ctx.stack.back();
   kpcn::ops::MetricResult r = kpcn::ops::compare(x, y, metric, o, {}, ctx.nthreads);
+  // Non-finite pixels are reported naming both files even when they leave the metric nothing
+  // to average (the library's own message names neither).
+  if (!check_nonfinite(r, m, x, y, err)) return false;
   if (!r.ok) {
     err = r.error;
     return false;
   }
-  if (!check_nonfinite(r, m, x, y, err)) return false;
   // the count's key follows the value's own (l1_2 -> l1_2_nonfinite_pixels: it was
   // l1_nonfinite_pixels, read as the first --l1's)
   const std::string key = ctx.add_result(kpcn::ops::metric_name(metric), r.value);

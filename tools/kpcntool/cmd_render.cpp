@@ -15,7 +15,7 @@ bool run_render(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
                 const std::vector<std::string> &args, std::string &err) {
   kpcn::ops::RenderOptions o;
   o.spp = (int)m.integer("spp", 0);
-  const uint64_t seed = m.u64("seed", 1);
+  o.seed = (int64_t)m.u64("seed", 1, (uint64_t)INT64_MAX, "2^63-1");
   o.albedo_spp = (int)m.integer("albedo_spp", 0);
   o.albedo_footprint = (int)m.integer("footprint", 0);
   o.color_only = m.flag("color_only", false);
@@ -24,11 +24,6 @@ bool run_render(kpcntool::Context &ctx, const kpcntool::Modifiers &m,
     err = "spp must be in [1, 2^24] (0: the scene's; got " + std::to_string(o.spp) + ")";
     return false;
   }
-  if (seed > (uint64_t)INT64_MAX) {
-    err = "seed must be in [0, 2^63-1]";
-    return false;
-  }
-  o.seed = (int64_t)seed;
   if (o.max_bounces < -1) {
     err = "max_bounces must be >= 0 (-1: the scene's)";
     return false;

@@ -25,10 +25,12 @@ struct Modifiers {
     return it == kv.end() ? def : it->second;
   }
   // Parse helpers: on a malformed value they throw kpcntool::Error naming the modifier.
-  double num(const std::string &k, double def) const;     // finite
-  long integer(const std::string &k, long def) const;     // within int's range
-  uint64_t u64(const std::string &k, uint64_t def) const; // seeds, indices: digits only
-  bool flag(const std::string &k, bool def) const;        // exactly 0 or 1
+  double num(const std::string &k, double def) const; // finite
+  long integer(const std::string &k, long def) const; // within int's range
+  // seeds, indices: digits only, at most max (named in the error as max_text)
+  uint64_t u64(const std::string &k, uint64_t def, uint64_t max = UINT64_MAX,
+               const char *max_text = "2^64-1") const;
+  bool flag(const std::string &k, bool def) const; // exactly 0 or 1
 };
 
 struct Error : std::runtime_error {

@@ -8,11 +8,12 @@
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
-#include <csignal>
 #include <cctype>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <sys/statvfs.h>
 #include <system_error>
 #include <unistd.h>
 
@@ -210,10 +211,19 @@ static std::string temp_path(const Context::Output &o, size_t index) {
   return p + t;
 }
 
-// Some image writers report no error when the disk fills (OIIO 2.4's PNG writer closes a
-// truncated file with success), so every image written other than EXR (whose writer reports
-// it) is read back whole, 64 rows at a time, before it counts.
+// Some image writers report no error when the disk fills: OIIO 2.4's PNG writer closes a
+// truncated file with success, its BMP and FITS writers (which seek) leave holes where the
+// writes failed, and its IFF reader reads a truncated file back as black without a word. A
+// write that ran out of space leaves the file system with no free block (the kernel writes
+// what fits), so an image after which none is left (for this user: root may use the reserved
+// blocks) is refused as possibly incomplete; then every image other than EXR (whose writer
+// reports it) is also read back whole, 64 rows (or a band of tiles) at a time.
 static bool verify_written(const std::string &file, std::string &err) {
+  struct statvfs vs;
+  if (statvfs(file.c_str(), &vs) == 0 && (geteuid() == 0 ? vs.f_bfree : vs.f_bavail) == 0) {
+    err = "the disk is full after writing it (no free block left), so it may be incomplete";
+    return false;
+  }
   if (lower_ext(file) == "exr") return true;
   auto in = OIIO::ImageInput::open(file);
   if (!in) {
@@ -221,10 +231,19 @@ static bool verify_written(const std::string &file, std::string &err) {
     return false;
   }
   const OIIO::ImageSpec &sp = in->spec();
-  std::vector<float> rows((size_t)sp.width * 64 * (size_t)sp.nchannels);
-  for (int y = sp.y; y < sp.y + sp.height; y += 64) {
-    const int y1 = std::min(y + 64, sp.y + sp.height);
-    if (!in->read_scanlines(0, 0, y, y1, 0, 0, sp.nchannels, OIIO::TypeDesc::FLOAT, rows.data())) {
+  // a tiled file (IFF always is) is read by whole tile rows: OIIO 2.4's read_scanlines
+  // divides by zero on some tiled files
+  const int band = sp.tile_width > 0 ? std::max(1, 64 / sp.tile_height) * sp.tile_height : 64;
+  std::vector<float> rows((size_t)sp.width * band * (size_t)sp.nchannels);
+  for (int y = sp.y; y < sp.y + sp.height; y += band) {
+    const int y1 = std::min(y + band, sp.y + sp.height);
+    const bool ok =
+        sp.tile_width > 0
+            ? in->read_tiles(0, 0, sp.x, sp.x + sp.width, y, y1, sp.z, sp.z + std::max(1, sp.depth),
+                             0, sp.nchannels, OIIO::TypeDesc::FLOAT, rows.data())
+            : in->read_scanlines(0, 0, y, y1, 0, 0, sp.nchannels, OIIO::TypeDesc::FLOAT,
+                                 rows.data());
+    if (!ok) {
       err = "the written file is incomplete (disk full?): " + in->geterror();
       return false;
     }
@@ -248,16 +267,17 @@ static void cleanup_at_exit() {
                g_writing_what.c_str());
 }
 
-// The same for an image library that aborts on what it cannot write (OIIO 2.4 asserts on some
-// DPX channel counts, or when a buffer cannot be allocated): outside a write the default.
+// The same for an image library that aborts or crashes on what it cannot write (OIIO 2.4
+// asserts on some DPX channel counts, or when a buffer cannot be allocated, and divided by
+// zero reading back a tiled IFF): outside a write the default.
 // Only unlink and write, which are async-signal-safe, touch the outside world here; a
 // directory output (--patches:out=) is left for the next run to replace.
 static void abort_while_writing(int sig) {
   if (g_writing_tmps) {
     for (const std::string &t : *g_writing_tmps)
       (void)unlink(t.c_str());
-    static const char msg[] = "kpcntool: error: the image library aborted while writing an "
-                              "output; nothing was written\n";
+    static const char msg[] = "kpcntool: error: the image library aborted or crashed while "
+                              "writing an output; nothing was written\n";
     (void)!write(2, msg, sizeof msg - 1);
   }
   std::signal(sig, SIG_DFL);
@@ -300,8 +320,12 @@ bool commit_outputs(const std::vector<Context::Output> &outputs, std::string &fa
       return false;
     }
     tmp.push_back(temp_path(o, i));
-    static const bool registered =
-        std::atexit(cleanup_at_exit) == 0 && std::signal(SIGABRT, abort_while_writing) != SIG_ERR;
+    static const bool registered = [] {
+      bool r = std::atexit(cleanup_at_exit) == 0;
+      for (int sig : {SIGABRT, SIGFPE, SIGSEGV, SIGBUS})
+        r = std::signal(sig, abort_while_writing) != SIG_ERR && r;
+      return r;
+    }();
     (void)registered;
     g_writing_what = o.what;
     g_writing_tmps = &tmp;

@@ -55,7 +55,8 @@ long Modifiers::integer(const std::string &k, long def) const {
   return (long)v;
 }
 
-uint64_t Modifiers::u64(const std::string &k, uint64_t def) const {
+uint64_t Modifiers::u64(const std::string &k, uint64_t def, uint64_t max,
+                        const char *max_text) const {
   auto it = kv.find(k);
   if (it == kv.end()) return def;
   const std::string &v = it->second;
@@ -63,8 +64,8 @@ uint64_t Modifiers::u64(const std::string &k, uint64_t def) const {
       !v.empty() && std::all_of(v.begin(), v.end(), [](char c) { return c >= '0' && c <= '9'; });
   errno = 0;
   unsigned long long u = digits ? std::strtoull(v.c_str(), nullptr, 10) : 0;
-  if (!digits || errno == ERANGE)
-    throw Error("modifier '" + k + "' needs an integer in [0, 2^64) (got '" + v + "')");
+  if (!digits || errno == ERANGE || u > max)
+    throw Error("modifier '" + k + "' needs an integer in [0, " + max_text + "] (got '" + v + "')");
   return (uint64_t)u;
 }
 

@@ -202,6 +202,8 @@ kpcn_status kpcn_commit_file(const char *tmp, const char *path) {
 
 void kpcn_abort_file(const char *tmp) { unlink(tmp); }
 
+const char *kpcn_write_reason(int err) { return err ? strerror(err) : "short write"; }
+
 int kpcn_path_join(char *out, size_t n, const char *dir, const char *file) {
   const int w = file[0] == '/' || !dir || !dir[0] ? snprintf(out, n, "%s", file)
                                                   : snprintf(out, n, "%s/%s", dir, file);

@@ -38,6 +38,11 @@ kpcn_status kpcn_commit_file(const char *tmp, const char *path);
  * it does not fit, since a truncated path could name another file */
 int kpcn_path_join(char *out, size_t n, const char *dir, const char *file);
 void kpcn_abort_file(const char *tmp);
+/* The reason a write failed, for its message: the text of `err` (the errno the caller saved
+ * right after the failing call, before kpcn_abort_file or fclose can change it), or "short
+ * write" where the C library set none. Not a guess such as "disk full?": a file-size limit
+ * or a removed folder fail the same calls. */
+const char *kpcn_write_reason(int err);
 
 /* Denormal floats take a slow microcode path in the SIMD units (many times the cost of a
  * normal FMA); trained weights and their gradients drift into that range, which made

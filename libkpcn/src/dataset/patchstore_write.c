@@ -318,7 +318,8 @@ kpcn_status kpcn_patchstore_append(kpcn_patchstore_writer *w, const kpcn_patch_r
   }
   size_t bytes = pe * kps_dtype_size((uint32_t)w->dtype);
   if (fwrite(w->conv, 1, bytes, w->f) != bytes)
-    return kpcn_fail(KPCN_ERR_IO, "patch store '%s': write failed (disk full?)", w->path);
+    return kpcn_fail(KPCN_ERR_IO, "patch store '%s': write failed: %s", w->path,
+                     kpcn_write_reason(errno));
   if (w->nrec == w->caprec) {
     uint64_t cap = w->caprec ? 2 * w->caprec : 1024;
     kpcn_patch_record *n = realloc(w->rec, sizeof *n * cap);
@@ -456,8 +457,9 @@ kpcn_status kpcn_patchstore_finish(kpcn_patchstore_writer *w) {
   st = kpcn_commit_file(w->tmp, w->path);
   free_writer(w);
   return st;
-io:
-  st = kpcn_fail(KPCN_ERR_IO, "patch store '%s': write failed (disk full?)", w->path);
+io: /* straight after the failing call, so errno is its reason */
+  st = kpcn_fail(KPCN_ERR_IO, "patch store '%s': write failed: %s", w->path,
+                 kpcn_write_reason(errno));
 fail:
   free(text);
   kpcn_patchstore_abort(w);

@@ -201,11 +201,13 @@ kpcn_status kpcn_render_ckpt_save(const kpcn_render_ckpt *c) {
     put(f, &hash, 8, &ok);
     /* on the disk before the rename: after a crash the name holds the old file or the new
      * one, never an empty one that every later resume would refuse as damaged */
-    if (ok && (fflush(f) != 0 || fsync(fileno(f)) != 0)) ok = 0;
-    if (fclose(f) != 0) ok = 0;
+    int err = ok ? 0 : errno; /* the failed put's reason (nothing since has touched errno) */
+    if (ok && (fflush(f) != 0 || fsync(fileno(f)) != 0)) ok = 0, err = errno;
+    if (fclose(f) != 0 && ok) ok = 0, err = errno;
     if (!ok) {
       kpcn_abort_file(tmp);
-      st = kpcn_fail(KPCN_ERR_IO, "cannot write render checkpoint '%s' (disk full?)", c->path);
+      st = kpcn_fail(KPCN_ERR_IO, "cannot write render checkpoint '%s': %s", c->path,
+                     kpcn_write_reason(err));
     } else
       st = kpcn_commit_file(tmp, c->path);
   }

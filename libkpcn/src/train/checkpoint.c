@@ -169,10 +169,12 @@ kpcn_status kt_checkpoint_save(kpcn_trainer *t, const char *path) {
       ok = fputc(' ', f) != EOF;
     for (int i = 0; i < n && ok; i++) /* little-endian host (x86-64) */
       ok = fwrite(ts[i].data, 4, ts[i].count, f) == ts[i].count;
-    if (fclose(f) != 0) ok = 0;
+    int err = ok ? 0 : errno; /* the failed call's reason, before fclose can change errno */
+    if (fclose(f) != 0 && ok) ok = 0, err = errno;
     if (!ok) {
       kpcn_abort_file(tmp);
-      st = kpcn_fail(KPCN_ERR_IO, "writing checkpoint '%s' failed (disk full?)", path);
+      st = kpcn_fail(KPCN_ERR_IO, "writing checkpoint '%s' failed: %s", path,
+                     kpcn_write_reason(err));
     } else {
       st = kpcn_commit_file(tmp, path);
     }
