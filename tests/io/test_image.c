@@ -205,6 +205,29 @@ static void test_aov_sets(void) {
   CHECK(strstr(kpcn_last_error(), "albedo.var") != NULL);
   CHECK(kpcn_aov_add(s, KPCN_BUF_DEPTH, 1) == KPCN_OK);
   CHECK(kpcn_aov_add(s, KPCN_BUF_COLOR, 1) == KPCN_OK);
+  /* the list form names every absent buffer and variance in one message, in the list's
+   * order, and nothing present (albedo's variance, normal and visibility here) */
+  {
+    const kpcn_buffer need[] = {KPCN_BUF_ALBEDO, KPCN_BUF_DEPTH, KPCN_BUF_NORMAL,
+                                KPCN_BUF_VISIBILITY, KPCN_BUF_COLOR};
+    CHECK(kpcn_aov_require_list(s, need, 5, 1, "in.exr") == KPCN_ERR_MISSING_CHANNEL);
+    const char *e = kpcn_last_error();
+    CHECK(strcmp(e, "in.exr: missing variance of 'albedo' (channel albedo.var), buffer 'normal' "
+                    "(channels N.X N.Y N.Z, and its variance N.var), buffer 'visibility' "
+                    "(channel visibility.V, and its variance visibility.var)") == 0);
+    if (strcmp(e, "in.exr: missing variance of 'albedo' (channel albedo.var), buffer 'normal' "
+                  "(channels N.X N.Y N.Z, and its variance N.var), buffer 'visibility' "
+                  "(channel visibility.V, and its variance visibility.var)") != 0)
+      fprintf(stderr, "  got: %s\n", e);
+    CHECK(kpcn_aov_require_list(s, need, 5, 0, "in.exr") == KPCN_ERR_MISSING_CHANNEL);
+    CHECK(strcmp(kpcn_last_error(), "in.exr: missing buffer 'normal' (channels N.X N.Y N.Z), "
+                                    "buffer 'visibility' (channel visibility.V)") == 0);
+    CHECK(kpcn_aov_require_list(s, need + 1, 1, 1, "in.exr") == KPCN_OK);
+    CHECK(kpcn_aov_require_list(s, need, 0, 1, "in.exr") == KPCN_OK);
+    CHECK(kpcn_aov_require_list(s, NULL, 1, 1, "in.exr") == KPCN_ERR_INVALID_ARGUMENT);
+    const kpcn_buffer bad = (kpcn_buffer)99;
+    CHECK(kpcn_aov_require_list(s, &bad, 1, 1, "in.exr") == KPCN_ERR_INVALID_ARGUMENT);
+  }
   size_t n = kpcn_aov_plane_size(s);
   fill(s->buf[KPCN_BUF_ALBEDO], 3 * n, 1);
   fill(s->buf[KPCN_BUF_DEPTH], n, 100);

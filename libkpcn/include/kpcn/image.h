@@ -108,6 +108,11 @@ kpcn_status kpcn_aov_add(kpcn_aov_set *set, kpcn_buffer b, int with_variance);
  * name, in the message) if buffer b -- and its variance if need_variance -- is absent. */
 kpcn_status kpcn_aov_require(const kpcn_aov_set *set, kpcn_buffer b, int need_variance,
                              const char *what);
+/* The same for the n buffers b[0..n-1], with one message naming every absent buffer and
+ * variance ("what: missing buffer 'normal' (channels N.X N.Y N.Z, and its variance N.var),
+ * variance of 'diffuse' (channel diffuse.var)"). */
+kpcn_status kpcn_aov_require_list(const kpcn_aov_set *set, const kpcn_buffer *b, int n,
+                                  int need_variance, const char *what);
 /* Number of floats in one plane. */
 static inline size_t kpcn_aov_plane_size(const kpcn_aov_set *s) {
   return (size_t)s->width * (size_t)s->height;

@@ -81,14 +81,12 @@ kpcn_status kpcn_features_norm_compute(const kpcn_aov_set *aov, kpcn_features_no
   return KPCN_OK;
 }
 
-/* Required inputs of a branch, checked up front so the error names the first absent one. */
+/* Required inputs of a branch, checked up front so the error names every absent one. */
 static kpcn_status require_inputs(const kpcn_aov_set *aov, int branch) {
   kpcn_buffer cb = branch == KPCN_BRANCH_DIFFUSE ? KPCN_BUF_DIFFUSE : KPCN_BUF_SPECULAR;
   const kpcn_buffer need[] = {cb, KPCN_BUF_ALBEDO, KPCN_BUF_NORMAL, KPCN_BUF_DEPTH,
                               KPCN_BUF_VISIBILITY};
-  for (size_t i = 0; i < sizeof need / sizeof need[0]; i++)
-    KPCN_TRY(kpcn_aov_require(aov, need[i], 1, "KPCN features"));
-  return KPCN_OK;
+  return kpcn_aov_require_list(aov, need, (int)(sizeof need / sizeof need[0]), 1, "KPCN features");
 }
 
 /* log(1 + x) for x >= 0 (finite), in plain arithmetic the compiler vectorizes: glibc's

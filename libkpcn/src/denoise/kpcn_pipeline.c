@@ -142,9 +142,8 @@ static void tile_grid(const kpcn_arch *a, int bf16, int W, int H, int pad, int t
 kpcn_status kpcn_pipeline_require(const kpcn_aov_set *aov) {
   const kpcn_buffer need[] = {KPCN_BUF_DIFFUSE, KPCN_BUF_SPECULAR, KPCN_BUF_ALBEDO,
                               KPCN_BUF_NORMAL,  KPCN_BUF_DEPTH,    KPCN_BUF_VISIBILITY};
-  for (size_t i = 0; i < sizeof need / sizeof need[0]; i++)
-    KPCN_TRY(kpcn_aov_require(aov, need[i], 1, "KPCN denoiser input"));
-  return KPCN_OK;
+  return kpcn_aov_require_list(aov, need, (int)(sizeof need / sizeof need[0]), 1,
+                               "KPCN denoiser input");
 }
 
 static double net_conv_s(const kpcn_net *net) {

@@ -194,23 +194,42 @@ kpcn_status kpcn_aov_clone(kpcn_aov_set **out, const kpcn_aov_set *src) {
   return KPCN_OK;
 }
 
+kpcn_status kpcn_aov_require_list(const kpcn_aov_set *set, const kpcn_buffer *b, int n,
+                                  int need_variance, const char *what) {
+  if (!set || n < 0 || (n > 0 && !b))
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_aov_require: NULL set or buffer list");
+  for (int i = 0; i < n; i++)
+    if (!valid_buffer(b[i]))
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_aov_require: bad buffer %d", (int)b[i]);
+  /* every absent buffer and variance in one message, so a render missing several is fixed
+   * in one go rather than one rerun per channel */
+  char msg[1024] = "";
+  size_t len = 0;
+  for (int i = 0; i < n; i++) {
+    const kpcn_buffer x = b[i];
+    const int novar = need_variance && !set->var[x];
+    const char *sep = len ? ", " : "";
+    int k = 0;
+    if (!set->buf[x] && kpcn_buffer_channels(x) == 1)
+      k = snprintf(msg + len, sizeof msg - len, "%sbuffer '%s' (channel %s%s%s)", sep,
+                   g_buf_names[x], g_chan_names[x][0], novar ? ", and its variance " : "",
+                   novar ? g_var_names[x] : "");
+    else if (!set->buf[x])
+      k = snprintf(msg + len, sizeof msg - len, "%sbuffer '%s' (channels %s %s %s%s%s)", sep,
+                   g_buf_names[x], g_chan_names[x][0], g_chan_names[x][1], g_chan_names[x][2],
+                   novar ? ", and its variance " : "", novar ? g_var_names[x] : "");
+    else if (novar)
+      k = snprintf(msg + len, sizeof msg - len, "%svariance of '%s' (channel %s)", sep,
+                   g_buf_names[x], g_var_names[x]);
+    if (k > 0) len = len + (size_t)k < sizeof msg ? len + (size_t)k : sizeof msg - 1;
+  }
+  if (!len) return KPCN_OK;
+  return kpcn_fail(KPCN_ERR_MISSING_CHANNEL, "%s: missing %s", what ? what : "AOV set", msg);
+}
+
 kpcn_status kpcn_aov_require(const kpcn_aov_set *set, kpcn_buffer b, int need_variance,
                              const char *what) {
-  if (!set || !valid_buffer(b))
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_aov_require: bad set or buffer %d", (int)b);
-  const char *w = what ? what : "AOV set";
-  if (!set->buf[b]) {
-    if (kpcn_buffer_channels(b) == 1)
-      return kpcn_fail(KPCN_ERR_MISSING_CHANNEL, "%s: missing buffer '%s' (channel %s)", w,
-                       kpcn_buffer_name(b), g_chan_names[b][0]);
-    return kpcn_fail(KPCN_ERR_MISSING_CHANNEL, "%s: missing buffer '%s' (channels %s %s %s)", w,
-                     kpcn_buffer_name(b), g_chan_names[b][0], g_chan_names[b][1],
-                     g_chan_names[b][2]);
-  }
-  if (need_variance && !set->var[b])
-    return kpcn_fail(KPCN_ERR_MISSING_CHANNEL, "%s: missing variance of '%s' (channel %s)", w,
-                     kpcn_buffer_name(b), g_var_names[b]);
-  return KPCN_OK;
+  return kpcn_aov_require_list(set, &b, 1, need_variance, what);
 }
 
 kpcn_status kpcn_aov_to_image(kpcn_image **out, const kpcn_aov_set *set) {
