@@ -219,6 +219,13 @@ static void test_denoiser(void) {
     CHECK(kpcn_denoiser_create_with_model(&d, m, &o) == KPCN_ERR_INVALID_ARGUMENT && !d);
     CHECK(strstr(kpcn_last_error(), "firefly") != NULL);
   }
+  /* the method and the baselines' options are ignored by create_with_model (denoise.h), so
+   * also not refused: a baseline method with zeroed baseline options */
+  kpcn_denoiser_options_defaults(&o);
+  o.method = KPCN_DENOISE_BILATERAL;
+  memset(&o.bilateral, 0, sizeof o.bilateral);
+  CHECK(kpcn_denoiser_create_with_model(&d, m, &o) == KPCN_OK && d);
+  kpcn_denoiser_destroy(d);
   free(x);
   free(y);
   free(z);

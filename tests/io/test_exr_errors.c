@@ -470,6 +470,15 @@ static void test_atomic_writes(void) {
     CHECK(kpcn_exr_options_add_int(&o, an, i) == KPCN_OK);
   }
   CHECK(kpcn_exr_options_add_int(&o, "one_too_many", 1) == KPCN_ERR_INVALID_ARGUMENT);
+  /* a count outside [0, max] is refused, not used as an index (-1 wrote before the array) */
+  o = kpcn_exr_write_options_defaults();
+  o.nattrs = -1;
+  CHECK(kpcn_exr_options_add_int(&o, "x", 1) == KPCN_ERR_INVALID_ARGUMENT &&
+        strstr(kpcn_last_error(), "nattrs -1") != NULL);
+  o.nattrs = KPCN_EXR_MAX_ATTRS + 1;
+  CHECK(kpcn_exr_options_add_string(&o, "x", "y") == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(kpcn_exr_write_image(kt_tmpfile("opt.exr"), img, &o) == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(file_size(kt_tmpfile("opt.exr")) < 0);
   kpcn_aov_set *empty = NULL;
   kpcn_aov_create(&empty, 4, 4);
   CHECK(kpcn_exr_write_aov(kt_tmpfile("empty_aov.exr"), empty, NULL) == KPCN_ERR_MISSING_CHANNEL);

@@ -101,11 +101,24 @@ static void test_library(const kpcn_scene *s) {
   CHECK(render(s, &rs, &st, NULL) == NULL && st == KPCN_ERR_CANCELLED);
   CHECK(strstr(kpcn_last_error(), "checkpoint") != NULL);
   CHECK(file_exists("c.ckpt"));
+  /* resumed, then cancelled again: the cancel's stats say what was resumed (kpcn-render's log
+   * line "resumed N of H rows" reads them; they were left unwritten, so garbage) */
+  memset(&stats, 0xA5, sizeof stats);
+  rs = settings(1, "c.ckpt");
+  calls = 1;
+  rs.progress = cancel_after, rs.progress_user = &calls;
+  CHECK(render(s, &rs, &st, &stats) == NULL && st == KPCN_ERR_CANCELLED);
+  CHECK(stats.rows_resumed == 10 && stats.checkpoint_errors == 0 && stats.samples == 0 &&
+        stats.rays == 0 && stats.seconds >= 0.0 && stats.seconds < 1e6);
+  memset(&stats, 0xA5, sizeof stats); /* an error return leaves them zero */
+  kpcn_aov_set *none = NULL;
+  CHECK(kpcn_render_ex(NULL, &rs, &none, &stats) == KPCN_ERR_INVALID_ARGUMENT && !none);
+  CHECK(stats.rows_resumed == 0 && stats.samples == 0 && stats.seconds == 0.0);
   rs = settings(2, "c.ckpt");
   kpcn_aov_set *resumed = render(s, &rs, &st, &stats);
   CHECK(resumed != NULL && sets_equal(full, resumed));
-  CHECK(stats.rows_resumed == 10);
-  CHECK(stats.samples == (uint64_t)(H - 10) * W * SPP);
+  CHECK(stats.rows_resumed == 11);
+  CHECK(stats.samples == (uint64_t)(H - 11) * W * SPP);
   CHECK(stats.rays > 0 && stats.rays < full_stats.rays);
   CHECK(stats.nonfinite_samples == full_stats.nonfinite_samples);
   CHECK(file_exists("c.ckpt")); /* the caller removes it once the result is safe */

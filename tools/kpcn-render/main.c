@@ -365,7 +365,7 @@ int main(int argc, char **argv) {
   sigaction(SIGINT, &sa, NULL);
   sigaction(SIGTERM, &sa, NULL);
   kpcn_aov_set *aov = NULL;
-  kpcn_render_stats stats;
+  kpcn_render_stats stats = {0};
   kpcn_status st = kpcn_render_ex(scene, &rs, &aov, &stats);
   if (ps.show) fprintf(stderr, "\n");
   kpcn_scene_destroy(scene);

@@ -26,7 +26,7 @@
  *      one turn maps pixel (x, y) of a W x H image to (y, W-1-x) of the H x W result and
  *      the normal (N.X, N.Y) to (-N.Y, N.X) (a vector pointing right now points up);
  *   5. shift (dx, dy): x' = x + dx, y' = y + dy with WRAP-AROUND (torus) so the size is kept
- *      and the op is exactly invertible. Use kpcn_augment_crop for a seam-free shift.
+ *      and the op is exactly invertible. Use kpcn_augment_crop_aov for a seam-free shift.
  * All of 1-5 are exact (pure copies and sign flips, bit-exact inverses).
  *
  * Arbitrary angles (kpcn_augment_rotate_any) resample bilinearly. That ALTERS THE NOISE

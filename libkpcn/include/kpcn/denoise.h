@@ -216,8 +216,8 @@ typedef struct kpcn_denoiser_options {
                              grid with the least overlap whose padded tile's buffers fit
                              an eighth of the machine's memory, kept within 1..3 GiB (a
                              1 Mpx frame: one tile on a 24 GB machine). A tile
-                             >= the image size denoises in one piece. Tiles overlap by
-                             kpcn_denoise_tile_overlap(arch) pixels, so every tile sees
+                             >= the image size denoises in one piece. Tiles are padded by
+                             >= kpcn_denoise_tile_overlap(arch) pixels, so every tile sees
                              the inputs the untiled image does; the result agrees across
                              tile sizes to float summation order (oneDNN sums in an order
                              that depends on the tensor's shape: up to ~2e-6 relative with
@@ -348,9 +348,10 @@ void kpcn_denoiser_get_stats(const kpcn_denoiser *d, kpcn_denoise_stats *s);
  * 2, 4 and 8 each form a group. Returns KPCN_ERR_INVALID_ARGUMENT for other i. */
 kpcn_status kpcn_denoise_ensemble_xform(int i, kpcn_augment_xform *x);
 
-/* Overlap (pixels per side) a tile needs so tiled == untiled: max(conv radius, K/2) —
- * logits of an output pixel depend on inputs within the conv radius, the kernel reads
- * the noisy image within K/2, and features are built from the full image. */
+/* Overlap (pixels per side) a tile needs so tiled == untiled: kpcn_arch_receptive_radius
+ * (max(conv radius + (passes-1)·K/2 [+ K/2 with source weights], passes·K/2); 0 for NULL) —
+ * logits of an output pixel depend on inputs within the conv radius, each kernel pass reads
+ * within K/2, and features are built from the full image. */
 int kpcn_denoise_tile_overlap(const kpcn_arch *arch);
 
 /* Convenience: denoises an AOV set into a new 3-channel image (R, G, B). */

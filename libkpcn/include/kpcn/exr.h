@@ -3,7 +3,8 @@
  *
  * Reading:
  *  - scanline and tiled single-part files (part 0 of multi-part files), any compression
- *    OpenEXR supports; half/float/uint channels are all converted to float32;
+ *    OpenEXR supports (DWAA/DWAB only with OpenEXR >= 3.2: KPCN_ERR_UNSUPPORTED before);
+ *    half/float/uint channels are all converted to float32;
  *  - channel names are kept exactly as stored (OpenEXR stores them sorted by name);
  *  - the data window may start anywhere (it is read as is; the image is the data window);
  *  - values are NOT filtered: NaN/Inf are kept (see kpcn_aov_count_nonfinite);
@@ -68,8 +69,8 @@ kpcn_exr_write_options kpcn_exr_write_options_defaults(void);
 /* "zip", "zips", "piz", "rle" or "none" (the names kpcn_exr_info reports) into *out;
  * KPCN_ERR_INVALID_ARGUMENT naming the text otherwise. */
 kpcn_status kpcn_exr_compression_parse(const char *name, kpcn_exr_compression *out);
-/* Appends a string/int attribute to opt (KPCN_ERR_INVALID_ARGUMENT when full or the name
- * is too long). */
+/* Appends a string/int attribute to opt, or replaces one of the same name
+ * (KPCN_ERR_INVALID_ARGUMENT when full, or the name or a string value is too long). */
 kpcn_status kpcn_exr_options_add_string(kpcn_exr_write_options *opt, const char *name,
                                         const char *value);
 kpcn_status kpcn_exr_options_add_int(kpcn_exr_write_options *opt, const char *name, int value);
@@ -93,7 +94,8 @@ kpcn_status kpcn_exr_write_image(const char *path, const kpcn_image *img,
 kpcn_status kpcn_exr_read_aov(const char *path, kpcn_aov_set **out);
 kpcn_status kpcn_exr_read_aov_mt(const char *path, int nthreads, kpcn_aov_set **out);
 /* Writes the present buffers with canonical names plus kpcn:spp/seed/scene/version
- * (spp/seed only when >= 0, strings only when non-empty). opt may be NULL. */
+ * (spp/seed only when >= 0, scene only when non-empty; version always, this library's when
+ * empty) and kpcn:albedoSpp / kpcn:albedoFootprint (when > 0 / > 1). opt may be NULL. */
 kpcn_status kpcn_exr_write_aov(const char *path, const kpcn_aov_set *set,
                                const kpcn_exr_write_options *opt);
 

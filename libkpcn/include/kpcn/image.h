@@ -41,7 +41,8 @@ typedef struct kpcn_image {
 } kpcn_image;
 
 /* Allocates a zero-filled image. names may be NULL (channels named "0", "1", ...).
- * Rejects zero/negative or absurd sizes (KPCN_MAX_DIM, KPCN_MAX_PIXELS). */
+ * Rejects zero/negative or absurd sizes (KPCN_MAX_DIM, KPCN_MAX_PIXELS) and channel counts
+ * outside 1 .. 4096. */
 kpcn_status kpcn_image_create(kpcn_image **out, int width, int height, int nchannels,
                               const char *const *names);
 void kpcn_image_destroy(kpcn_image *img);

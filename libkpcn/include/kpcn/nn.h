@@ -88,8 +88,9 @@ void kpcn_arch_defaults(kpcn_arch *a);
 /* Fills *a with a preset: "paper" = 9 hidden x 100 ch x 5x5, K = 21 (seed ch. 4);
  * "cpu" = 6 hidden x 48 ch x 3x3, dilations 1,2,4,8,4,2 then a 3x3 linear layer, K = 11
  * (see docs/nn.md for the FLOP reasoning); "tiny" = 2 hidden x 8 ch x 3x3, K = 5 (tests).
- * Input names are NOT set by presets (n_inputs = 0): the feature builder of the denoise
- * module supplies them with kpcn_arch_set_inputs. eps = 0.00316, preprocess = "kpcn-pre-1". */
+ * Input names are NOT set by presets (those already in *a are kept, else n_inputs = 0): the
+ * feature builder of the denoise module supplies them with kpcn_arch_set_inputs.
+ * eps = 0.00316, preprocess = "kpcn-pre-1". */
 kpcn_status kpcn_arch_preset(const char *name, kpcn_arch *a);
 
 /* Sets the input channel list (n <= KPCN_NN_MAX_INPUTS, names < KPCN_NN_NAME_LEN bytes). */
@@ -107,9 +108,9 @@ int kpcn_arch_layer_out(const kpcn_arch *a, int l);
  * reads the noisy image within K/2 per pass. */
 int kpcn_arch_conv_radius(const kpcn_arch *a);
 /* Pixels around an output pixel that its value depends on, per input kind: the features
- * (through the logits of every pixel a later pass reads: conv radius + (passes-1)·K/2) and
- * the noisy colour (passes·K/2). A tile computed on its core grown by the larger of the two
- * gives the untiled result. */
+ * (through the logits of every pixel a later pass reads: conv radius + (passes-1)·K/2, + K/2
+ * with source weights) and the noisy colour (passes·K/2). A tile computed on its core grown
+ * by the larger of the two gives the untiled result. */
 int kpcn_arch_receptive_radius(const kpcn_arch *a);
 /* Convolution FLOPs (2 per multiply-add) per output pixel of ONE branch, forward only. */
 double kpcn_arch_flops_per_pixel(const kpcn_arch *a);

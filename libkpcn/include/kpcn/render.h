@@ -38,7 +38,7 @@ typedef enum kpcn_light_strategy {
 
 typedef struct kpcn_render_settings {
   int spp;            /* samples per pixel; 0 = the scene's renderer.spp */
-  int64_t seed;       /* sampler seed */
+  int64_t seed;       /* sampler seed, 0 .. 2^63-1 */
   int nthreads;       /* 0 = all cores */
   int width, height;  /* resolution override (0 = scene's); Tungsten keeps the horizontal fov */
   int crop_x, crop_y; /* crop window in the (possibly overridden) resolution; */
@@ -49,7 +49,7 @@ typedef struct kpcn_render_settings {
    * features-only pass (camera ray, delta bounces to the feature surface, its albedo: no
    * shading, no shadow rays), the first spp of them the colour's own. The albedo's sub-pixel
    * coverage noise at edges is what the denoiser's remodulation multiplies its result by
-   * (docs/renderer.md). 0 = the colour's samples. */
+   * (docs/renderer.md). 0 (or = spp) = the colour's samples; 1 .. spp-1 is an error. */
   int albedo_spp;
   /* k >= 2: where a textured surface is seen directly, each sample's albedo is the mean of
    * k x k texture lookups over its pixel's footprint (its film point shifted by (i/k, j/k),
@@ -97,7 +97,8 @@ typedef struct kpcn_render_stats {
 
 kpcn_status kpcn_render(const kpcn_scene *scene, const kpcn_render_settings *settings,
                         kpcn_aov_set **out);
-/* Same, also filling *stats (may be NULL). */
+/* Same, also filling *stats (may be NULL): zeroed first on every return; on a cancel
+ * (KPCN_ERR_CANCELLED) seconds, rows_resumed and checkpoint_errors are filled too. */
 kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *settings,
                            kpcn_aov_set **out, kpcn_render_stats *stats);
 

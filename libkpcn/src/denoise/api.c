@@ -128,11 +128,11 @@ kpcn_status kpcn_denoiser_create_with_model(kpcn_denoiser **out, kpcn_model *mod
     o = *opts;
   else
     kpcn_denoiser_options_defaults(&o);
+  o.method = KPCN_DENOISE_KPCN; /* documented as ignored, so the baselines' options are too */
   KPCN_TRY(check_options(&o));
   kpcn_denoiser *d = kpcn_calloc(1, sizeof *d, "denoiser");
   if (!d) return KPCN_ERR_OUT_OF_MEMORY;
   d->opt = o;
-  d->opt.method = KPCN_DENOISE_KPCN;
   d->opt.model_path = NULL;
   d->model = model; /* borrowed: model_path is NULL so destroy leaves it alone */
   *out = d;

@@ -20,6 +20,9 @@ kpcn_exr_write_options kpcn_exr_write_options_defaults(void) {
 static kpcn_status add_attr(kpcn_exr_write_options *opt, const char *name, kpcn_exr_attr **a) {
   if (!opt || !name || !*name)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "EXR attribute: NULL options or empty name");
+  if (opt->nattrs < 0 || opt->nattrs > KPCN_EXR_MAX_ATTRS) /* an index below: never trusted */
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "EXR options: nattrs %d is outside [0, %d]",
+                     opt->nattrs, KPCN_EXR_MAX_ATTRS);
   if (strlen(name) >= sizeof opt->attrs[0].name)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "EXR attribute name '%s' is too long", name);
   for (int i = 0; i < opt->nattrs; i++) /* replace an attribute of the same name */

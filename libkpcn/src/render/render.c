@@ -216,6 +216,8 @@ static cJSON *render_identity(const kpcn_render_ctx *c, const kpcn_render_settin
 
 kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *settings,
                            kpcn_aov_set **out, kpcn_render_stats *stats) {
+  /* defined on every return: a caller reads rows_resumed after a cancel too */
+  if (stats) memset(stats, 0, sizeof *stats);
   if (!scene || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_render: NULL scene or out");
   *out = NULL;
   kpcn_render_settings st = settings ? *settings : kpcn_render_settings_defaults();
@@ -377,6 +379,11 @@ kpcn_status kpcn_render_ex(const kpcn_scene *scene, const kpcn_render_settings *
    * whose return value was dropped). Reported once. */
   if (!cancel && st.progress && !reported_all && st.progress(st.progress_user, 1.0)) cancel = 1;
   if (cancel) {
+    if (stats) { /* what a log should say of a resumed render stopped again */
+      stats->seconds = secs;
+      stats->rows_resumed = resumed;
+      stats->checkpoint_errors = save_errors;
+    }
     kpcn_status r = kpcn_render_ckpt_save(ck);
     if (r == KPCN_OK)
       r = kpcn_fail(KPCN_ERR_CANCELLED, "render of '%s' cancelled%s", scene->name,

@@ -787,7 +787,7 @@ kpcn_status kpcn_scene_load(const char *path, kpcn_scene **out) {
   snprintf(dir, sizeof(dir), "%s", path);
   char *slash = strrchr(dir, '/');
   if (slash)
-    *slash = 0;
+    slash[slash == dir] = 0; /* "/scene.json" is in "/", not in the working directory */
   else
     dir[0] = 0;
   kpcn_status st = kpcn_scene_load_json(text, dir, path, out);
