@@ -203,6 +203,25 @@ static void test_shift_and_inverse(void) {
   }
   CHECK(all);
   kpcn_aov_destroy(a);
+  /* Shifts drawn within [-max_shift, max_shift] up to INT_MAX (2 * max_shift + 1 overflowed
+   * int from 2^30 on), both signs and both ends' neighbourhoods reached */
+  const int maxes[3] = {5, 1 << 30, INT_MAX};
+  for (int k = 0; k < 3; k++) {
+    kpcn_augment_draw_defaults(&ds);
+    ds.colorswap = ds.mirror = ds.rotate = 0;
+    ds.max_shift = maxes[k];
+    int inside = 1, neg = 0, pos = 0;
+    for (uint64_t i = 0; i < 2000; i++) {
+      kpcn_augment_xform x;
+      kpcn_augment_draw(&x, &ds, 7, i);
+      inside &= x.dx >= -maxes[k] && x.dx <= maxes[k] && x.dy >= -maxes[k] && x.dy <= maxes[k];
+      neg |= x.dx<-maxes[k] / 2, pos |= x.dx> maxes[k] / 2;
+    }
+    CHECK(inside && neg && pos);
+    if (!(inside && neg && pos))
+      fprintf(stderr, "  max_shift %d: inside %d, below -max/2 %d, above max/2 %d\n", maxes[k],
+              inside, neg, pos);
+  }
 }
 
 /* A hemisphere bulging toward the camera: its camera-space normal at image pixel (x, y)

@@ -84,6 +84,15 @@ $PY -c 'import json,sys; sys.exit(json.load(open("out.txt"))["l1"] < 0.05)' &&
 oiiotool s8.png --attrib oiio:ColorSpace GammaCorrected1.8 -o g18.png
 expect_fail "tagged as colour space 'GammaCorrected1.8' (oiio:ColorSpace), which OCIO config" x.exr \
   g18.png --ociodisplay -o x.exr
+# An AOV image (any channel besides R, G, B, A) is reduced to its colour first: a Z after R,G,B
+# was displayed as alpha until session 62, and an R,G,Z image is refused
+oiiotool --pattern constant:color=0.1,0.2,0.3,5 8x8 4 --chnames R,G,B,Z -o rgbz.exr
+oiiotool --pattern constant:color=0.1,0.2,0.3 8x8 3 -o rgb.exr
+run_ok rgbz.exr --ociodisplay -o drgbz.exr rgb.exr --ociodisplay -o drgb.exr
+oiiotool --info drgbz.exr | grep -q ", 3 channel," && idiff -fail 0 -a drgbz.exr drgb.exr >/dev/null &&
+  pass "--ociodisplay of R,G,B,Z = of R,G,B" || fail "R,G,B,Z display: $(oiiotool --info -v drgbz.exr | head -3)"
+oiiotool rgbz.exr --ch R,G,Z -o rgz.exr
+expect_fail "has 3 channels but no R,G,B to display" x.exr rgz.exr --ociodisplay -o x.exr
 # looks= are applied (OIIO 2.4's display transform ignores them): a config with a look
 # 'Brighten' (exponent 0.5 in linear) against oiiotool's --ociolook then --ociodisplay.
 sed 's/^active_views:.*/&\nlooks:\n  - !<Look>\n    name: Brighten\n    process_space: Linear Rec.709 (sRGB)\n    transform: !<ExponentTransform> {value: [0.5, 0.5, 0.5, 1]}/' \

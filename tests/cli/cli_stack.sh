@@ -124,6 +124,30 @@ oiiotool --info mix.png | grep -q "uint16 png" && pass "computed: widest input t
 run_ok h.exr u16.png -o own16.png h.exr u8.tif -o own8.tif
 oiiotool --info own16.png | grep -q "uint16 png" && oiiotool --info own8.tif | grep -q "uint8 tiff" &&
   pass "as read: its own type" || fail "own types: $(oiiotool --info own16.png own8.tif)"
+# PNM holds 16 bits: the input's uint16 and -d uint16 reach the file's maximum value (OIIO's PNM
+# writer takes its depth from oiio:BitsPerSample, so both came out 8-bit until session 62)
+run_ok u16.png -o k16.ppm u8.tif -o k8.ppm --ch R -d uint16 -o d16.pgm
+for f in k16.ppm:65535 d16.pgm:65535 k8.ppm:255; do
+  [ "$(head -c 20 "${f%%:*}" | tr '\n' ' ' | awk '{print $4}')" = "${f#*:}" ] &&
+    pass "${f%%:*}: maximum value ${f#*:}" || fail "${f%%:*}: header $(head -c 20 "${f%%:*}" | tr '\n' ' ')"
+done
+# the samples as stored (big-endian after the header) against the PNG's: OIIO's PNM reader
+# converts some 16-bit values a step low, so the file is read here
+if $PY - <<'PY'; then pass "16-bit PPM holds the PNG's values exactly"; else fail "16-bit PPM values"; fi
+import numpy as np, OpenImageIO as oiio
+png = oiio.ImageBuf("u16.png").get_pixels(oiio.UINT16)
+raw = open("k16.ppm", "rb").read()
+assert raw.startswith(b"P6\n40 30\n65535\n"), raw[:20]
+ppm = np.frombuffer(raw[len(b"P6\n40 30\n65535\n"):], dtype=">u2").reshape(png.shape)
+assert (ppm == png).all(), (ppm != png).sum()
+PY
+# --mosaic labels that do not fit the (short) tile: none drawn, a warning naming the tile
+oiiotool --pattern constant:color=0,0,0 20x12 3 -o short.exr --pattern constant:color=0,0,0 40x30 3 -o tall.exr
+run_ok short.exr tall.exr --mosaic:labels=a,b:fontsize=20 -o lab.exr
+grep -q "labels not drawn (fontsize 20 does not fit a 20x12 tile)" err.txt &&
+  oiiotool --stats lab.exr | grep -q 'Max: 0.000000 0.000000 0.000000' &&
+  pass "--mosaic: labels taller than a tile are not drawn, with a warning" ||
+  fail "--mosaic short tile: $(cat err.txt) $(oiiotool --stats lab.exr | grep Max)"
 # DPX holds 1, 3 or 4 channels (OIIO's writer aborted on others, leaving temporaries)
 expect_fail ".dpx files hold 1, 3 or 4" x.dpx h.exr --ch R,G -o x.exr -o x.dpx
 [ ! -e x.exr ] || fail "x.exr written beside a refused DPX"

@@ -401,8 +401,15 @@ bool cmd_ociodisplay(Context &ctx, const Modifiers &m, const std::vector<std::st
     }
   }
   ImageBuf src = ctx.top();
-  // AOV images: transform the colour only (R,G,B and A when present).
-  if (src.nchannels() > 4 || src.spec().channelindex("R") > 0) {
+  // AOV images (any channel other than R, G, B, A: metrics.md's rule) and images whose colour
+  // channels are out of order: the colour only, R,G,B and A when present. Fewer than three
+  // channels go to OCIO as they are.
+  bool reduce = src.spec().channelindex("R") > 0;
+  for (int c = 0; c < src.nchannels() && src.nchannels() >= 3; ++c) {
+    const std::string &n = src.spec().channelnames[(size_t)c];
+    reduce = reduce || (n != "R" && n != "G" && n != "B" && n != "A");
+  }
+  if (reduce) {
     std::vector<int> order;
     for (const char *c : {"R", "G", "B", "A"}) {
       int i = src.spec().channelindex(c);
@@ -468,18 +475,20 @@ bool cmd_colormap(Context &ctx, const Modifiers &m, const std::vector<std::strin
       std::remove_if(finite.begin(), finite.end(), [](float v) { return !std::isfinite(v); }),
       finite.end());
   IBA::fixNonFinite(mean, mean, IBA::NONFINITE_BLACK, nullptr, {}, ctx.nthreads);
-  double mx = m.str("max").empty() ? 0.0 : m.num("max", 0.0); // empty: the 99th percentile
-  if (m.str("max").empty() && !finite.empty()) {
+  // absent: the 99th percentile (an empty max= is a bad value, not the default)
+  const bool auto_max = !m.has("max");
+  double mx = auto_max ? 0.0 : m.num("max", 0.0);
+  if (auto_max && !finite.empty()) {
     size_t k = (size_t)std::floor(0.99 * (double)(finite.size() - 1));
     std::nth_element(finite.begin(), finite.begin() + (long)k, finite.end());
     mx = finite[k];
   }
-  if (m.str("max").empty() && finite.empty()) {
+  if (auto_max && finite.empty()) {
     err = "every pixel of the image is NaN or Inf: nothing to scale the map by";
     return false;
   }
   if (!(mx > 0.0) || !std::isfinite(mx)) {
-    err = m.str("max").empty()
+    err = auto_max
               ? "the image's 99th percentile is " + std::to_string(mx) + ": give a positive :max="
               : "modifier 'max' must be positive (got '" + m.str("max") + "')";
     return false;
@@ -563,11 +572,11 @@ bool cmd_mosaic(Context &ctx, const Modifiers &m, const std::vector<std::string>
     }
     /* OIIO 2.4's render_text asserts (aborts) when the text's origin lies outside the image,
      * so a label that cannot start inside its tile is not drawn */
-    if (!labels.empty() && !warned && (b.spec().width <= 4 || 4 + fontsize > H)) {
+    if (!labels.empty() && !warned && (b.spec().width <= 4 || 4 + fontsize > b.spec().height)) {
       std::fprintf(stderr,
                    "kpcntool: warning: --mosaic: labels not drawn (fontsize %ld does not fit "
                    "a %dx%d tile)\n",
-                   fontsize, b.spec().width, H);
+                   fontsize, b.spec().width, b.spec().height);
       warned = true;
     }
     if (!labels.empty() && !warned &&

@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <exception>
 #include <sstream>
+#include <sys/stat.h>
 
 namespace {
 
@@ -88,8 +89,24 @@ bool check_files(const std::vector<Step> &steps, std::string &err) {
     if (!st.cmd) continue;
     if (st.cmd->name == "o") outs.push_back({st.args[0], "-o"});
     const std::string out = st.mods.str("out"), model = st.mods.str("model");
-    if (out.size() > 4 && out.compare(out.size() - 4, 4, ".kps") == 0) // as cmd_patches
+    if (out.size() > 4 && out.compare(out.size() - 4, 4, ".kps") == 0) { // as cmd_patches
       outs.push_back({out, "out="});
+    } else if (!out.empty()) {
+      // a folder of EXR pairs, merged into when it exists: then it must be a directory; a new
+      // one needs its parent folder, checked as for a new file of that name
+      std::string bare = out;
+      while (bare.size() > 1 && bare.back() == '/')
+        bare.pop_back();
+      struct stat sb;
+      if (stat(bare.c_str(), &sb) == 0 && !S_ISDIR(sb.st_mode)) {
+        err = "out= '" + out + "' exists and is not a directory";
+        return false;
+      }
+      if (stat(bare.c_str(), &sb) != 0 && kpcn_check_output_path(bare.c_str(), "out=") != KPCN_OK) {
+        err = kpcn_last_error();
+        return false;
+      }
+    }
     if (!model.empty()) ins.push_back({model, "model"});
     if (st.cmd->name == "render") ins.push_back({st.args[0], "the scene of --render"});
   }
@@ -243,7 +260,10 @@ int main(int argc, char **argv) {
     }
     if (!ok) {
       if (err.empty()) err = "failed";
-      std::fprintf(stderr, "kpcntool: error: %s: %s\n", kpcntool::printable(st.token).c_str(),
+      std::string what = st.token; // the command as written, with its arguments (-o x.png)
+      for (const std::string &a : st.args)
+        what += " " + a;
+      std::fprintf(stderr, "kpcntool: error: %s: %s\n", kpcntool::printable(what).c_str(),
                    kpcntool::printable(err, true).c_str());
       return 1;
     }

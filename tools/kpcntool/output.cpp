@@ -11,7 +11,9 @@
 #include <cctype>
 #include <csignal>
 #include <cstdio>
+#include <cerrno>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <sys/statvfs.h>
 #include <system_error>
@@ -155,6 +157,40 @@ bool whole_frame(const OIIO::ImageBuf &img, OIIO::ImageBuf &out, int nthreads, s
   return true;
 }
 
+// A 16-bit binary PNM (P5 grey, P6 RGB: the header, then big-endian samples). OIIO 2.4's PNM
+// writer takes its depth from oiio:BitsPerSample (8 when absent) rather than the pixel type,
+// and given 16 it writes garbled samples (as oiiotool -d uint16 -o x.ppm does), so 16-bit PNM
+// is written here; OIIO's PNM reader reads it back exactly (tested).
+static bool write_pnm16(const OIIO::ImageBuf &w, const std::string &file, std::string &err) {
+  const OIIO::ROI r = w.roi();
+  const size_t n = (size_t)r.width() * (size_t)r.height() * (size_t)w.nchannels();
+  std::vector<float> px(n);
+  if (!w.get_pixels(r, OIIO::TypeDesc::FLOAT, px.data())) {
+    err = w.geterror();
+    return false;
+  }
+  // rounded to nearest, as OIIO's writers convert (its get_pixels to UINT16 truncated some
+  // values a step low); NaN as 0
+  std::vector<unsigned char> be(2 * n);
+  for (size_t i = 0; i < n; ++i) {
+    const float v = px[i] > 0.0f ? (px[i] < 1.0f ? px[i] : 1.0f) : 0.0f;
+    const unsigned q = (unsigned)(v * 65535.0f + 0.5f);
+    be[2 * i] = (unsigned char)(q >> 8), be[2 * i + 1] = (unsigned char)(q & 0xff);
+  }
+  FILE *f = std::fopen(file.c_str(), "wb");
+  if (!f) {
+    err = std::string("cannot create it: ") + std::strerror(errno);
+    return false;
+  }
+  bool ok = std::fprintf(f, "P%c\n%d %d\n65535\n", w.nchannels() == 1 ? '5' : '6', r.width(),
+                         r.height()) > 0 &&
+            std::fwrite(be.data(), 1, be.size(), f) == be.size();
+  const int e = ok ? 0 : errno;
+  if (std::fclose(f) != 0 && ok) ok = false;
+  if (!ok) err = std::string("writing it failed: ") + std::strerror(e ? e : errno);
+  return ok;
+}
+
 bool write_image(const OIIO::ImageBuf &img, const std::string &file, OIIO::TypeDesc fmt,
                  std::string &err) {
   auto out = OIIO::ImageOutput::create(file);
@@ -166,6 +202,9 @@ bool write_image(const OIIO::ImageBuf &img, const std::string &file, OIIO::TypeD
   const bool fill = !out->supports("displaywindow") && img.roi() != img.roi_full();
   if (fill && !whole_frame(img, framed, 0, err)) return false;
   const OIIO::ImageBuf &w = fill ? framed : img;
+  if (fmt == OIIO::TypeDesc::UINT16 && is_any_of(lower_ext(file), {"ppm", "pgm", "pnm"}) &&
+      (w.nchannels() == 1 || w.nchannels() == 3))
+    return write_pnm16(w, file, err);
   if (!w.write(file, fmt)) {
     err = w.geterror();
     if (err.empty()) err = "the image writer failed";

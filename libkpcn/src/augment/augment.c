@@ -118,7 +118,8 @@ void kpcn_augment_draw(kpcn_augment_xform *x, const kpcn_augment_draw_settings *
   if (s->max_shift > 0) ops[nops++] = 4;
   if (nops == 0) return;
   int only = s->mode == KPCN_AUGMENT_ONE_OF ? ops[r[5] % (uint64_t)nops] : -1;
-  int span = 2 * s->max_shift + 1;
+  /* in 64 bits: 2 * max_shift + 1 overflowed int from max_shift 2^30 on */
+  const uint64_t span = 2 * (uint64_t)(s->max_shift > 0 ? s->max_shift : 0) + 1;
   for (int i = 0; i < nops; i++) {
     int op = ops[i];
     if (only >= 0 && op != only) continue;
@@ -133,8 +134,8 @@ void kpcn_augment_draw(kpcn_augment_xform *x, const kpcn_augment_draw_settings *
     case 2: x->mirror_v = force ? 1 : (int)((r[2] >> 7) & 1); break;
     case 3: x->rot90 = force ? 1 + (int)(r[3] % 3) : (int)(r[3] % 4); break;
     case 4:
-      x->dx = (int)(r[4] % (uint64_t)span) - s->max_shift;
-      x->dy = (int)((r[4] >> 32) % (uint64_t)span) - s->max_shift;
+      x->dx = (int)((int64_t)(r[4] % span) - s->max_shift);
+      x->dy = (int)((int64_t)((r[4] >> 32) % span) - s->max_shift);
       if (force && x->dx == 0 && x->dy == 0) x->dx = s->max_shift;
       break;
     }
