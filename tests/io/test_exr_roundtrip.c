@@ -294,6 +294,29 @@ static void test_aov_roundtrip(void) {
   }
   CHECK(kpcn_exr_info(path, &info) == KPCN_OK && info.channel_is_half[0] == 1);
   kpcn_aov_destroy(r);
+  /* a kpcn:seed string is a seed only when it is digits alone within 2^63-1 (strtoll took
+   * "12abc" as 12 and "-5" as -5); anything else is no seed, -1 */
+  static const struct {
+    const char *text;
+    int64_t seed;
+  } seeds[] = {{"12abc", -1},
+               {"-5", -1},
+               {" 7", -1},
+               {"9223372036854775808", -1},
+               {"9223372036854775807", INT64_MAX},
+               {"0", 0}};
+  sub->seed = -1; /* the writer then adds no kpcn:seed of its own */
+  for (size_t k = 0; k < sizeof seeds / sizeof seeds[0]; k++) {
+    o = kpcn_exr_write_options_defaults();
+    CHECK(kpcn_exr_options_add_string(&o, "kpcn:seed", seeds[k].text) == KPCN_OK);
+    path = kt_tmpfile("aov_seed.exr");
+    r = NULL;
+    CHECK(kpcn_exr_write_aov(path, sub, &o) == KPCN_OK && kpcn_exr_read_aov(path, &r) == KPCN_OK);
+    CHECK(r && r->seed == seeds[k].seed);
+    if (r && r->seed != seeds[k].seed)
+      fprintf(stderr, "  kpcn:seed '%s' read as %lld\n", seeds[k].text, (long long)r->seed);
+    kpcn_aov_destroy(r);
+  }
   kpcn_aov_destroy(sub);
   kpcn_aov_destroy(s);
 }

@@ -174,10 +174,11 @@ void kpcn_exr_read_meta(exr_context_t ctx, int *spp, int64_t *seed, char *scene,
   *seed = -1;
   char sbuf[64];
   attr_string(ctx, "kpcn:seed", sbuf, sizeof sbuf);
-  if (sbuf[0]) {
+  if (sbuf[0]) { /* digits only, in range: "12abc" or "-5" is no seed (-1), not 12 or -5 */
     char *end;
-    long long s = strtoll(sbuf, &end, 10);
-    if (end != sbuf) *seed = s;
+    errno = 0;
+    long long s = sbuf[0] >= '0' && sbuf[0] <= '9' ? strtoll(sbuf, &end, 10) : -1;
+    if (s >= 0 && !*end && errno != ERANGE) *seed = s;
   } else if (attr_number(ctx, "kpcn:seed", &v) && v >= 0.0 && v < 9.2e18) {
     *seed = (int64_t)v; /* the cast of NaN or of a value past int64 is undefined */
   }
