@@ -1,5 +1,6 @@
 // ImageBuf <-> kpcn_image / kpcn_aov_set conversions (see kpcn/oiio_convert.h).
 #include "kpcn/oiio_convert.h"
+#include "ops_internal.h"
 
 #include <algorithm>
 #include <climits>
@@ -267,6 +268,12 @@ ImageBuf from_aov_set(const kpcn_aov_set &set) {
   ImageBuf dst;
   from_aov_set(dst, set);
   return dst;
+}
+
+bool empty_roi(OIIO::ImageBuf &dst, OIIO::ROI roi, const char *what) {
+  if (!roi.defined() || (roi.width() > 0 && roi.height() > 0 && roi.depth() == 1)) return false;
+  dst.errorfmt("{}: the region {} holds no pixels", what, roi);
+  return true;
 }
 
 } // namespace ops

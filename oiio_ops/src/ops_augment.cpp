@@ -90,14 +90,25 @@ kpcn_status rotate_any_image(kpcn_image **out, const kpcn_image *in, double deg,
   return KPCN_OK;
 }
 
-// Converts the noisy image and, when given (initialized), the reference image.
+// Converts the noisy image and, when given, the reference image. Only an empty ImageBuf is no
+// reference: one naming a file that failed to open was taken as none, without a word. A
+// reference must cover the noisy image's pixels (directory output cut misaligned patches).
 bool to_aov_pair(const OIIO::ImageBuf &noisy, const OIIO::ImageBuf &ref, AovPtr &n, AovPtr &r,
                  std::string &err) {
   n = to_aov_set(noisy, err);
   if (!n) return false;
-  if (ref.initialized()) {
+  if (ref.initialized() || ref.has_error() || !ref.name().empty()) {
     r = to_aov_set(ref, err);
     if (!r) return false;
+    if (r->width != n->width || r->height != n->height || ref.xbegin() != noisy.xbegin() ||
+        ref.ybegin() != noisy.ybegin()) {
+      err = "reference " + std::to_string(r->width) + "x" + std::to_string(r->height) + " at (" +
+            std::to_string(ref.xbegin()) + ", " + std::to_string(ref.ybegin()) + ") vs noisy " +
+            std::to_string(n->width) + "x" + std::to_string(n->height) + " at (" +
+            std::to_string(noisy.xbegin()) + ", " + std::to_string(noisy.ybegin()) +
+            "): the images must cover the same pixels";
+      return false;
+    }
   }
   return true;
 }
@@ -133,15 +144,19 @@ bool rotate(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, double degrees, int 
     dst.errorfmt("rotate: angle {} is not finite", degrees);
     return false;
   }
-  double q = degrees / 90.0;
+  // reduced to [0, 360) first (fmod is exact): degrees / 90 lost the fraction of a large
+  // angle (1e18 was taken as a quarter-turn multiple) and llround overflowed past 2^63
+  double r = std::fmod(degrees, 360.0);
+  if (r < 0.0) r += 360.0;
+  const double q = r / 90.0;
   if (std::fabs(q - std::round(q)) < 1e-12) {
     kpcn_augment_xform x;
     kpcn_augment_identity(&x);
-    x.rot90 = (int)(((long long)std::llround(q) % 4 + 4) % 4);
+    x.rot90 = (int)std::lround(q) % 4;
     return augment(dst, src, x, nthreads);
   }
   return apply(dst, src, nullptr, [&](kpcn_image **o, const kpcn_image *i) {
-    return rotate_any_image(o, i, degrees, nthreads);
+    return rotate_any_image(o, i, r, nthreads); // reduced: 1e18's sin and cos are not 280's
   });
 }
 OIIO::ImageBuf rotate(const OIIO::ImageBuf &src, double degrees, int nthreads) {
@@ -201,6 +216,10 @@ bool write_patches(const std::string &out, const OIIO::ImageBuf &noisy, const OI
   AovPtr n, r;
   if (!to_aov_pair(noisy, ref, n, r, err)) return false;
   bool kps = out.size() > 4 && out.compare(out.size() - 4, 4, ".kps") == 0;
+  if (kps && !r) {
+    err = "a patch store needs a reference image (its training target)";
+    return false;
+  }
   if (kps) {
     kpcn_patchstore_settings ss;
     kpcn_patchstore_settings_defaults(&ss);

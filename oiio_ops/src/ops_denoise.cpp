@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "kpcn/oiio_convert.h"
+#include "ops_internal.h"
 
 namespace kpcn {
 namespace ops {
@@ -59,14 +60,6 @@ bool place_result(OIIO::ImageBuf &dst, OIIO::ImageBuf &full, const OIIO::ImageBu
   return true;
 }
 
-// A caller's ROI must hold pixels: an empty one was "accepted", and dst came back
-// uninitialised with OIIO's internal message and a true return.
-bool empty_roi(OIIO::ImageBuf &dst, OIIO::ROI roi, const char *what) {
-  if (!roi.defined() || (roi.width() > 0 && roi.height() > 0 && roi.depth() == 1)) return false;
-  dst.errorfmt("{}: the region {} holds no pixels", what, roi);
-  return true;
-}
-
 // The C library's last error for dst, prefixed with `what` unless it already names the
 // denoiser ("denoise: ...", "denoiser_kernels: ...", as most of libkpcn's denoiser messages do).
 void c_error(OIIO::ImageBuf &dst, const char *what) {
@@ -113,8 +106,16 @@ bool denoise(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptio
 
 bool denoise_kernels(OIIO::ImageBuf &dst, const OIIO::ImageBuf &aovs, const DenoiseOptions &opt,
                      const std::string &branch, OIIO::ROI roi, int nthreads) {
-  if (opt.method != "kpcn" || opt.model.empty()) {
-    dst.errorfmt("denoise_kernels: only the KPCN predicts kernels: give a model file (model=...)");
+  if (opt.method != "kpcn" && opt.method != "bilateral" && opt.method != "nlmeans") {
+    dst.errorfmt("denoise_kernels: unknown method '{}' (kpcn, bilateral, nlmeans)", opt.method);
+    return false;
+  }
+  if (opt.method != "kpcn") {
+    dst.errorfmt("denoise_kernels: method {} predicts no kernels: only the KPCN does", opt.method);
+    return false;
+  }
+  if (opt.model.empty()) {
+    dst.errorfmt("denoise_kernels: the KPCN needs a model file (model=...)");
     return false;
   }
   if (branch != "diffuse" && branch != "specular") {

@@ -2,6 +2,7 @@
 #include "kpcn/ops_render.h"
 
 #include "kpcn/oiio_convert.h"
+#include "ops_internal.h"
 
 #ifdef KPCN_HAVE_EMBREE
 #include "kpcn/render.h"
@@ -18,6 +19,7 @@ bool render(OIIO::ImageBuf &dst, const std::string &scene_path, const RenderOpti
   dst.errorfmt("render: this kpcn was built without the renderer (KPCN_WITH_EMBREE=OFF)");
   return false;
 #else
+  if (empty_roi(dst, roi, "render")) return false;
   if ((opt.width > 0) != (opt.height > 0) || opt.width < 0 || opt.height < 0) {
     dst.errorfmt("render: width and height are given together and > 0 (got {}x{})", opt.width,
                  opt.height);

@@ -13,6 +13,7 @@ extern "C" {
 #include "testutil.h" // a C header without extern "C" guards
 }
 
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imagebufalgo.h>
 
 #include <string>
@@ -90,7 +91,11 @@ int main() {
   CHECK(OIIO::ImageBufAlgo::compare(kp, kf, 0.0f, 0.0f, win).nfail == 0);
   ImageBuf kb;
   CHECK(!ops::denoise_kernels(kb, aov, o, "diffuse"));
-  CHECK(kb.geterror().find("only the KPCN") != std::string::npos);
+  CHECK(kb.geterror().find("predicts no kernels") != std::string::npos);
+  ops::DenoiseOptions unk = k; // an unknown method is named as such, with or without a model
+  unk.method = "foo";
+  CHECK(!ops::denoise_kernels(kb, aov, unk, "diffuse") &&
+        kb.geterror().find("unknown method 'foo'") != std::string::npos);
   CHECK(!ops::denoise_kernels(kb, aov, k, "albedo"));
   CHECK(kb.geterror().find("albedo") != std::string::npos);
   // the value-returning form (session 60: only the dst form existed)
@@ -126,5 +131,40 @@ int main() {
         nr.error.find("sizes differ") == std::string::npos);
   nr = ops::compare(aov, ImageBuf(), ops::Metric::L1);
   CHECK(!nr.ok && nr.error.find("the reference image is not initialized") != std::string::npos);
+
+  // session 62 (a second review of the C++ face):
+  // a large angle is reduced to [0, 360) first: 1e18 degrees is 280 (it was taken as an exact
+  // quarter-turn multiple, the identity), -90 is 270
+  ImageBuf big = ops::rotate(aov, 1e18), r280 = ops::rotate(aov, 280.0);
+  CHECK(!big.has_error() && OIIO::ImageBufAlgo::compare(big, r280, 0.0f, 0.0f).nfail == 0 &&
+        OIIO::ImageBufAlgo::compare(big, aov, 0.0f, 0.0f).nfail != 0);
+  ImageBuf rm90 = ops::rotate(aov, -90.0), r270 = ops::rotate(aov, 270.0 + 360.0 * 1e6);
+  CHECK(OIIO::ImageBufAlgo::compare(rm90, r270, 0.0f, 0.0f).nfail == 0 && placed_like(rm90, r270));
+  // patches: a reference naming a file that failed to open is an error, not "no reference";
+  // one covering other pixels is refused before anything is written (the directory form cut
+  // misaligned pairs); a patch store without a reference says that it needs one
+  kpcn_patch_settings ps;
+  kpcn_patch_settings_defaults(&ps);
+  ps.size = 8;
+  std::vector<kpcn_patch_origin> po;
+  kpcn_patch_stats pst;
+  std::string perr;
+  CHECK(!ops::select_patches(aov, nofile, ps, po, pst, perr) &&
+        perr.find("not initialized") != std::string::npos);
+  CHECK(ops::select_patches(aov, aov, ps, po, pst, perr) && !po.empty());
+  const std::string pdir = kt_tmpfile("ops_patches");
+  OIIO::Filesystem::remove_all(pdir);
+  CHECK(!ops::write_patches(pdir, aov, nofile, po, 8, perr));
+  ImageBuf moved = aov;
+  moved.set_origin(4, 5);
+  CHECK(!ops::write_patches(pdir, aov, moved, po, 8, perr) &&
+        perr.find("must cover the same pixels") != std::string::npos);
+  ImageBuf small = OIIO::ImageBufAlgo::cut(aov, ROI(3, 3 + w - 2, 5, 5 + h));
+  CHECK(!ops::write_patches(pdir, aov, small, po, 8, perr) &&
+        perr.find("must cover the same pixels") != std::string::npos);
+  CHECK(!OIIO::Filesystem::exists(pdir)); // refused before the folder was made
+  CHECK(!ops::write_patches(pdir + ".kps", aov, ImageBuf(), po, 8, perr) &&
+        perr.find("needs a reference image") != std::string::npos);
+  CHECK(ops::write_patches(pdir, aov, aov, po, 8, perr));
   return kt_summary("test_ops_places");
 }

@@ -57,6 +57,12 @@ int main() {
   CHECK(bad.geterror().find("no_such_scene.json") != std::string::npos);
   CHECK(!ops::render(bad, CORNELL, o, OIIO::ROI(30, 50, 0, 10)));
   CHECK(bad.geterror().find("lies outside") != std::string::npos);
+  // an empty or zero-depth window is an error (an all-zero one rendered the whole image: the
+  // library's "no crop")
+  CHECK(!ops::render(bad, CORNELL, o, OIIO::ROI(0, 0, 0, 0)) &&
+        bad.geterror().find("holds no pixels") != std::string::npos);
+  CHECK(!ops::render(bad, CORNELL, o, OIIO::ROI(2, 6, 1, 5, 0, 0)) &&
+        bad.geterror().find("holds no pixels") != std::string::npos);
   o.width = 10, o.height = 0;
   CHECK(!ops::render(bad, CORNELL, o) &&
         bad.geterror().find("width and height") != std::string::npos);

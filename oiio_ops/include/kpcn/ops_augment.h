@@ -9,8 +9,9 @@
 // window (no ROI: an augmentation of part of an image would misalign it with its reference).
 // Mirrors and quarter turns act on the whole frame (full window), as oiiotool's --flop, --flip
 // and --rotate90 do: a crop's data window moves inside the transformed frame; colour swaps,
-// shifts (wrapping inside the pixels) and other angles keep it. Errors are reported on dst
-// (dst.geterror()).
+// shifts (wrapping inside the pixels) and other angles keep it. The result is float whatever
+// the source's pixel type (libkpcn works in float; unlike IBA::flop, a half image comes back
+// float). Errors are reported on dst (dst.geterror()).
 //
 //   ImageBuf out = kpcn::ops::rotate(src, 90);          // exact quarter turn
 //   kpcn::ops::colorswap(dst, src, "BRG");
@@ -53,15 +54,18 @@ OIIO::ImageBuf colorswap(const OIIO::ImageBuf &src, const std::string &perm, int
 bool shift(OIIO::ImageBuf &dst, const OIIO::ImageBuf &src, int dx, int dy, int nthreads = 0);
 OIIO::ImageBuf shift(const OIIO::ImageBuf &src, int dx, int dy, int nthreads = 0);
 
-// Patch origins in noisy (culling on ref's colour when ref is given, else on noisy's;
-// ref may be an empty ImageBuf). Returns false and sets err on failure.
+// Patch origins in noisy, relative to its data window's corner (culling on ref's colour when
+// ref is given, else on noisy's). Only an empty ImageBuf is no reference: one whose file
+// failed to open is an error, and a reference must cover the same pixels (size and data
+// window). Returns false and sets err on failure.
 bool select_patches(const OIIO::ImageBuf &noisy, const OIIO::ImageBuf &ref,
                     const kpcn_patch_settings &s, std::vector<kpcn_patch_origin> &out,
                     kpcn_patch_stats &stats, std::string &err);
 
 // Writes the selected patches: `out` ending in ".kps" -> a patch store (the default
 // channel list of kpcn/dataset.h: noisy needs every AOV, ref color/diffuse/specular);
-// otherwise a directory receiving noisy_NNNN.exr (+ ref_NNNN.exr) with all channels. A store
+// otherwise a directory receiving noisy_NNNN.exr (+ ref_NNNN.exr) with all channels (a store
+// needs ref; both refuse a ref as select_patches does, before anything is written). A store
 // records `stats` (the selection's candidates, kept, culled; none when null) and
 // `settings_json` (a JSON object, e.g. the selection's settings) in its metadata.
 bool write_patches(const std::string &out, const OIIO::ImageBuf &noisy, const OIIO::ImageBuf &ref,
