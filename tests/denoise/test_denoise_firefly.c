@@ -226,6 +226,19 @@ static void test_denoiser(void) {
   memset(&o.bilateral, 0, sizeof o.bilateral);
   CHECK(kpcn_denoiser_create_with_model(&d, m, &o) == KPCN_OK && d);
   kpcn_denoiser_destroy(d);
+  /* switches are 0 or 1 (2 acted as 1), named; a failed create leaves *out NULL, a NULL
+   * model included (it kept the caller's value), and names the argument */
+  kpcn_denoiser_options_defaults(&o);
+  o.bf16 = 2;
+  d = (kpcn_denoiser *)&o;
+  CHECK(kpcn_denoiser_create_with_model(&d, m, &o) == KPCN_ERR_INVALID_ARGUMENT && !d &&
+        strstr(kpcn_last_error(), "bf16 2 must be 0 or 1"));
+  o.bf16 = 0, o.direct_conv = -1;
+  CHECK(kpcn_denoiser_create_with_model(&d, m, &o) == KPCN_ERR_INVALID_ARGUMENT &&
+        strstr(kpcn_last_error(), "direct_conv -1 must be 0 or 1"));
+  d = (kpcn_denoiser *)&o;
+  CHECK(kpcn_denoiser_create_with_model(&d, NULL, NULL) == KPCN_ERR_INVALID_ARGUMENT && !d &&
+        strstr(kpcn_last_error(), "model is NULL"));
   free(x);
   free(y);
   free(z);

@@ -182,11 +182,11 @@ static void test_bf16_and_larger_tiling(void) {
   kpcn_model_destroy(m);
 }
 
-static int g_calls;
+static int g_calls, g_cancel_at = 3;
 static int cancel_third(void *u, double f) {
   (void)u;
   (void)f;
-  return ++g_calls >= 3;
+  return ++g_calls >= g_cancel_at;
 }
 
 static void test_api(void) {
@@ -250,7 +250,46 @@ static void test_api(void) {
   kpcn_denoiser_set_progress(d, cancel_third, NULL);
   CHECK(kpcn_denoiser_execute(d, out, W, H, 0, 0) == KPCN_ERR_CANCELLED);
   CHECK(g_calls == 3);
+  /* session 62: the final call (2 x 6 + 1 = the 13th, at 1.0) cancels too, leaving the output
+   * as it was (its answer was dropped and the result returned); then the same denoiser runs
+   * afresh, bit for bit */
+  for (size_t i = 0; i < 3 * P; i++)
+    out[i] = -3.0f;
+  g_calls = 0, g_cancel_at = 13;
+  CHECK(kpcn_denoiser_execute(d, out, W, H, 0, 0) == KPCN_ERR_CANCELLED && g_calls == 13);
+  int kept = 1;
+  for (size_t i = 0; i < 3 * P; i++)
+    kept &= out[i] == -3.0f;
+  CHECK(kept);
+  g_calls = 0, g_cancel_at = 1000;
+  CHECK(kpcn_denoiser_execute(d, out, W, H, 0, 0) == KPCN_OK && g_calls == 13);
+  int same = 1; /* out interleaved RGB, ref planar */
+  for (size_t i = 0; i < P; i++)
+    for (int c = 0; c < 3; c++)
+      same &= out[3 * i + c] == ref[c * P + i];
+  CHECK(same);
+  g_cancel_at = 3;
   kpcn_denoiser_destroy(d);
+  /* an ensemble denoiser cancelled once runs its next execute (it stayed cancelled, its
+   * callback never called again) */
+  o.ensemble = 2;
+  CHECK(kpcn_denoiser_create(&d, &o) == KPCN_OK);
+  if (d) {
+    kpcn_denoiser_set_progress(d, cancel_third, NULL);
+    CHECK(kpcn_denoiser_execute_aov(d, a, out) == KPCN_ERR_CANCELLED);
+    g_calls = 0, g_cancel_at = 1000;
+    CHECK(kpcn_denoiser_execute_aov(d, a, out) == KPCN_OK && g_calls > 0);
+    kpcn_denoise_stats es;
+    kpcn_denoiser_get_stats(d, &es);
+    CHECK(es.tiles == 12 && es.tiles_total == 12); /* summed over the 2 members */
+    g_cancel_at = 3;
+    kpcn_denoiser_destroy(d);
+  }
+  o.ensemble = 0;
+  kpcn_denoise_stats none;
+  memset(&none, 0x5A, sizeof none);
+  kpcn_denoiser_get_stats(NULL, &none);
+  CHECK(none.tiles == 0 && none.total_s == 0.0);
 
   /* tile 0: the automatic grid (a small frame fits the memory budget in one tile), and a tile
    * far beyond the image ("never tile", where W + tile must not overflow): one piece each,

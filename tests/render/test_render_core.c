@@ -594,6 +594,37 @@ static void test_albedo_pass(const char *path) {
   kpcn_scene_destroy(s);
 }
 
+/* Two-sided shading flips the frame where the shading normal faces away from the viewer, as
+ * Tungsten does (it was decided by the geometric normal): one triangle facing +z whose vertex
+ * normals lean to +x, seen from -x and above (45 degrees), under a white environment. Its shading
+ * normal faces away from the camera while its face does not; Lambert albedo 0.5 shaded with the
+ * flipped frame is lit (about 0.5 · the upper hemisphere), where it rendered black. */
+static void test_backface_by_shading_normal(void) {
+  FILE *f = fopen(kt_tmpfile("leaning.obj"), "w");
+  CHECK(f != NULL);
+  if (!f) return;
+  fputs("v -1 -1 0\nv 1 -1 0\nv 0 1 0\nvn 0.98058 0 0.19612\nvn 0.98058 0 0.19612\n"
+        "vn 0.98058 0 0.19612\nf 1//1 2//2 3//3\n",
+        f);
+  fclose(f);
+  kpcn_aov_set *a =
+      render_text("{\"type\": \"mesh\", \"file\": \"leaning.obj\", \"smooth\": true, \"bsdf\": "
+                  "{\"type\": \"lambert\", \"albedo\": 0.5}}, {\"type\": \"infinite_sphere\", "
+                  "\"emission\": 1}",
+                  "[-3, 0, 3]", NULL);
+  CHECK(a != NULL);
+  if (!a) return;
+  double sum = 0;
+  int n = 0;
+  for (size_t i = 0; i < 256; i++)
+    if (fabsf(a->buf[KPCN_BUF_ALBEDO][i] - 0.5f) < 1e-6f) /* the triangle's pixels */
+      sum += a->buf[KPCN_BUF_COLOR][i], n++;
+  printf("triangle whose shading normal faces away: %d pixels, mean red %.3f\n", n,
+         n ? sum / n : 0.0);
+  CHECK(n >= 4 && sum / n > 0.2);
+  kpcn_aov_destroy(a);
+}
+
 int main(void) {
   test_albedo_pass(KPCN_TESTDATA "/scenes/glass-caustics/scene.json");
   test_albedo_pass(KPCN_TESTDATA "/scenes/textures/scene.json");
@@ -606,6 +637,7 @@ int main(void) {
   test_mesh_smooth_default();
   test_mesh_creases();
   test_tungsten_conventions();
+  test_backface_by_shading_normal();
   test_split(KPCN_TESTDATA "/scenes/glossy-mirror/scene.json");
   test_estimators(CORNELL, 32, 32, 256);
   test_estimators(KPCN_TESTDATA "/scenes/sky-plastics/scene.json", 32, 24, 128);

@@ -264,7 +264,41 @@ static void test_scene_values(void) {
   expect_fail("negative ior",
               "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"dielectric\","
               "\"ior\":-1.5}}]}",
-              "ior: -1.5 must be > 0", NULL);
+              "ior: -1.5 is outside [1e-4, 1e4]", NULL);
+  /* session 62 (a review against Tungsten and the docs): values that rendered NaN, negative
+   * or exploding radiance, or fields that were read and ignored, are refused by JSON path */
+  expect_fail("denormal ior",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"plastic\","
+              "\"ior\":1e-40}}]}",
+              "is outside [1e-4, 1e4]", "bsdf.ior: 9.99995e-41");
+  expect_fail("huge roughness",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"rough_conductor\","
+              "\"roughness\":1e20}}]}",
+              "bsdf.roughness: 1e+20 is above 1e4", NULL);
+  expect_fail("RGB roughness",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"rough_conductor\","
+              "\"roughness\":[0.1,0.2,0.3]}}]}",
+              "bsdf.roughness: a colour (0.1, 0.2, 0.3) is not one roughness", NULL);
+  expect_fail("RGB checker roughness",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"rough_plastic\","
+              "\"roughness\":{\"type\":\"checker\",\"on_color\":[0.1,0.1,0.2]}}}]}",
+              "bsdf.roughness: a colour", NULL);
+  expect_fail("plastic albedo at its pole",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"plastic\","
+              "\"albedo\":2}}]}",
+              "bsdf.albedo: 2 reaches the plastic's limit 1/F_dr", NULL);
+  expect_fail("conductor name and eta/k",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"conductor\","
+              "\"material\":\"Au\",\"eta\":[1,1,1],\"k\":[0,0,0]}}]}",
+              "bsdf.material: give a conductor name or", NULL);
+  expect_fail("no palik twin",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"conductor\","
+              "\"material\":\"Au_palik\"}}]}",
+              "unknown conductor 'Au_palik'", NULL);
+  expect_fail("inline bsdf name not a string",
+              "{\"primitives\":[{\"type\":\"quad\",\"bsdf\":{\"type\":\"lambert\","
+              "\"name\":3}}]}",
+              "primitives[0].bsdf.name: not a string", NULL);
   /* 0 or a denormal as a float: 1/tan(fov/2) was Inf and Embree aborted */
   expect_fail("tiny fov", CAM("\"type\":\"pinhole\",\"fov\":1e-38"), "camera.fov", NULL);
   expect_fail("fov rounding to 180", CAM("\"type\":\"pinhole\",\"fov\":179.99999999"), "camera.fov",

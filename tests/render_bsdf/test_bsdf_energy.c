@@ -160,6 +160,15 @@ int main(void) {
     }
   }
   CHECK(!kpcn_conductor_lookup("Unobtainium", &eta, &k));
+  /* a "_palik" twin only where Tungsten has one (Ir_palik is Ir's values); none for gold, and
+   * no double suffix */
+  kpcn_vec3 eta2, k2;
+  CHECK(kpcn_conductor_lookup("Ir", &eta2, &k2) && kpcn_conductor_lookup("Ir_palik", &eta, &k) &&
+        eta.x == eta2.x && k.z == k2.z);
+  const char *no_twin[] = {"Au_palik",  "Ag_palik",       "Al_palik", "Cr_palik", "W_palik",
+                           "a-C_palik", "Cu_palik_palik", "_palik",   "Na"};
+  for (size_t i = 0; i < sizeof no_twin / sizeof no_twin[0]; ++i)
+    CHECK(!kpcn_conductor_lookup(no_twin[i], &eta, &k));
   CHECK(kpcn_conductor_lookup("Au", &eta, &k));
   kpcn_vec3 fau = kpcn_fresnel_conductor3(eta, k, 1.0f);
   CHECK(fau.x > fau.z + 0.3f);                                     /* gold is yellow */

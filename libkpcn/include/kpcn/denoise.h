@@ -287,7 +287,9 @@ kpcn_status kpcn_denoiser_set_buffer(kpcn_denoiser *d, const char *name, const f
 kpcn_status kpcn_denoiser_set_buffer_channel(kpcn_denoiser *d, const char *name, int channel,
                                              const float *ptr, int width, int height,
                                              size_t pixel_stride, size_t row_stride);
-/* Progress callback: fraction in [0,1]; non-zero return cancels (KPCN_ERR_CANCELLED). */
+/* Progress callback: fraction in [0,1], ending with 1; a non-zero return, the final call's
+ * included, cancels that execute (KPCN_ERR_CANCELLED, the output untouched); the next
+ * execute runs afresh. */
 void kpcn_denoiser_set_progress(kpcn_denoiser *d, kpcn_progress_fn fn, void *user);
 
 /* Denoises into out (RGB, 3 floats per pixel at out + y*row_stride + x*pixel_stride;
@@ -332,13 +334,16 @@ typedef struct kpcn_denoise_stats {
   double other_s;        /* recombination, copies, net creation */
   double conv_flops;     /* convolution FLOPs executed (both branches, overlap included) */
   int tiles;             /* tiles processed (per branch) */
-  int tiles_total;       /* tiles of the grid (per branch) */
+  int tiles_total;       /* tiles of the grid (per branch; with an ensemble, summed over its
+                            members as tiles is) */
   int tile_w, tile_h;    /* output size of a full tile of that grid */
   int nets_created;      /* oneDNN networks built (0 on a warm execute of an unchanged size) */
   double exposure;       /* the input's kpcn_aov_exposure (0 when not measured) */
   double exposure_scale; /* the colour scale the network saw the input at (1 = as rendered) */
   int fireflies; /* pixels kpcn_aov_bound_fireflies bounded (kpcn_denoiser_options.firefly) */
 } kpcn_denoise_stats;
+/* The last execute's figures: zeroed when it starts (after its argument and size checks),
+ * so after a failure or cancel they hold what was done until then; all zero for a NULL d. */
 void kpcn_denoiser_get_stats(const kpcn_denoiser *d, kpcn_denoise_stats *s);
 
 /* Largest ensemble size (the eight symmetries of the square). */

@@ -56,6 +56,12 @@ static double now_s(void) {
 
 /* Checks what both create calls accept alike. */
 static kpcn_status check_options(const kpcn_denoiser_options *o) {
+  /* switches are 0 or 1: any other value acted as 1 without a word */
+  if (o->bf16 != 0 && o->bf16 != 1)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: bf16 %d must be 0 or 1", o->bf16);
+  if (o->direct_conv != 0 && o->direct_conv != 1)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: direct_conv %d must be 0 or 1",
+                     o->direct_conv);
   if (o->tile < 0)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create: tile %d must be >= 0", o->tile);
   /* libgomp aborts the process when it cannot start the threads asked for */
@@ -119,9 +125,10 @@ kpcn_status kpcn_denoiser_create(kpcn_denoiser **out, const kpcn_denoiser_option
 
 kpcn_status kpcn_denoiser_create_with_model(kpcn_denoiser **out, kpcn_model *model,
                                             const kpcn_denoiser_options *opts) {
+  if (out) *out = NULL; /* on every failure, as kpcn_denoiser_create */
   if (!out || !model)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create_with_model: NULL argument");
-  *out = NULL;
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_create_with_model: %s is NULL",
+                     !out ? "out" : "model");
   KPCN_TRY(kpcn_features_check_arch(kpcn_model_arch(model)));
   kpcn_denoiser_options o;
   if (opts)
@@ -151,10 +158,15 @@ void kpcn_denoiser_set_progress(kpcn_denoiser *d, kpcn_progress_fn fn, void *use
   if (!d) return;
   d->prog.fn = fn;
   d->prog.user = user;
+  d->prog.cancelled = 0;
 }
 
 void kpcn_denoiser_get_stats(const kpcn_denoiser *d, kpcn_denoise_stats *s) {
-  if (d && s) *s = d->stats;
+  if (!s) return;
+  if (d)
+    *s = d->stats;
+  else
+    memset(s, 0, sizeof *s);
 }
 
 /* "diffuse" -> (buffer, 0); "diffuse.var" -> (buffer, 1). */
@@ -309,7 +321,8 @@ static kpcn_status run_method(kpcn_denoiser *d, const kpcn_aov_set *aov, float s
 }
 
 kpcn_status kpcn_denoise_ensemble_xform(int i, kpcn_augment_xform *x) {
-  if (!x || i < 0 || i >= KPCN_DENOISE_MAX_ENSEMBLE)
+  if (!x) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoise_ensemble_xform: x is NULL");
+  if (i < 0 || i >= KPCN_DENOISE_MAX_ENSEMBLE)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoise_ensemble_xform: index %d not in 0..7", i);
   kpcn_augment_identity(x);
   static const int rot[4] = {0, 2, 1, 3}; /* pairs of i: rot180 before the quarter turns, so
@@ -377,6 +390,7 @@ static kpcn_status run_ensemble(kpcn_denoiser *d, const kpcn_aov_set *aov, float
     return KPCN_ERR_OUT_OF_MEMORY;
   }
   kpcn_progress outer = d->prog;
+  outer.cancelled = 0; /* the last execute's cancel is written back below: not this one's */
   ensemble_progress ep = {&outer, 0, n};
   d->prog.fn = outer.fn ? ensemble_progress_fn : NULL;
   d->prog.user = &ep;
@@ -528,7 +542,8 @@ static kpcn_status check_all_set(const kpcn_denoiser *d) {
 
 kpcn_status kpcn_denoiser_execute(kpcn_denoiser *d, float *out, int width, int height,
                                   size_t pixel_stride, size_t row_stride) {
-  if (!d || !out) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_execute: NULL argument");
+  if (!d || !out)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_execute: %s is NULL", !d ? "d" : "out");
   KPCN_TRY(kpcn_check_size(width, height, "denoiser output"));
   double t0 = now_s();
   memset(&d->stats, 0, sizeof d->stats);
@@ -563,7 +578,10 @@ kpcn_status kpcn_denoiser_execute(kpcn_denoiser *d, float *out, int width, int h
 kpcn_status kpcn_denoiser_execute_aov(kpcn_denoiser *d, const kpcn_aov_set *aov,
                                       float *out_planar) {
   if (!d || !aov || !out_planar)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_execute_aov: NULL argument");
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_execute_aov: %s is NULL",
+                     !d     ? "d"
+                     : !aov ? "aov"
+                            : "out_planar");
   KPCN_TRY(kpcn_check_size(aov->width, aov->height, "denoiser_execute_aov"));
   double t0 = now_s();
   memset(&d->stats, 0, sizeof d->stats);
@@ -583,7 +601,8 @@ static kpcn_status require_kpcn(const kpcn_denoiser *d, const char *what) {
 kpcn_status kpcn_denoiser_kernel_info(const kpcn_denoiser *d, int *kernel_size, int *passes,
                                       float *eps) {
   if (!d || !kernel_size)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_kernel_info: NULL argument");
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_kernel_info: %s is NULL",
+                     !d ? "d" : "kernel_size");
   KPCN_TRY(require_kpcn(d, "denoiser_kernel_info"));
   const kpcn_arch *a = kpcn_model_arch(d->model);
   *kernel_size = a->kernel_size;
@@ -595,7 +614,10 @@ kpcn_status kpcn_denoiser_kernel_info(const kpcn_denoiser *d, int *kernel_size, 
 kpcn_status kpcn_denoiser_kernels_aov(kpcn_denoiser *d, const kpcn_aov_set *aov, int branch,
                                       float *weights, float *noisy_pre) {
   if (!d || !aov || !weights)
-    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_kernels: NULL argument");
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoiser_kernels: %s is NULL",
+                     !d     ? "d"
+                     : !aov ? "aov"
+                            : "weights");
   KPCN_TRY(require_kpcn(d, "denoiser_kernels"));
   if (branch != KPCN_BRANCH_DIFFUSE && branch != KPCN_BRANCH_SPECULAR)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
@@ -626,7 +648,9 @@ kpcn_status kpcn_denoiser_kernels_aov(kpcn_denoiser *d, const kpcn_aov_set *aov,
 
 kpcn_status kpcn_denoise_aov_stats(const kpcn_aov_set *aov, const kpcn_denoiser_options *opts,
                                    kpcn_image **out_rgb, kpcn_denoise_stats *stats) {
-  if (!aov || !out_rgb) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoise_aov: NULL argument");
+  if (!aov || !out_rgb)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "denoise_aov: %s is NULL",
+                     !aov ? "aov" : "out_rgb");
   *out_rgb = NULL;
   kpcn_denoiser *d = NULL;
   KPCN_TRY(kpcn_denoiser_create(&d, opts));

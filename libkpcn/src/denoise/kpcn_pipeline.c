@@ -275,7 +275,7 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
   const float inv_scale = 1.0f / color_scale; /* 1 exactly when the exposure is untouched */
 
   const int nx = (W + TW - 1) / TW, ny = (H + TH - 1) / TH, nt = nx * ny;
-  st->tiles_total = nt;
+  st->tiles_total += nt; /* summed over an ensemble's members, as tiles is */
   st->tile_w = TW;
   st->tile_h = TH;
   tile_t *tiles = kpcn_alloc(sizeof(tile_t) * (size_t)nt, "denoiser tile list");
@@ -397,10 +397,13 @@ kpcn_status kpcn_pipeline_run(kpcn_model *model, const kpcn_aov_set *aov,
         }
       }
       st->other_s += now_s() - td;
-      if (b == 0) st->tiles++;
+      /* the branch that runs (a kernel export of the specular one counted none) */
+      if (b == (sink ? sink->branch : 0)) st->tiles++;
     }
   }
-  kpcn_progress_report(prog, 1.0);
+  /* the final call may cancel too (its answer was dropped: the result came back) */
+  if (kpcn_progress_report(prog, 1.0))
+    s = kpcn_fail(KPCN_ERR_CANCELLED, "KPCN denoiser: cancelled by the progress callback");
 done:
   free(tile_weights);
   take_conv_time(pc, st);

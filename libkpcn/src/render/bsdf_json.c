@@ -5,6 +5,7 @@
 #include "render/bsdf.h"
 
 #include "core/internal.h"
+#include "render/fresnel.h"
 #include "render/microfacet.h"
 
 #include <cjson/cJSON.h>
@@ -272,6 +273,9 @@ static kpcn_status parse_object(kpcn_material_lib *lib, const cJSON *node, const
   if (type == KPCN_BSDF_TYPE_COUNT)
     return kpcn_fail(KPCN_ERR_UNSUPPORTED, "%s.type: unsupported bsdf type '%s'", path,
                      t->valuestring);
+  /* checked here too, for inline bsdfs (the "bsdfs" list checks its own names) */
+  const cJSON *nm = cJSON_GetObjectItemCaseSensitive(node, "name");
+  if (nm && !cJSON_IsString(nm)) return kpcn_fail(KPCN_ERR_FORMAT, "%s.name: not a string", path);
 
   /* fields per type; "name", "type", "albedo" are common (Tungsten's Bsdf base) */
   static const char *const k_plain[] = {"name", "type", "albedo", NULL};
@@ -321,11 +325,26 @@ static kpcn_status parse_object(kpcn_material_lib *lib, const cJSON *node, const
       KPCN_TRY(json_float(f, path, "roughness", &p.roughness_value));
     else
       KPCN_TRY(kpcn_texture_parse(lib, f, sub, 1, &p.roughness));
-    float lo = p.roughness_value, hi;
+    float lo = p.roughness_value, hi = p.roughness_value;
     if (p.roughness) kpcn_texture_range(p.roughness, &lo, &hi);
     if (lo < 0.0f)
       return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.roughness: %g must be >= 0", path,
                        (double)lo);
+    /* alpha^2 and the distributions' powers of it must stay finite (1e20 rendered NaN) */
+    if (hi > 1e4f)
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.roughness: %g is above 1e4", path,
+                       (double)hi);
+    /* one value per lookup: an RGB roughness was read as its red alone */
+    const kpcn_texture *r = p.roughness;
+    const kpcn_vec3 c0 = r && r->type == KPCN_TEX_CHECKER ? r->on_color
+                         : r                              ? r->value
+                                                          : kv3s(0),
+                    c1 = r && r->type == KPCN_TEX_CHECKER ? r->off_color : c0;
+    if (r && r->type != KPCN_TEX_BITMAP &&
+        !(c0.x == c0.y && c0.y == c0.z && c1.x == c1.y && c1.y == c1.z))
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                       "%s.roughness: a colour (%g, %g, %g) is not one roughness: give a number",
+                       path, (double)c0.x, (double)c0.y, (double)c0.z);
   }
   if ((f = cJSON_GetObjectItemCaseSensitive(node, "distribution"))) {
     if (!cJSON_IsString(f) || !kpcn_mf_from_name(f->valuestring, &p.distribution))
@@ -343,14 +362,19 @@ static kpcn_status parse_object(kpcn_material_lib *lib, const cJSON *node, const
     KPCN_TRY(json_vec3(k, path, "k", &p.k));
   }
   if ((f = cJSON_GetObjectItemCaseSensitive(node, "material"))) {
+    if (eta) /* Tungsten lets the name win without a word; here that would ignore a field */
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                       "%s.material: give a conductor name or \"eta\" and \"k\", not both", path);
     if (!cJSON_IsString(f) || !kpcn_conductor_lookup(f->valuestring, &p.eta, &p.k))
       return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.material: unknown conductor '%s'", path,
                        cJSON_IsString(f) ? f->valuestring : "<not a string>");
   }
   if ((f = cJSON_GetObjectItemCaseSensitive(node, "ior"))) {
     KPCN_TRY(json_float(f, path, "ior", &p.ior));
-    if (!(p.ior > 0.0f))
-      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.ior: %g must be > 0", path, (double)p.ior);
+    /* 1/ior must be a normal float (1e-40 flushed to Inf, and rendered NaN) */
+    if (!(p.ior >= 1e-4f && p.ior <= 1e4f))
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s.ior: %g is outside [1e-4, 1e4]", path,
+                       (double)p.ior);
   }
   if ((f = cJSON_GetObjectItemCaseSensitive(node, "enable_refraction")))
     KPCN_TRY(json_bool(f, path, "enable_refraction", &p.enable_refraction));
@@ -387,6 +411,18 @@ static kpcn_status parse_object(kpcn_material_lib *lib, const cJSON *node, const
       KPCN_TRY(kpcn_material_lib_adopt(lib, d));
       p.substrate = d;
     }
+  }
+  if ((type == KPCN_BSDF_PLASTIC || type == KPCN_BSDF_ROUGH_PLASTIC) && p.albedo) {
+    /* the diffuse base a / (1 - a F_dr) has a pole at 1 / F_dr (about 1.68 at ior 1.5):
+     * there and beyond it rendered Inf or negative radiance */
+    float lo, hi;
+    kpcn_texture_range(p.albedo, &lo, &hi);
+    const float fdr = kpcn_fresnel_diffuse_reflectance(p.ior);
+    if (hi * fdr >= 1.0f)
+      return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                       "%s.albedo: %g reaches the plastic's limit 1/F_dr = %g (ior %g), where "
+                       "its diffuse term a / (1 - a F_dr) is infinite",
+                       path, (double)hi, 1.0 / fdr, (double)p.ior);
   }
   kpcn_bsdf *b;
   if (kpcn_bsdf_create(&p, &b) != KPCN_OK) return kpcn_fail_context("%s", path);

@@ -52,13 +52,16 @@ kpcn_status kpcn_envmap_create(const kpcn_texture *emission, const float rot[9],
       lum[i] = (m > 0.0f && isfinite(m)) ? m : 0.0f;
     }
     /* Bilinear lookups blend a texel with its 8 neighbours, so each cell's weight is the max
-     * over its 3x3 neighbourhood (u wraps, v clamps): no direction with radiance gets pdf 0. */
+     * over its 3x3 neighbourhood: no direction with radiance gets pdf 0. u wraps; v wraps as
+     * the lookup does unless the texture clamps (the top row's lookups blend the bottom row's
+     * texels, which a clamped neighbourhood left out: radiance with pdf 0 there). */
     for (int y = 0; y < h; ++y) {
       float st = sinf(KPCN_PI * ((float)y + 0.5f) / (float)h);
       for (int x = 0; x < w; ++x) {
         float m = 0.0f;
         for (int dy = -1; dy <= 1; ++dy) {
           int yy = y + dy;
+          if (!emission->clamp) yy = (yy % h + h) % h;
           if (yy < 0 || yy >= h) continue;
           for (int dx = -1; dx <= 1; ++dx) {
             int xx = ((x + dx) % w + w) % w;

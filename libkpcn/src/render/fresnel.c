@@ -195,8 +195,17 @@ int kpcn_conductor_lookup(const char *name, kpcn_vec3 *eta, kpcn_vec3 *k) {
   if (!name) return 0;
   size_t len = strlen(name);
   if (lookup_exact(name, len, eta, k)) return 1;
+  /* Tungsten lists most materials twice, "X" and "X_palik" with the same values; the twins
+   * not in the table above are found by their stem. Not every stem has a twin in Tungsten
+   * (its lookup is exact, so these fall back to its default there): "Au_palik" was taken as
+   * gold, and "Cu_palik_palik" as "Cu_palik". */
   static const char suffix[] = "_palik";
-  size_t sl = sizeof(suffix) - 1;
-  if (len > sl && strcmp(name + len - sl, suffix) == 0) return lookup_exact(name, len - sl, eta, k);
-  return 0;
+  static const char *const no_twin[] = {"a-C", "Ag", "Al", "Au", "Cr", "W"};
+  const size_t sl = sizeof(suffix) - 1;
+  if (len <= sl || strcmp(name + len - sl, suffix) != 0) return 0;
+  const size_t stem = len - sl;
+  if (stem > sl && strncmp(name + stem - sl, suffix, sl) == 0) return 0;
+  for (size_t i = 0; i < sizeof no_twin / sizeof no_twin[0]; i++)
+    if (strlen(no_twin[i]) == stem && strncmp(no_twin[i], name, stem) == 0) return 0;
+  return lookup_exact(name, stem, eta, k);
 }

@@ -278,7 +278,11 @@ static void shade_hit(const kpcn_render_ctx *ctx, path_state *L, unsigned geom_i
     return;
   }
   kpcn_vec3 wo = kv3_neg(d), ng = h.ng, ns = h.ns;
-  if (!kpcn_bsdf_is_transmissive(bsdf) && kv3_dot(wo, ng) < 0.0f) { /* two-sided shading */
+  /* two-sided shading, decided by the shading normal as Tungsten's makeLocalScatterEvent
+   * does: where a smooth mesh's interpolated normal faces away while the face does not (near
+   * silhouettes), judging by ng left wo below the shading frame, and the surface black.
+   * ng's sign matters nowhere after this (ray offsets orient it by the new direction). */
+  if (!kpcn_bsdf_is_transmissive(bsdf) && kv3_dot(wo, ns) < 0.0f) {
     ng = kv3_neg(ng);
     ns = kv3_neg(ns);
   }
