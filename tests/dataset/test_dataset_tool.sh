@@ -495,25 +495,33 @@ for i in $(seq 64); do
   for f in manifest.jsonl plan.json scenes renders; do ln -s "$T/sg/$f" "$T/sg$i/$f"; done
   sgdirs="$sgdirs $T/sg$i"
 done
-# stop_patches SIG OUT: start patches into OUT, send SIG once the temporary store exists and a
-# first pair is done (the handler is installed by then), wait; sets rc, sp_sent (1 when the
-# signal was sent while patches ran) and sp_err (its stderr)
-stop_patches() {
-  sp_sent=0; sp_err="$T/sig_$1.err"
-  # shellcheck disable=SC2086 # the directories
-  "$DS" patches $sgdirs --size 8 --per-image 2 --progress-every 0 -o "$2" > "$T/sig_$1.out" 2> "$sp_err" &
-  sp_pid=$!
-  for _ in $(seq 400); do # 20 s at most
-    kill -0 $sp_pid 2> /dev/null || break
-    if [ -n "$(ls "$2".tmp.* 2> /dev/null)" ] && grep -q '^\[1/' "$sp_err"; then
-      kill -"$1" $sp_pid && sp_sent=1
+# signal_when SIG PID TRIES PAUSE CONDITION: while PID runs, evaluates CONDITION every PAUSE
+# seconds, at most TRIES times, and sends SIG once it holds (sent=1; else sent=0 and PID is
+# killed, never left running); then waits for PID (rc: its exit status)
+signal_when() {
+  sw_sig=$1 sw_pid=$2 sw_tries=$3 sw_pause=$4
+  sent=0
+  for _ in $(seq "$sw_tries"); do
+    kill -0 "$sw_pid" 2> /dev/null || break
+    if eval "$5"; then
+      kill -"$sw_sig" "$sw_pid" && sent=1
       break
     fi
-    sleep 0.05
+    sleep "$sw_pause"
   done
-  [ $sp_sent -eq 1 ] || kill -KILL $sp_pid 2> /dev/null # never left running
-  wait $sp_pid
+  [ $sent -eq 1 ] || kill -KILL "$sw_pid" 2> /dev/null
+  wait "$sw_pid"
   rc=$?
+}
+# stop_patches SIG OUT: start patches into OUT, send SIG once the temporary store exists and a
+# first pair is done (the handler is installed by then; 20 s at most), wait; sets rc, sp_sent
+# (1 when the signal was sent while patches ran) and sp_err (its stderr)
+stop_patches() {
+  sp_err="$T/sig_$1.err" sp_out=$2
+  # shellcheck disable=SC2086 # the directories
+  "$DS" patches $sgdirs --size 8 --per-image 2 --progress-every 0 -o "$2" > "$T/sig_$1.out" 2> "$sp_err" &
+  signal_when "$1" $! 400 0.05 '[ -n "$(ls "$sp_out".tmp.* 2> /dev/null)" ] && grep -q "^\[1/" "$sp_err"'
+  sp_sent=$sent
 }
 stop_patches TERM "$T/sig.kps"
 ok '[ $sp_sent -eq 1 ]' "patches SIGTERM: the signal was sent while patches ran (it had ended or never \
@@ -542,19 +550,7 @@ rm -rf "$T"/sg*
   --resolution 1024x1024 --split train:cornell-box+cornell-teal+cornell-wide -o "$T/sl" > /dev/null
 FAKE_LOG=/dev/null FAKE_SLEEP=0 "$DS" run "$T/sl" --jobs 2 --renderer "$FAKE" > /dev/null 2>&1
 "$DS" patches "$T/sl" --size 8 --per-image 2 --progress-every 0 -o "$T/sl.kps" > /dev/null 2> "$T/sl.err" &
-pid=$!
-sent=0
-for _ in $(seq 400); do # 20 s at most
-  kill -0 $pid 2> /dev/null || break
-  if grep -q '^\[2/3' "$T/sl.err"; then
-    kill -TERM $pid && sent=1
-    break
-  fi
-  sleep 0.02
-done
-[ $sent -eq 1 ] || kill -KILL $pid 2> /dev/null
-wait $pid
-rc=$?
+signal_when TERM $! 1000 0.02 'grep -q "^\[2/3" "$T/sl.err"' # 20 s at most
 ok '[ $sent -eq 1 ] && [ $rc -eq 143 ] && [ ! -e "$T/sl.kps" ] && [ -z "$(ls "$T"/sl.kps.* 2> /dev/null)" ]' \
   "patches SIGTERM during the last pair: exit 143, no store (sent $sent, rc $rc, $(tail -n 1 "$T/sl.err"))"
 ok 'grep -q "stopped by signal 15 after [23] of 3 pairs; nothing written" "$T/sl.err"' "patches SIGTERM during the last pair: said so ($(grep stopped "$T/sl.err"))"
@@ -563,19 +559,8 @@ rm -rf "$T"/sl*
 "$DS" plan --scenes "$TD/scenes" --variants 0 --seed 3 --spp 2 --ref-spp 128 --no-preview \
   --split train:cornell-box+cornell-teal+cornell-wide -o "$T/si" > /dev/null
 FAKE_LOG="$T/logsi" FAKE_SLEEP=1 "$DS" run "$T/si" --jobs 2 --renderer "$FAKE" > /dev/null 2>&1 &
-pid=$!
-sent=0
-for _ in $(seq 200); do # 10 s at most: once two renderers run
-  kill -0 $pid 2> /dev/null || break
-  if [ -f "$T/logsi" ] && [ "$(grep -c '^start' "$T/logsi")" -ge 2 ]; then
-    kill -INT $pid && sent=1
-    break
-  fi
-  sleep 0.05
-done
-[ $sent -eq 1 ] || kill -KILL $pid 2> /dev/null
-wait $pid
-rc=$?
+# once two renderers run (10 s at most)
+signal_when INT $! 200 0.05 '[ -f "$T/logsi" ] && [ "$(grep -c "^start" "$T/logsi")" -ge 2 ]'
 ok '[ $sent -eq 1 ] && [ $rc -eq 130 ]' "a run stopped by SIGINT exits 130 (sent $sent, got $rc)"
 ok '[ -z "$(ls "$T"/si/renders/*/*.part* 2> /dev/null)" ]' "run SIGINT: no part file left"
 
