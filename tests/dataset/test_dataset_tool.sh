@@ -513,20 +513,19 @@ signal_when() {
   wait "$sw_pid"
   rc=$?
 }
-# stop_patches SIG OUT: start patches into OUT, send SIG once the temporary store exists and a
-# first pair is done (the handler is installed by then; 20 s at most), wait; sets rc, sp_sent
-# (1 when the signal was sent while patches ran) and sp_err (its stderr)
+# stop_patches SIG OUT CODE: start patches into OUT, send SIG once the temporary store exists
+# and a first pair is done (the handler is installed by then; 20 s at most), wait; checks that
+# the signal was sent while patches ran and that it exited CODE; sets sp_err (its stderr)
 stop_patches() {
   sp_err="$T/sig_$1.err" sp_out=$2
   # shellcheck disable=SC2086 # the directories
   "$DS" patches $sgdirs --size 8 --per-image 2 --progress-every 0 -o "$2" > "$T/sig_$1.out" 2> "$sp_err" &
   signal_when "$1" $! 400 0.05 '[ -n "$(ls "$sp_out".tmp.* 2> /dev/null)" ] && grep -q "^\[1/" "$sp_err"'
-  sp_sent=$sent
+  ok "[ $sent -eq 1 ]" "patches SIG$1: the signal was sent while patches ran (it had ended or \
+never started writing first: rc $rc, $(tail -n 2 "$sp_err" | tr '\n' '|'))"
+  ok "[ $rc -eq $3 ]" "patches stopped by SIG$1 exits $3 (got $rc)"
 }
-stop_patches TERM "$T/sig.kps"
-ok '[ $sp_sent -eq 1 ]' "patches SIGTERM: the signal was sent while patches ran (it had ended or never \
-started writing first: rc $rc, $(tail -n 2 "$sp_err" | tr '\n' '|'))"
-ok '[ $rc -eq 143 ]' "patches stopped by SIGTERM exits 143 (got $rc)"
+stop_patches TERM "$T/sig.kps" 143
 ok '[ ! -e "$T/sig.kps" ] && [ -z "$(ls "$T"/sig.kps.* 2> /dev/null)" ]' \
   "patches SIGTERM: no store and no temporary left ($(cd "$T" && echo sig.kps*))"
 ok 'grep -q "stopped by signal 15 after [0-9]* of 384 pairs; nothing written" "$sp_err" &&
@@ -534,10 +533,7 @@ ok 'grep -q "stopped by signal 15 after [0-9]* of 384 pairs; nothing written" "$
   "patches SIGTERM: stopped half-way, said so, no summary ($(grep stopped "$sp_err"))"
 # SIGINT (^C) with a store already at -o: that store is kept as it was
 cp "$T/r/train.kps" "$T/sig2.kps" && cp "$T/r/train.kps" "$T/sig2.bak"
-stop_patches INT "$T/sig2.kps"
-ok '[ $sp_sent -eq 1 ]' "patches SIGINT: the signal was sent while patches ran (it had ended or never \
-started writing first: rc $rc, $(tail -n 2 "$sp_err" | tr '\n' '|'))"
-ok '[ $rc -eq 130 ]' "patches stopped by SIGINT exits 130 (got $rc)"
+stop_patches INT "$T/sig2.kps" 130
 ok 'cmp -s "$T/sig2.kps" "$T/sig2.bak" && [ -z "$(ls "$T"/sig2.kps.* 2> /dev/null)" ]' \
   "patches SIGINT: the earlier store at -o intact, no temporary left ($(cd "$T" && echo sig2.kps*))"
 ok 'grep -q "stopped by signal 2 after [0-9]* of 384 pairs; nothing written" "$sp_err"' \
