@@ -330,8 +330,8 @@ int ds_cmd_patches(int argc, char **argv) {
   }
   ss.settings_json = settings;
   /* A stop removes the unfinished store (its temporary can be gigabytes). The handlers are
-   * in place from before the temporary exists until it is renamed or removed, so a signal
-   * in no gap between them ends the process with the temporary left behind. */
+   * in place from before the temporary exists until it is renamed or removed, so no signal
+   * in between ends the process with the temporary left behind. */
   struct sigaction sa, old_int, old_term;
   memset(&sa, 0, sizeof sa);
   sa.sa_handler = on_signal;
