@@ -2,7 +2,7 @@
 """A pool of procedural albedo bitmaps for kpcn-dataset plan --texture-dir (a broad pool of
 surface patterns, so that a bitmap in an unseen scene is close to something learnt).
 
-usage: tools/texture_pool.py OUT_DIR [--count N] [--seed S] [--exclude PNG ...]
+usage: tools/texture_pool.py OUT_DIR [--count N] [--seed S] [--from DIR] [--exclude PNG ...]
 
 Writes N (default 256) 8-bit RGB PNGs, OUT_DIR/pool_NNNN_FAMILY.png, drawn from twelve
 families (running-bond bricks, noisy rectangle checkers, tiles with grout, stripes, dots,
@@ -11,6 +11,16 @@ random rectangles) at 32, 64 or 128 pixels square, colours drawn in HSV with alb
 The same seed and count give the same files byte for byte (numpy's PCG64, one generator per
 bitmap seeded with (S, index)). A manifest OUT_DIR/pool.json lists every file, its family and
 its parameters.
+
+--from DIR: photographs instead of procedural families (session 63: a game's surface textures,
+Debian's openarena-081-textures). Every .jpg/.jpeg/.png/.tga/.tif under DIR, in sorted order, is
+a candidate; the seed shuffles them and the first COUNT that pass are taken, each at most once.
+A candidate is cut to its centre square and area-averaged to 32, 64 or 128 pixels (drawn, at
+most its own size). It is skipped when its shorter side is under 32 pixels, its sides differ by
+more than 4x (trims), it has an alpha channel that is not opaque everywhere (decals, cut-outs),
+its mean is outside 0.03..0.9 or its standard deviation under 0.02 (flat), or it is excluded.
+Family "photo"; pool.json records each bitmap's source path. Fewer eligible files than COUNT
+is an error naming how many there were.
 
 --exclude PNG: the pool must not contain these bitmaps (the held-out scenes' own). A draw is
 rejected and drawn again when, after both are resampled to 64x64 (box filter), its RMS
@@ -234,14 +244,22 @@ def gen_rects(rng, n):
 GEN = {f: globals()["gen_" + f] for f in FAMILIES}
 
 
-def area_matrix(n):
-    """A (64, n) matrix whose rows average an n-pixel row onto 64 cells by covered length."""
-    a = np.zeros((64, n))
-    for i in range(64):
-        lo, hi = i * n / 64, (i + 1) * n / 64
+def area_matrix(n, m=64):
+    """A (m, n) matrix whose rows average an n-pixel row onto m cells by covered length."""
+    a = np.zeros((m, n))
+    for i in range(m):
+        lo, hi = i * n / m, (i + 1) * n / m
         for j in range(int(np.floor(lo)), min(n, int(np.ceil(hi)))):
             a[i, j] = min(hi, j + 1) - max(lo, j)
     return a / a.sum(axis=1, keepdims=True)
+
+
+def area_resample(img, m):
+    """A square bitmap averaged onto m x m cells by covered area (rows, then columns: two
+    matrix products, where one einsum over both would loop over every pixel pair)."""
+    a = area_matrix(img.shape[0], m)
+    rows = np.tensordot(a, img, axes=(1, 0))
+    return np.tensordot(a, rows, axes=(1, 1)).transpose(1, 0, 2)
 
 
 def box64(img):
@@ -254,8 +272,7 @@ def box64(img):
         return img.reshape(64, f, 64, f, 3).mean(axis=(1, 3))
     if n < 64 and 64 % n == 0:
         return np.repeat(np.repeat(img, 64 // n, 0), 64 // n, 1)
-    a = area_matrix(n)
-    return np.einsum("iy,yxc,jx->ijc", a, img, a)
+    return area_resample(img, 64)
 
 
 def symmetries(img):
@@ -286,6 +303,53 @@ def read_png(path):
     if px is None or px.shape[0] != px.shape[1]:
         sys.exit("texture_pool.py: '%s' is not a square RGB bitmap" % path)
     return np.asarray(px, np.float64)
+
+
+PHOTO_EXT = (".jpg", ".jpeg", ".png", ".tga", ".tif", ".tiff")
+
+
+def photo_candidates(root):
+    """Every image file under root, as sorted paths relative to it (the order the seed shuffles)."""
+    found = []
+    for d, dirs, files in os.walk(root):
+        dirs.sort()
+        for f in files:
+            if f.lower().endswith(PHOTO_EXT):
+                found.append(os.path.relpath(os.path.join(d, f), root))
+    return sorted(found)
+
+
+def read_photo(path, rng):
+    """The candidate as a square RGB float bitmap of 32, 64 or 128 pixels, or (None, why)."""
+    inp = oiio.ImageInput.open(path)
+    if not inp:
+        oiio.geterror()
+        return None, "unreadable"
+    spec = inp.spec()
+    px = inp.read_image(0, 0, 0, spec.nchannels, "float")
+    inp.close()
+    if px is None:
+        return None, "unreadable"
+    px = np.asarray(px, np.float64)
+    h, w = px.shape[:2]
+    if min(h, w) < 32:
+        return None, "small"
+    if max(h, w) > 4 * min(h, w):
+        return None, "strip"
+    c = px.shape[2]
+    if c in (2, 4) and px[:, :, c - 1].min() < 0.99:
+        return None, "alpha"
+    rgb = np.repeat(px[:, :, :1], 3, 2) if c < 3 else px[:, :, :3]
+    n = min(h, w)
+    y0, x0 = (h - n) // 2, (w - n) // 2
+    sq = rgb[y0:y0 + n, x0:x0 + n]
+    size = int(rng.choice([s for s in (32, 64, 128) if s <= n]))
+    img = np.clip(area_resample(sq, size), 0, 1)
+    if not 0.03 <= img.mean() <= 0.9:
+        return None, "dark or bright"
+    if img.std() < 0.02:
+        return None, "flat"
+    return img, None
 
 
 def excluded_kind(fam, params, excl):
@@ -330,6 +394,7 @@ def main():
     ap.add_argument("--count", type=int, default=256)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--exclude", nargs="*", default=[])
+    ap.add_argument("--from", dest="src", metavar="DIR")
     a = ap.parse_args()
     if not 1 <= a.count <= 100000:
         sys.exit("texture_pool.py: --count must be 1..100000")
@@ -344,28 +409,70 @@ def main():
                  "to a new or empty folder" % a.out)
     if os.path.exists(a.out) and not os.path.isdir(a.out):
         sys.exit("texture_pool.py: '%s' exists and is not a folder" % a.out)
-    os.makedirs(a.out, exist_ok=True)
+    if a.src and not os.path.isdir(a.src):
+        sys.exit("texture_pool.py: --from '%s' is not a folder" % a.src)
     manifest = []
     nearest = {p: (1e9, None) for p, _, _ in excl}
     rejected = 0
-    for i in range(a.count):
-        rng = np.random.default_rng([a.seed, i])
-        while True:
-            fam = FAMILIES[int(rng.integers(len(FAMILIES)))]
-            n = int(rng.choice([32, 64, 128]))
-            img, params = GEN[fam](rng, n)
-            img = np.clip(img, 0, 1)
-            i64 = box64(img)
-            ds = [(distance(i64, e64), p) for p, e64, _ in excl]
-            bad = any(d < 0.1 for d, _ in ds) or any(excluded_kind(fam, params, ep)
-                                                     for _, _, ep in excl)
-            if not bad:
-                break
-            rejected += 1
+    skipped = {}
+
+    def is_excluded(fam, params, img):
+        ds = [(distance(box64(img), e64), p) for p, e64, _ in excl]
+        bad = any(d < 0.1 for d, _ in ds) or any(excluded_kind(fam, params, ep)
+                                                 for _, _, ep in excl)
+        return bad, ds
+
+    def procedural():
+        nonlocal rejected
+        for i in range(a.count):
+            rng = np.random.default_rng([a.seed, i])
+            while True:
+                fam = FAMILIES[int(rng.integers(len(FAMILIES)))]
+                n = int(rng.choice([32, 64, 128]))
+                img, params = GEN[fam](rng, n)
+                img = np.clip(img, 0, 1)
+                bad, ds = is_excluded(fam, params, img)
+                if not bad:
+                    yield fam, img, params, ds
+                    break
+                rejected += 1
+
+    def photographs():
+        nonlocal rejected
+        cand = photo_candidates(a.src)
+        order = np.random.default_rng([a.seed]).permutation(len(cand))
+        for k in order:
+            rng = np.random.default_rng([a.seed, int(k)])
+            img, why = read_photo(os.path.join(a.src, cand[k]), rng)
+            if img is None:
+                skipped[why] = skipped.get(why, 0) + 1
+                continue
+            params = {"source": cand[k]}
+            bad, ds = is_excluded("photo", params, img)
+            if bad:
+                rejected += 1
+                continue
+            yield "photo", img, params, ds
+
+    # Everything is drawn before anything is written: too few eligible photographs is an error
+    # that leaves OUT_DIR as it was.
+    drawn = []
+    for draw in (photographs() if a.src else procedural()):
+        drawn.append(draw)
+        if len(drawn) == a.count:
+            break
+    if len(drawn) < a.count:
+        sys.exit("texture_pool.py: --from '%s': only %d of the images are eligible (%s; %d "
+                 "excluded), --count asks for %d" % (a.src, len(drawn), ", ".join(
+                     "%d %s" % (v, k) for k, v in sorted(skipped.items())) or "none skipped",
+                     rejected, a.count))
+    os.makedirs(a.out, exist_ok=True)
+    for i, (fam, img, params, ds) in enumerate(drawn):
+        name = "pool_%04d_%s.png" % (i, fam)
         for d, p in ds:
             if d < nearest[p][0]:
-                nearest[p] = (d, "pool_%04d_%s.png" % (i, fam))
-        name = "pool_%04d_%s.png" % (i, fam)
+                nearest[p] = (d, name)
+        n = img.shape[0]
         out = oiio.ImageOutput.create(os.path.join(a.out, name))
         spec = oiio.ImageSpec(n, n, 3, "uint8")
         if not out or not out.open(os.path.join(a.out, name), spec):
@@ -374,8 +481,9 @@ def main():
         out.close()
         manifest.append({"file": name, "family": fam, "size": n, "params": params})
     with open(os.path.join(a.out, "pool.json"), "w") as f:
-        json.dump({"seed": a.seed, "count": a.count, "excluded": a.exclude,
-                   "rejected_draws": rejected, "bitmaps": manifest}, f, indent=1)
+        json.dump({"seed": a.seed, "count": a.count, "from": a.src, "excluded": a.exclude,
+                   "rejected_draws": rejected, "skipped": skipped, "bitmaps": manifest}, f,
+                  indent=1)
     fams = {}
     for m in manifest:
         fams[m["family"]] = fams.get(m["family"], 0) + 1

@@ -104,4 +104,76 @@ grep -q "none.png" "$D/err1" || fail "missing file not named: $(cat "$D/err1")"
 /usr/bin/python3 "$S" "$D/bad2" --count 0 2>"$D/err2" && fail "--count 0 accepted"
 grep -q "count" "$D/err2" || fail "--count error unclear"
 [ ! -e "$D/bad1" ] && [ ! -e "$D/bad2" ] || fail "output written on bad input"
+# --from DIR: photographs. Of nine candidates, three are eligible (a wide image is cut to its
+# centre square); an RGBA cut-out, a 20-pixel image, a 40x200 strip, a flat and a black one
+# are skipped, and a copy of an excluded bitmap is rejected. Each bitmap is checked against an
+# independent area average of its source's centre square; too few eligible images is an error
+# that writes nothing.
+mkdir -p "$D/src/sub"
+/usr/bin/python3 - "$D" <<'PY' || fail "write --from sources"
+import sys
+import numpy as np
+import OpenImageIO as oiio
+d = sys.argv[1]
+rng = np.random.default_rng(11)
+def write(name, a):
+    h, w, c = a.shape
+    o = oiio.ImageBuf(oiio.ImageSpec(w, h, c, oiio.UINT8))
+    o.set_pixels(oiio.ROI(0, w, 0, h, 0, 1, 0, c), a.astype(np.float32))
+    assert o.write(d + "/src/" + name), name
+write("good_a.png", rng.uniform(0.2, 0.8, (96, 144, 3)))
+write("sub/good_b.tga", rng.uniform(0.1, 0.6, (64, 64, 3)))
+write("good_c.png", rng.uniform(0.3, 0.9, (40, 40, 1)))
+cut = np.concatenate([rng.uniform(0.2, 0.8, (64, 64, 3)), np.ones((64, 64, 1))], 2)
+cut[:8, :8, 3] = 0
+write("cutout.png", cut)
+write("small.png", rng.uniform(0.2, 0.8, (20, 20, 3)))
+write("strip.png", rng.uniform(0.2, 0.8, (40, 200, 3)))
+write("flat.png", np.full((64, 64, 3), 0.5))
+write("black.png", np.zeros((64, 64, 3)))
+b = oiio.ImageBuf(d + "/x0.png")
+write("sub/copy.png", b.get_pixels(oiio.FLOAT).astype(np.float64))
+PY
+/usr/bin/python3 "$S" "$D/p1" --count 3 --seed 5 --from "$D/src" --exclude "$D/x0.png" >/dev/null ||
+  fail "--from"
+/usr/bin/python3 "$S" "$D/p2" --count 3 --seed 5 --from "$D/src" --exclude "$D/x0.png" >/dev/null ||
+  fail "--from again"
+for f in "$D"/p1/*.png; do
+  cmp -s "$f" "$D/p2/$(basename "$f")" || fail "--from: $(basename "$f") differs between runs"
+done
+/usr/bin/python3 - "$D" <<'PY' || fail "--from bitmaps"
+import json, math, sys
+import numpy as np
+import OpenImageIO as oiio
+d = sys.argv[1]
+m = json.load(open(d + "/p1/pool.json"))
+assert m["skipped"] == {"alpha": 1, "small": 1, "strip": 1, "flat": 1, "dark or bright": 1}, m
+assert m["rejected_draws"] == 1, m
+srcs = sorted(e["params"]["source"] for e in m["bitmaps"])
+assert srcs == ["good_a.png", "good_c.png", "sub/good_b.tga"], srcs
+for e in m["bitmaps"]:
+    assert e["family"] == "photo" and e["file"].endswith("_photo.png"), e
+    src = oiio.ImageBuf(d + "/src/" + e["params"]["source"]).get_pixels(oiio.FLOAT)
+    src = np.asarray(src, np.float64)
+    if src.shape[2] == 1:
+        src = np.repeat(src, 3, 2)
+    h, w = src.shape[:2]
+    n = min(h, w)
+    sq = src[(h - n) // 2:(h - n) // 2 + n, (w - n) // 2:(w - n) // 2 + n, :3]
+    got = oiio.ImageBuf(d + "/p1/" + e["file"])
+    s = got.spec()
+    m_ = s.width
+    assert s.nchannels == 3 and s.width == s.height and m_ in (32, 64, 128) and m_ <= n, e
+    l = n * m_ // math.gcd(n, m_)
+    big = np.repeat(np.repeat(sq, l // n, 0), l // n, 1)
+    ref = big.reshape(m_, l // m_, m_, l // m_, 3).mean(axis=(1, 3))
+    px = got.get_pixels(oiio.FLOAT).astype(np.float64)
+    assert np.abs(px - ref).max() <= 0.5 / 255 + 1e-6, (e["file"], np.abs(px - ref).max())
+PY
+/usr/bin/python3 "$S" "$D/p3" --count 4 --from "$D/src" --exclude "$D/x0.png" 2>"$D/err3" &&
+  fail "--from with too few eligible images accepted"
+grep -q "only 3 of the images are eligible" "$D/err3" || fail "--from shortage: $(cat "$D/err3")"
+/usr/bin/python3 "$S" "$D/p4" --count 1 --from "$D/none" 2>"$D/err4" && fail "missing --from accepted"
+grep -q "none' is not a folder" "$D/err4" || fail "missing --from: $(cat "$D/err4")"
+[ ! -e "$D/p3" ] && [ ! -e "$D/p4" ] || fail "--from: output written on bad input"
 echo "test_texture_pool: all passed"
