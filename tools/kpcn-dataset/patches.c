@@ -367,9 +367,24 @@ int ds_cmd_patches(int argc, char **argv) {
     kpcn_patch_source src;
     memset(&src, 0, sizeof src);
     uint32_t sid = 0;
-    if (kpcn_exr_read_aov(a, &noisy) != KPCN_OK || kpcn_exr_read_aov(b, &ref) != KPCN_OK ||
-        kpcn_patches_select(&o, &n, &st, noisy, ref, &pi) != KPCN_OK ||
-        kpcn_patch_source_image_stats(&src, noisy) != KPCN_OK) {
+    const char *unreadable = NULL;
+    if (kpcn_exr_read_aov(a, &noisy) != KPCN_OK)
+      unreadable = a;
+    else if (kpcn_exr_read_aov(b, &ref) != KPCN_OK)
+      unreadable = b;
+    if (unreadable) {
+      /* `run` takes a render whose header matches its job as done, so a file damaged after it
+       * was written (a copy cut short) is only found here: say how to make it again */
+      const char *e = kpcn_last_error();
+      if (strstr(e, "truncated or corrupt"))
+        ds_err("patches: %s: %s (remove '%s' and run `kpcn-dataset run` again to render it "
+               "anew)",
+               j->id, e, unreadable);
+      else
+        ds_err("patches: %s: %s", j->id, e);
+      rc = 1;
+    } else if (kpcn_patches_select(&o, &n, &st, noisy, ref, &pi) != KPCN_OK ||
+               kpcn_patch_source_image_stats(&src, noisy) != KPCN_OK) {
       ds_err("patches: %s: %s", j->id, kpcn_last_error());
       rc = 1;
     }

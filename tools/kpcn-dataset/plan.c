@@ -8,6 +8,7 @@
 #include <cjson/cJSON.h>
 #include <dirent.h>
 #include <errno.h>
+#include <glob.h>
 #include <limits.h>
 #include <ctype.h>
 #include <math.h>
@@ -380,6 +381,7 @@ typedef struct plan_ctx {
   uint64_t seed;
   int variants, eval_variants, no_preview, preview_spp, preview_scale, ref_spp, W, H;
   int albedo_footprint; /* noisy jobs' --albedo-footprint (0 = none) */
+  int force;            /* --force: a variant whose scene file changes loses its renders */
   const int *spps;
   int nspp;
   const kpcn_perturb_settings *ps;
@@ -387,6 +389,30 @@ typedef struct plan_ctx {
   double samples;
   created made; /* filled by the write pass */
 } plan_ctx;
+
+/* Removes every file of one variant under renders/SCENE/ (its noisy, reference and preview
+ * renders, their verdicts and checkpoints): renders of a scene file that changed would count
+ * as done (a render is matched to its job by size, spp and seed only). */
+static int remove_variant_renders(const plan_ctx *c, const char *scene, int v) {
+  char rel[DS_PATH], pat[DS_PATH];
+  snprintf(rel, sizeof rel, "renders/%s/v%03d_*", scene, v);
+  ds_join(pat, sizeof pat, c->outdir, rel);
+  glob_t g;
+  int n = 0, rc = 0;
+  if (glob(pat, GLOB_NOSORT, NULL, &g) == 0) {
+    for (size_t i = 0; i < g.gl_pathc; i++) {
+      if (remove(g.gl_pathv[i]) == 0) {
+        n++;
+      } else {
+        ds_err("plan: cannot remove '%s': %s", g.gl_pathv[i], strerror(errno));
+        rc = 1;
+      }
+    }
+    globfree(&g);
+  }
+  if (n) printf("plan: %s/v%03d's scene changed: %d render file(s) removed\n", scene, v, n);
+  return rc;
+}
 
 /* One base scene. The check pass (write = 0) reads, sizes and perturbs every variant and
  * appends the scene's jobs to the manifest, writing nothing; the write pass (write = 1),
@@ -442,11 +468,37 @@ static int plan_scene(plan_ctx *c, const base_scene *sc, int write) {
     snprintf(j.split, sizeof j.split, "%s", sc->split);
     j.variant = v;
     snprintf(j.scene_file, sizeof j.scene_file, "scenes/%s/v%03d.json", sc->name, v);
-    if (write) {
+    /* The variant's file as it will be written; one that exists with other contents (the
+     * base scene or the perturbation changed) is refused in the check pass unless --force,
+     * and with --force its renders are removed in the write pass. */
+    char *txt = NULL;
+    {
       cJSON *pjs = cJSON_Parse(pert);
       rebase_paths(pjs, sc->dir);
-      char *txt = cJSON_Print(pjs);
+      txt = cJSON_Print(pjs);
       cJSON_Delete(pjs);
+    }
+    ds_join(path, sizeof path, c->outdir, j.scene_file);
+    char *was = ds_slurp(path, NULL, NULL);
+    const int changed = was && txt && strcmp(was, txt) != 0;
+    free(was);
+    if (changed && !write && !c->force) {
+      ds_err("plan: '%s' would change (the base scene '%s' or the perturbation settings "
+             "changed), and its renders would no longer match it; use another directory or "
+             "--force (which removes that variant's renders)",
+             path, sc->file);
+      free(txt);
+      free(pert);
+      rc = 1;
+      break;
+    }
+    if (changed && write && remove_variant_renders(c, sc->name, v) != 0) {
+      free(txt);
+      free(pert);
+      rc = 1;
+      break;
+    }
+    if (write) {
       /* What changed, beside the scene (renderers reject unknown scene fields); cJSON
        * escapes the texture names the summary may quote. */
       cJSON *lj = cJSON_CreateObject();
@@ -477,6 +529,7 @@ static int plan_scene(plan_ctx *c, const base_scene *sc, int write) {
       free(pert);
       continue;
     }
+    free(txt);
     /* No variant may carry a non-finite number (the renderer rejects the scene, and only
      * at render time). */
     cJSON *pjs = cJSON_Parse(pert);
@@ -745,6 +798,7 @@ int ds_cmd_plan(int argc, char **argv) {
   c.preview_spp = preview_spp, c.preview_scale = preview_scale, c.ref_spp = ref_spp;
   c.W = W, c.H = H;
   c.albedo_footprint = albedo_footprint > 1 ? albedo_footprint : 0;
+  c.force = force;
   c.spps = spps, c.nspp = nspp;
   c.ps = &ps;
   /* Every scene is checked (and the manifest built) before the first file is written. */

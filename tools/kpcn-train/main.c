@@ -33,13 +33,17 @@ static void usage(FILE *f) {
         "  --source-weight           predict a per-pixel source weight too (arch.source_weight;\n"
         "                            with --init: added with zero weights, same function)\n"
         "  --source-lr-scale X       the source score's weights learn at X times the rate\n"
+        "                            (needs a source weight: --source-weight or the --init's)\n"
         "  --freeze diffuse|specular with --init: that branch keeps its weights bit for bit\n"
         "                            (fine-tune the other branch alone)\n"
-        "  --loss l1|l2|relmse|rell1|ssim|relmse-sg|rell1-sg   stage-1 loss (default l1)\n"
+        "  --loss l1|l2|relmse|rell1|ssim|relmse-sg|rell1-sg   stage-1 loss (default l1;\n"
+        "                            mse is l2)\n"
         "  --loss2 NAME              stage-2 loss (default: same as --loss)\n"
         "  --ssim-window N           SSIM window (odd, default 11), --loss-margin M\n"
-        "  --lr X (1e-3) --lr-decay X (0.96) --decay-every N (100000) --staircase --clip X\n"
-        "  --lr2 X                   base learning rate of stage 2 (default: --lr)\n"
+        "  --lr X (1e-3) --lr-decay X (0.96) --decay-every N (100000; 0 = no decay)\n"
+        "                            --staircase --clip X\n"
+        "  --lr2 X                   base learning rate of stage 2 (default: --lr); its decay\n"
+        "                            counts the run's iterations, not stage 2's\n"
         "  --batch N (16) --patch P (64) --iters N (1000) --stage1-iters N (0.6*iters)\n"
         "  --threads N (0 = all) --seed N (1)\n"
         "  --bf16                    mixed precision: bf16 convolutions (about 2x the conv\n"
@@ -48,19 +52,23 @@ static void usage(FILE *f) {
         "  --val NOISY.exr,REF.exr   validation pair (repeatable)\n"
         "  --val-store VAL.kps       validate on the full renders another store was cut from\n"
         "                            (e.g. kpcn-dataset patches --split val)\n"
-        "  --val-every N --ckpt-every N   (default 0: only at the end and when stopped)\n"
+        "  --val-every N --ckpt-every N   (default 0: only at the end and when stopped;\n"
+        "                            --val-every needs --val or --val-store)\n"
         "  --log-every N             CSV row every N iterations (10)\n"
         "  --ckpt PATH --csv PATH --plot PATH   (default MODEL.ckpt/.csv/.png; '' = none)\n"
         "  --best PATH               also write the model with the lowest validation relMSE\n"
         "  --best-by mean|geomean    which: mean (default) or geometric mean over the pairs\n"
+        "                            (needs --best)\n"
         "  --snapshots DIR           keep every checkpoint in DIR (for --average)\n"
-        "  --time-limit MINUTES      stop cleanly and checkpoint\n"
+        "  --time-limit MINUTES      stop cleanly and checkpoint after MINUTES of this call\n"
+        "                            (not counting earlier sessions of a --resume; 0 = none)\n"
         "  --resume                  continue bit-exactly from the checkpoint\n"
         "  --no-colorswap --no-mirror --no-rotate --no-shift   disable augmentations\n"
         "  --normalize-exposure      show every patch at the model's exposure (the median of\n"
         "                            the store's; as the denoiser shows every input)\n"
         "  --firefly R               bound each patch's isolated diffuse fireflies (ratio R >= 1)\n"
-        "                            before its features, as the denoiser does by default (4)\n"
+        "                            before its features, as the denoiser does (its default is\n"
+        "                            4; training's is off)\n"
         "  --quiet                   no log lines\n"
         "  --version                 the versions and the instruction set (avx512 or avx2)\n"
         "\n"
@@ -645,11 +653,38 @@ int main(int argc, char **argv) {
     fprintf(stderr, "kpcn-train: --ssim-window %lld: the window must be odd\n", ssim_win);
     return 2;
   }
+  if (channels > 0 && s.widen_channels > 0 && channels != s.widen_channels) {
+    fprintf(stderr, "kpcn-train: --channels %lld conflicts with --widen %d\n", channels,
+            s.widen_channels);
+    return 2;
+  }
+  if (s.source_lr_scale > 0 && !s.arch.source_weight && !s.init_model) {
+    fprintf(stderr, "kpcn-train: --source-lr-scale has no effect without --source-weight\n");
+    return 2;
+  }
   if (s.init_model &&
       (preset_given || layers > 0 || channels > 0 || conv > 0 || kernel > 0 || dil)) {
     int r = check_init_arch(&s, preset_given, layers > 0, channels > 0, conv > 0, kernel > 0,
                             dil != NULL);
     if (r) return r;
+  }
+  if (val_store && s.store_path && kpcn_same_file(val_store, s.store_path)) {
+    fprintf(stderr,
+            "kpcn-train: --val-store '%s' is the training store: it would validate on "
+            "the images it trains on\n",
+            val_store);
+    return 2;
+  }
+  /* the validation store's pairs first, so that the usage check below sees them (an output
+   * that is one of their files is a usage mistake, exit 2) */
+  if (val_store && !val_from_store(val_store)) return 1;
+  if (s.val_every > 0 && g_nval == 0) {
+    fprintf(stderr, "kpcn-train: --val-every has no effect without --val or --val-store\n");
+    return 2;
+  }
+  if (best_by && !(s.best_path && *s.best_path)) {
+    fprintf(stderr, "kpcn-train: --best-by has no effect without --best\n");
+    return 2;
   }
   s.nval = g_nval;
   s.val_noisy = (const char *const *)g_valn;
@@ -660,17 +695,6 @@ int main(int argc, char **argv) {
     fprintf(stderr, "kpcn-train: %s\n", kpcn_last_error());
     return 2;
   }
-  if (val_store && s.store_path && kpcn_same_file(val_store, s.store_path)) {
-    fprintf(stderr,
-            "kpcn-train: --val-store '%s' is the training store: it would validate on "
-            "the images it trains on\n",
-            val_store);
-    return 2;
-  }
-  if (val_store && !val_from_store(val_store)) return 1;
-  s.nval = g_nval;
-  s.val_noisy = (const char *const *)g_valn;
-  s.val_ref = (const char *const *)g_valr;
   s.log = log_cb;
   int tty = isatty(2);
   s.progress = progress_cb;

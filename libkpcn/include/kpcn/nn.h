@@ -48,9 +48,9 @@ extern "C" {
 typedef struct kpcn_arch {
   char name[KPCN_NN_NAME_LEN];       /* preset / free-form name, e.g. "paper" */
   int n_hidden;                      /* hidden conv layers (ReLU); n_layers = n_hidden + 1 */
-  int channels;                      /* C: channels of every hidden layer */
+  int channels;                      /* C: channels of every hidden layer, in [1, 1024] */
   int conv_size[KPCN_NN_MAX_LAYERS]; /* k per conv layer (odd, 1..11), [0..n_hidden] used */
-  int dilation[KPCN_NN_MAX_LAYERS];  /* dilation per conv layer (>= 1) */
+  int dilation[KPCN_NN_MAX_LAYERS];  /* dilation per conv layer, in [1, 64] */
   int kernel_size;                   /* K: kernel-prediction window (odd, 3..KPCN_NN_MAX_KERNEL) */
   int n_inputs;                      /* input channels per branch (same list for both) */
   char inputs[KPCN_NN_MAX_INPUTS][KPCN_NN_NAME_LEN]; /* input channel names, in order */
@@ -257,7 +257,7 @@ void kpcn_net_destroy(kpcn_net *net);
 kpcn_status kpcn_net_set_branch(kpcn_net *net, kpcn_branch b);
 
 /* Forward: input [N][n_inputs][H][W] fp32 (planes input_plane_stride apart) -> logits
- * [N][K²][H][W] fp32. Re-reads the model's weights each call. input may be NULL when the
+ * [N][K²(+1 with a source weight)][H][W] fp32. Re-reads the model's weights each call. input may be NULL when the
  * caller has written it into kpcn_net_input_buffer (then no input reorder runs). */
 kpcn_status kpcn_net_forward(kpcn_net *net, const float *input, float *logits);
 
@@ -291,9 +291,10 @@ kpcn_logits_layout kpcn_logits_layout_planar(int K2, int h, int w);
 kpcn_status kpcn_net_forward_logits(kpcn_net *net, const float *input, const void **logits,
                                     kpcn_logits_layout *layout);
 
-/* Backward of the last forward (training nets only): dlogits [N][K²][H][W] -> parameter
- * gradients (overwritten, not accumulated; see kpcn_net_params) and, when the net was
- * created with input_grad, dinput [N][n_inputs][H][W] (may be NULL otherwise). */
+/* Backward of the last forward (training nets only): dlogits [N][K²(+1 with a source
+ * weight)][H][W] -> parameter gradients (overwritten, not accumulated; see kpcn_net_params)
+ * and, when the net was created with input_grad, dinput [N][n_inputs][H][W], dense whatever
+ * input_plane_stride says (may be NULL otherwise). */
 kpcn_status kpcn_net_backward(kpcn_net *net, const float *dlogits, float *dinput);
 /* Same, with dlogits in the layout the last kpcn_net_forward_logits reported (f32; the padding
  * of blocked layouts zero), as kpcn_kpa_backward_layout writes them: saves the transposing
@@ -385,6 +386,7 @@ kpcn_status kpcn_kpa_backward_passes(int K, int passes, int source_weight, int n
                                      const kpcn_logits_layout *layout, float *scratch,
                                      int nthreads);
 size_t kpcn_kpa_passes_mid_floats(int passes, int source_weight, int n, int nc, int h, int w);
+/* The scratch kpcn_kpa_backward_passes needs; the layout is required (0 for NULL). */
 size_t kpcn_kpa_passes_scratch_floats(int passes, int source_weight, int n, int nc, int h, int w,
                                       const kpcn_logits_layout *layout);
 

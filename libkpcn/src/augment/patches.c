@@ -67,12 +67,12 @@ double kpcn_patch_flat_fraction(const float *r, const float *g, const float *b, 
   for (int y = 0; y < size; y++) {
     for (int x = 0; x < size; x++) {
       size_t i = (size_t)(y0 + y) * (size_t)stride + (size_t)(x0 + x);
-      double d = 0;
-      for (int c = 0; c < 3; c++) {
-        double e = fabs((double)ch[c][i] - m[c]);
-        if (!(e <= d)) d = e; /* NaN propagates as "far" */
-      }
-      if (d <= tol) near++;
+      /* near when every channel is within the tolerance; a NaN difference (a non-finite value
+       * or median) is far, so the patch is kept and reaches the writer's finiteness check */
+      int is_near = 1;
+      for (int c = 0; c < 3; c++)
+        if (!(fabs((double)ch[c][i] - m[c]) <= tol)) is_near = 0;
+      near += is_near;
     }
   }
   return (double)near / (double)n;

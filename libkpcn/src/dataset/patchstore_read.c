@@ -178,14 +178,18 @@ kpcn_status kpcn_patchstore_open(kpcn_patchstore **out, const char *path,
   if (h->index_offset != KPCN_PATCHSTORE_DATA_OFFSET + h->count * pb ||
       h->meta_offset != h->index_offset + h->count * KPS_RECORD_BYTES)
     return bad(ps, path, "index/metadata offsets disagree with the patch count");
-  if (h->meta_length > ((uint64_t)1 << 31) || h->meta_offset + h->meta_length > ps->size) {
+  /* each piece against the file size: their sum may wrap past 2^64 in a crafted header */
+  if (h->meta_length > ((uint64_t)1 << 31) || h->meta_offset > ps->size ||
+      h->meta_length > ps->size - h->meta_offset) {
     kpcn_status s = kpcn_fail(
-        KPCN_ERR_FORMAT, "patch store '%s': truncated (file has %zu bytes, header needs %llu)",
-        path, ps->size, (unsigned long long)(h->meta_offset + h->meta_length));
+        KPCN_ERR_FORMAT,
+        "patch store '%s': truncated (file has %zu bytes, header needs metadata of %llu bytes at "
+        "offset %llu)",
+        path, ps->size, (unsigned long long)h->meta_length, (unsigned long long)h->meta_offset);
     kpcn_patchstore_close(ps);
     return s;
   }
-  if (h->meta_offset + h->meta_length != ps->size)
+  if (h->meta_offset != ps->size - h->meta_length)
     return bad(ps, path, "trailing bytes after the metadata");
   kpcn_status st = parse_meta(ps, path);
   if (st != KPCN_OK) {

@@ -178,7 +178,7 @@ static void perturb_albedo(cJSON *owner, const char *key, rng *r, double st) {
     perturb_rgb(c, hue, sat, gain);
     set_vec3(owner, key, c);
   } else if (cJSON_IsObject(a)) { /* procedural texture: perturb its colours */
-    static const char *const keys[] = {"on_color", "off_color", "color", "albedo"};
+    static const char *const keys[] = {"on_color", "off_color", "color", "albedo", "value"};
     for (size_t i = 0; i < sizeof keys / sizeof *keys; i++)
       if (get_vec3(cJSON_GetObjectItemCaseSensitive(a, keys[i]), c)) {
         perturb_rgb(c, hue, sat, gain);
@@ -245,7 +245,10 @@ static int is_emitter(const cJSON *p) {
   return e != NULL || pw != NULL;
 }
 
-static void scale_emission(cJSON *p, const char *key, double k) {
+/* Scales a number or [r,g,b] emission (or power); returns 0 for a textured one (a bitmap,
+ * checker or constant object), which is left as it is: recorded datasets were made so, and
+ * their recipes must plan the same scenes. The summary says so instead of claiming a factor. */
+static int scale_emission(cJSON *p, const char *key, double k) {
   cJSON *e = cJSON_GetObjectItemCaseSensitive(p, key);
   double c[3];
   if (cJSON_IsNumber(e))
@@ -254,7 +257,10 @@ static void scale_emission(cJSON *p, const char *key, double k) {
     for (int i = 0; i < 3; i++)
       c[i] *= k;
     set_vec3(p, key, c);
+  } else if (e) {
+    return 0;
   }
+  return 1;
 }
 
 static void perturb_light(cJSON *p, rng *r, const kpcn_perturb_settings *s, summary *sm) {
@@ -280,8 +286,12 @@ static void perturb_light(cJSON *p, rng *r, const kpcn_perturb_settings *s, summ
   }
   if (s->light <= 0) return;
   double k = exp((u[1] * 1.0 - 0.5) * s->light);
-  scale_emission(p, "emission", k);
-  scale_emission(p, "power", k);
+  const int scaled = scale_emission(p, "emission", k) & scale_emission(p, "power", k);
+  char kk[32];
+  if (scaled)
+    snprintf(kk, sizeof kk, "x%.2f", k);
+  else
+    snprintf(kk, sizeof kk, "textured, not scaled");
   if (cJSON_IsObject(t)) {
     double sz = exp((u[2] * 0.6 - 0.3) * s->light), sc[3], pos[3];
     cJSON *scale = cJSON_GetObjectItemCaseSensitive(t, "scale");
@@ -302,9 +312,9 @@ static void perturb_light(cJSON *p, rng *r, const kpcn_perturb_settings *s, summ
       pos[2] += (u[4] * 2 - 1) * 0.1 * fabs(mag) * s->light;
       set_vec3(t, "position", pos);
     }
-    note(sm, "light(x%.2f,size x%.2f)", k, sz);
+    note(sm, "light(%s,size x%.2f)", kk, sz);
   } else {
-    note(sm, "light(x%.2f)", k);
+    note(sm, "light(%s)", kk);
   }
 }
 

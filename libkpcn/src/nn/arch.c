@@ -168,7 +168,15 @@ size_t kpcn_arch_param_count(const kpcn_arch *a) {
   return n;
 }
 
+/* Adds item to o under key, or deletes it: 0 when either failed (out of memory). */
+static int add_item(cJSON *o, const char *key, cJSON *item) {
+  if (item && cJSON_AddItemToObject(o, key, item)) return 1;
+  cJSON_Delete(item);
+  return 0;
+}
+
 char *kpcn_arch_to_json(const kpcn_arch *a) {
+  if (!a) return NULL;
   cJSON *o = cJSON_CreateObject();
   if (!o) return NULL;
   int nl = a->n_hidden + 1;
@@ -176,26 +184,37 @@ char *kpcn_arch_to_json(const kpcn_arch *a) {
   int nin = a->n_inputs < 0                    ? 0
             : a->n_inputs > KPCN_NN_MAX_INPUTS ? KPCN_NN_MAX_INPUTS
                                                : a->n_inputs;
-  cJSON_AddStringToObject(o, "name", a->name);
-  cJSON_AddNumberToObject(o, "n_hidden", a->n_hidden);
-  cJSON_AddNumberToObject(o, "channels", a->channels);
-  cJSON_AddItemToObject(o, "conv_size", cJSON_CreateIntArray(a->conv_size, nl));
-  cJSON_AddItemToObject(o, "dilation", cJSON_CreateIntArray(a->dilation, nl));
-  cJSON_AddNumberToObject(o, "kernel_size", a->kernel_size);
-  cJSON *in = cJSON_AddArrayToObject(o, "inputs");
-  for (int i = 0; in && i < nin; i++)
-    cJSON_AddItemToArray(in, cJSON_CreateString(a->inputs[i]));
+  /* every call checked: a description missing a field would be saved as the model's */
+  int ok = cJSON_AddStringToObject(o, "name", a->name) &&
+           cJSON_AddNumberToObject(o, "n_hidden", a->n_hidden) &&
+           cJSON_AddNumberToObject(o, "channels", a->channels) &&
+           add_item(o, "conv_size", cJSON_CreateIntArray(a->conv_size, nl)) &&
+           add_item(o, "dilation", cJSON_CreateIntArray(a->dilation, nl)) &&
+           cJSON_AddNumberToObject(o, "kernel_size", a->kernel_size);
+  cJSON *in = ok ? cJSON_AddArrayToObject(o, "inputs") : NULL;
+  ok = in != NULL;
+  for (int i = 0; ok && i < nin; i++) {
+    cJSON *v = cJSON_CreateString(a->inputs[i]);
+    ok = v && cJSON_AddItemToArray(in, v);
+    if (!ok) cJSON_Delete(v);
+  }
   char eps[32];
   snprintf(eps, sizeof eps, "%.9g", (double)a->eps);
-  cJSON_AddRawToObject(o, "eps", eps);
-  cJSON_AddStringToObject(o, "preprocess", a->preprocess);
+  ok = ok && cJSON_AddRawToObject(o, "eps", eps) &&
+       cJSON_AddStringToObject(o, "preprocess", a->preprocess);
   /* written only when not 1, so single-pass models keep the bytes they always had */
-  if (kpcn_arch_kpa_passes(a) != 1) cJSON_AddNumberToObject(o, "kpa_passes", a->kpa_passes);
-  if (a->source_weight) cJSON_AddNumberToObject(o, "source_weight", a->source_weight);
-  if (a->exposure > 0.0f) {
+  if (ok && kpcn_arch_kpa_passes(a) != 1)
+    ok = cJSON_AddNumberToObject(o, "kpa_passes", a->kpa_passes) != NULL;
+  if (ok && a->source_weight)
+    ok = cJSON_AddNumberToObject(o, "source_weight", a->source_weight) != NULL;
+  if (ok && a->exposure > 0.0f) {
     char e[32];
     snprintf(e, sizeof e, "%.9g", (double)a->exposure);
-    cJSON_AddRawToObject(o, "exposure", e);
+    ok = cJSON_AddRawToObject(o, "exposure", e) != NULL;
+  }
+  if (!ok) {
+    cJSON_Delete(o);
+    return NULL;
   }
   char *s = cJSON_PrintUnformatted(o);
   cJSON_Delete(o);
@@ -276,9 +295,11 @@ static kpcn_status from_json_obj(const cJSON *o, kpcn_arch *t) {
   t->exposure = 0.0f; /* likewise */
   const cJSON *ex = cJSON_GetObjectItemCaseSensitive(o, "exposure");
   if (ex) {
-    if (!cJSON_IsNumber(ex) || !(ex->valuedouble > 0.0) || ex->valuedouble > 1e30)
-      return kpcn_fail(KPCN_ERR_FORMAT, "architecture.exposure: not a number > 0");
-    t->exposure = (float)ex->valuedouble;
+    /* judged as the float it is stored as: 1e-60 would become 0, "not recorded" */
+    const float ev = cJSON_IsNumber(ex) ? (float)ex->valuedouble : 0.0f;
+    if (!cJSON_IsNumber(ex) || !(ev > 0.0f) || !(ex->valuedouble <= 1e30))
+      return kpcn_fail(KPCN_ERR_FORMAT, "architecture.exposure: not a number in (0, 1e30]");
+    t->exposure = ev;
   }
   kpcn_status s = kpcn_arch_validate(t);
   if (s != KPCN_OK) {
@@ -292,8 +313,8 @@ static kpcn_status from_json_obj(const cJSON *o, kpcn_arch *t) {
 kpcn_status kpcn_arch_from_json(const char *json, kpcn_arch *a) {
   if (!json || !a)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_arch_from_json: NULL argument");
-  cJSON *o = cJSON_Parse(json);
-  if (!o) return kpcn_fail(KPCN_ERR_FORMAT, "architecture: not valid JSON");
+  cJSON *o = cJSON_ParseWithOpts(json, NULL, 1); /* nothing may follow the object */
+  if (!o) return kpcn_fail(KPCN_ERR_FORMAT, "architecture: not valid JSON (or text after it)");
   kpcn_arch t;
   memset(&t, 0, sizeof t);
   kpcn_status s = from_json_obj(o, &t);

@@ -5,6 +5,7 @@
  * Border: reads outside the image are clamped to the nearest edge pixel (replicate). */
 #include "core/internal.h"
 #include "kpcn/nn.h"
+#include "nn/kpa_internal.h"
 
 #include <math.h>
 #include <stdint.h>
@@ -54,6 +55,13 @@ static kpcn_status check_layout(const char *fn, const kpcn_logits_layout *l, int
   return KPCN_OK;
 }
 
+kpcn_status kpcn_kpa_check_call(const char *fn, int K, int n, int nc, int h, int w,
+                                const kpcn_logits_layout *layout, int nlogits) {
+  KPCN_TRY(check_args(fn, K, n, nc, h, w));
+  if (!layout) return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: NULL logits layout", fn);
+  return check_layout(fn, layout, nlogits);
+}
+
 /* row[x + r] = src[clamp(x)] for x in [-r, w + r) */
 static void padded_row(float *restrict row, const float *restrict src, int w, int r) {
   for (int x = 0; x < r; x++)
@@ -90,7 +98,8 @@ static inline int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? 
 /* exp(x) for x <= 0 (softmax after max subtraction), written with plain arithmetic so the
  * compiler vectorizes it (glibc's expf is a scalar call and costed ~25 % of inference on the
  * cpu preset). Range reduction x = n ln2 + r, |r| <= ln2/2, degree-6 Taylor/Horner for e^r
- * (truncation < 2e-8 relative), 2^n through the exponent bits. x < -87 flushes to 0. */
+ * (truncation < 2e-8 relative), 2^n through the exponent bits. x < -87 is clamped to
+ * -87 (e^-87 ≈ 1.6e-38, not 0). */
 static inline float exp_nonpos(float x) {
   x = x < -87.f ? -87.f : x; /* a NaN stays NaN (and comes out NaN: see below) */
   float t = x * 1.44269504088896341f;

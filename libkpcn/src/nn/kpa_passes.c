@@ -9,6 +9,7 @@
  *    K² logits. The backward runs the passes from the last, adding each pass's dlogits share. */
 #include "core/internal.h"
 #include "kpcn/nn.h"
+#include "nn/kpa_internal.h"
 
 #include <math.h>
 #include <stdint.h>
@@ -32,10 +33,16 @@ kpcn_status kpcn_kpa_forward_weighted(int K, int n, int nc, int h, int w, const 
                                       const kpcn_logits_layout *layout, const float *noisy,
                                       float *src1, float *acc1, float *out, float *weights,
                                       int nthreads) {
-  if (!logits || !layout || !noisy || !src1 || !acc1 || !out || n < 1 || nc < 1 || nc > 63 ||
-      h < 1 || w < 1 || (n > 1 && ((const float *)src1 == noisy || out == acc1)))
+  static const char fn[] = "kpcn_kpa_forward_weighted";
+  if (!logits || !noisy || !src1 || !acc1 || !out)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "%s: NULL buffer", fn);
+  /* before score_at indexes the logits through the layout; nc + 1 channels are filtered */
+  KPCN_TRY(kpcn_kpa_check_call(fn, K, n, nc + 1, h, w, layout, K * K + 1));
+  if (n > 1 && ((const float *)src1 == noisy || out == acc1))
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
-                     "kpcn_kpa_forward_weighted: NULL buffer, bad size or aliasing with n > 1");
+                     "%s: with n > 1 the source buffer may not be the input, nor the output the "
+                     "accumulator",
+                     fn);
   const int K2 = K * K, nt = kpcn_resolve_threads(nthreads);
   const size_t pl = (size_t)h * w;
   for (int b = 0; b < n; b++) {
@@ -118,6 +125,7 @@ size_t kpcn_kpa_passes_mid_floats(int passes, int source_weight, int n, int nc, 
 
 size_t kpcn_kpa_passes_scratch_floats(int passes, int source_weight, int n, int nc, int h, int w,
                                       const kpcn_logits_layout *layout) {
+  if (!layout) return 0; /* documented: the layout is needed (its image stride) */
   const size_t pl = (size_t)n * h * w;
   return (passes > 1 ? 2 * (size_t)nc * pl + (size_t)n * layout->image_stride : 0) +
          (source_weight ? 2 * (size_t)(nc + 1) * pl : 0);
@@ -138,6 +146,8 @@ kpcn_status kpcn_kpa_forward_passes(int K, int passes, int source_weight, int n,
                                     const float *noisy, float *mid, float *out, float *weights,
                                     int nthreads) {
   KPCN_TRY(check_chain("kpcn_kpa_forward_passes", passes, source_weight, mid));
+  KPCN_TRY(kpcn_kpa_check_call("kpcn_kpa_forward_passes", K, n, nc, h, w, layout,
+                               K * K + source_weight));
   const size_t img = (size_t)n * nc * h * w, img1 = (size_t)n * (nc + 1) * h * w;
   float *src1 = mid ? mid + (size_t)(passes - 1) * img : NULL, *acc1 = src1 ? src1 + img1 : NULL;
   const float *src = noisy;
@@ -168,6 +178,8 @@ kpcn_status kpcn_kpa_backward_passes(int K, int passes, int source_weight, int n
                                      const kpcn_logits_layout *layout, float *scratch,
                                      int nthreads) {
   KPCN_TRY(check_chain("kpcn_kpa_backward_passes", passes, source_weight, mid));
+  KPCN_TRY(kpcn_kpa_check_call("kpcn_kpa_backward_passes", K, n, nc, h, w, layout,
+                               K * K + source_weight));
   if ((passes > 1 || source_weight) && !scratch)
     return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT, "kpcn_kpa_backward_passes: no scratch buffer");
   const size_t img = (size_t)n * nc * h * w, img1 = (size_t)n * (nc + 1) * h * w;

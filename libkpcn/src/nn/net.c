@@ -335,8 +335,11 @@ static kpcn_status build(kpcn_net *n) {
         KPCN_TRY(
             kpcn_net_make_reorder(n, &n->dout_native, &last->dst_md, &last->ddst_md, &scratch));
     }
-    if (n->o.input_grad)
-      KPCN_TRY(kpcn_net_make_reorder(n, &n->dinput_out, &n->L[0].src_md, &user_in, &scratch));
+    if (n->o.input_grad) { /* dinput is dense [N][n_inputs][H][W] whatever the input's stride */
+      dnnl_memory_desc_t user_din;
+      DN(dnnl_memory_desc_init_by_tag(&user_din, 4, xd, dnnl_f32, dnnl_nchw));
+      KPCN_TRY(kpcn_net_make_reorder(n, &n->dinput_out, &n->L[0].src_md, &user_din, &scratch));
+    }
   }
   return bind_buffers(n, scratch);
 }

@@ -21,55 +21,72 @@
 
 #define KPCN_MODEL_FORMAT "kpcn-model-1"
 #define MAX_HEADER ((uint64_t)64 << 20)
+#define MAX_META_ENTRIES 4096 /* user metadata plus the kpcn.* keys */
 
 void kpcn_model_tensor_name(char *buf, size_t n, kpcn_branch b, int layer, int is_bias) {
+  if ((unsigned)b >= KPCN_N_BRANCHES) { /* no name: an empty string */
+    if (buf && n) buf[0] = 0;
+    return;
+  }
   snprintf(buf, n, "%s.conv%d.%s", kpcn_nn_branch_names[b], layer, is_bias ? "bias" : "weight");
 }
 
+/* Every cJSON call is checked: a header missing an entry (out of memory) would be written and
+ * renamed over a good model, which then no longer loads. */
 static kpcn_status build_header(const kpcn_model *m, char **out_json) {
+  *out_json = NULL;
   const kpcn_arch *a = &m->arch;
   cJSON *h = cJSON_CreateObject();
-  if (!h) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "out of memory for the safetensors header");
-  cJSON *meta = cJSON_AddObjectToObject(h, "__metadata__");
+  cJSON *meta = h ? cJSON_AddObjectToObject(h, "__metadata__") : NULL;
   char *arch = kpcn_arch_to_json(a);
   cJSON *inputs = cJSON_CreateArray();
-  for (int i = 0; inputs && i < a->n_inputs; i++)
-    cJSON_AddItemToArray(inputs, cJSON_CreateString(a->inputs[i]));
-  char *inputs_s = inputs ? cJSON_PrintUnformatted(inputs) : NULL;
+  int ok = meta && arch && inputs;
+  for (int i = 0; ok && i < a->n_inputs; i++) {
+    cJSON *in = cJSON_CreateString(a->inputs[i]);
+    ok = in && cJSON_AddItemToArray(inputs, in);
+    if (!ok) cJSON_Delete(in);
+  }
+  char *inputs_s = ok ? cJSON_PrintUnformatted(inputs) : NULL;
   cJSON_Delete(inputs);
   char eps[32];
   snprintf(eps, sizeof eps, "%.9g", (double)a->eps);
-  if (meta && arch && inputs_s) {
-    cJSON_AddStringToObject(meta, "kpcn.format", KPCN_MODEL_FORMAT);
-    cJSON_AddStringToObject(meta, "kpcn.architecture", arch);
-    cJSON_AddStringToObject(meta, "kpcn.inputs", inputs_s);
-    cJSON_AddStringToObject(meta, "kpcn.eps", eps);
-    cJSON_AddStringToObject(meta, "kpcn.preprocess", a->preprocess);
-    cJSON_AddStringToObject(meta, "kpcn.version", KPCN_VERSION_STRING);
-    for (int i = 0; i < m->n_meta; i++)
-      cJSON_AddStringToObject(meta, m->meta_key[i], m->meta_val[i]);
-  }
+  ok = ok && inputs_s && cJSON_AddStringToObject(meta, "kpcn.format", KPCN_MODEL_FORMAT) &&
+       cJSON_AddStringToObject(meta, "kpcn.architecture", arch) &&
+       cJSON_AddStringToObject(meta, "kpcn.inputs", inputs_s) &&
+       cJSON_AddStringToObject(meta, "kpcn.eps", eps) &&
+       cJSON_AddStringToObject(meta, "kpcn.preprocess", a->preprocess) &&
+       cJSON_AddStringToObject(meta, "kpcn.version", KPCN_VERSION_STRING);
+  for (int i = 0; ok && i < m->n_meta; i++)
+    ok = cJSON_AddStringToObject(meta, m->meta_key[i], m->meta_val[i]) != NULL;
   free(arch);
   free(inputs_s);
   uint64_t off = 0;
   char name[64];
-  for (int b = 0; b < KPCN_N_BRANCHES; b++)
-    for (int l = 0; l <= a->n_hidden; l++)
-      for (int isb = 0; isb < 2; isb++) {
+  for (int b = 0; ok && b < KPCN_N_BRANCHES; b++)
+    for (int l = 0; ok && l <= a->n_hidden; l++)
+      for (int isb = 0; ok && isb < 2; isb++) {
         kpcn_model_tensor_name(name, sizeof name, (kpcn_branch)b, l, isb);
         int k = a->conv_size[l];
         int shape[4] = {kpcn_arch_layer_out(a, l), kpcn_arch_layer_in(a, l), k, k};
         size_t n = isb ? (size_t)shape[0] : kpcn_model_weight_count(a, l);
         cJSON *t = cJSON_AddObjectToObject(h, name);
-        if (!t) continue;
-        cJSON_AddStringToObject(t, "dtype", "F32");
-        cJSON_AddItemToObject(t, "shape", cJSON_CreateIntArray(shape, isb ? 1 : 4));
+        cJSON *sh = cJSON_CreateIntArray(shape, isb ? 1 : 4);
+        ok = t && cJSON_AddStringToObject(t, "dtype", "F32") && sh &&
+             cJSON_AddItemToObject(t, "shape", sh);
+        if (!ok) {
+          cJSON_Delete(sh);
+          break;
+        }
         cJSON *offs = cJSON_AddArrayToObject(t, "data_offsets");
-        cJSON_AddItemToArray(offs, cJSON_CreateNumber((double)off));
+        cJSON *o0 = cJSON_CreateNumber((double)off);
         off += n * 4;
-        cJSON_AddItemToArray(offs, cJSON_CreateNumber((double)off));
+        cJSON *o1 = cJSON_CreateNumber((double)off);
+        ok = offs && o0 && cJSON_AddItemToArray(offs, o0);
+        if (!ok) cJSON_Delete(o0);
+        ok = ok && o1 && cJSON_AddItemToArray(offs, o1);
+        if (!ok) cJSON_Delete(o1);
       }
-  *out_json = cJSON_PrintUnformatted(h);
+  if (ok) *out_json = cJSON_PrintUnformatted(h);
   cJSON_Delete(h);
   if (!*out_json)
     return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "out of memory for the safetensors header");
@@ -140,6 +157,19 @@ static kpcn_status parse_meta(const cJSON *h, uint64_t data_size, kpcn_model **o
   const cJSON *meta = cJSON_GetObjectItemCaseSensitive(h, "__metadata__");
   if (!cJSON_IsObject(meta))
     return kpcn_fail(KPCN_ERR_FORMAT, "__metadata__: missing or not an object");
+  /* Before anything is looked up: a key given twice (cJSON would find the first copy, the
+   * user entries keep the last), an empty key, or so many entries that storing them (each
+   * one searched for among the earlier ones) would take hours. */
+  int nmeta = 0;
+  for (const cJSON *it = meta->child; it; it = it->next) {
+    if (++nmeta > MAX_META_ENTRIES)
+      return kpcn_fail(KPCN_ERR_FORMAT, "__metadata__: more than %d entries", MAX_META_ENTRIES);
+    if (!it->string || !it->string[0])
+      return kpcn_fail(KPCN_ERR_FORMAT, "__metadata__: an entry has an empty key");
+    for (const cJSON *p = meta->child; p != it; p = p->next)
+      if (!strcmp(p->string, it->string))
+        return kpcn_fail(KPCN_ERR_FORMAT, "__metadata__: key '%s' appears twice", it->string);
+  }
   const char *fmt = NULL, *arch_s = NULL, *inputs_s = NULL, *eps_s = NULL, *pre_s = NULL;
   KPCN_TRY(meta_string(meta, "kpcn.format", &fmt));
   if (strcmp(fmt, KPCN_MODEL_FORMAT))
@@ -153,7 +183,7 @@ static kpcn_status parse_meta(const cJSON *h, uint64_t data_size, kpcn_model **o
   if (kpcn_arch_from_json(arch_s, &a) != KPCN_OK) /* message already names the field */
     return kpcn_fail_context("__metadata__.\"kpcn.architecture\"");
   /* The redundant copies must agree with the architecture (catches hand edits). */
-  cJSON *in = cJSON_Parse(inputs_s);
+  cJSON *in = cJSON_ParseWithOpts(inputs_s, NULL, 1); /* nothing may follow the array */
   int ok = cJSON_IsArray(in) && cJSON_GetArraySize(in) == a.n_inputs;
   for (int i = 0; ok && i < a.n_inputs; i++) {
     const cJSON *it = cJSON_GetArrayItem(in, i);
@@ -276,8 +306,13 @@ static kpcn_status load_tensors(const cJSON *h, kpcn_model *m, FILE *f, uint64_t
       }
   /* Every key must be a known tensor or __metadata__ (no silently ignored weights). */
   int nkeys = 0;
+  int nmeta = 0;
   for (const cJSON *it = h->child; s == KPCN_OK && it; it = it->next) {
-    if (it->string && !strcmp(it->string, "__metadata__")) continue;
+    if (it->string && !strcmp(it->string, "__metadata__")) {
+      /* parse_meta read the first; a second one would be ignored */
+      if (++nmeta > 1) s = kpcn_fail(KPCN_ERR_FORMAT, "__metadata__ appears twice in the header");
+      continue;
+    }
     nkeys++;
     int known = 0;
     for (int j = 0; j < ne && !known; j++)
@@ -348,11 +383,15 @@ static kpcn_status load_file(FILE *f, const char *path, kpcn_model **out) {
     free(txt);
     return kpcn_fail(KPCN_ERR_FORMAT, "'%s': NUL byte inside the JSON header", path);
   }
-  cJSON *h = cJSON_Parse(txt);
+  const char *end = NULL;
+  cJSON *h = cJSON_ParseWithOpts(txt, &end, 0);
+  /* after the object only the padding to 8 bytes (spaces) may follow */
+  int trailing = h && end && end[strspn(end, " \t\r\n")] != 0;
   free(txt);
-  if (!cJSON_IsObject(h)) {
+  if (!cJSON_IsObject(h) || trailing) {
     cJSON_Delete(h);
-    return kpcn_fail(KPCN_ERR_FORMAT, "'%s': header is not a JSON object", path);
+    return kpcn_fail(KPCN_ERR_FORMAT, "'%s': header is not a JSON object%s", path,
+                     trailing ? " (text follows it)" : "");
   }
   kpcn_model *m = NULL;
   kpcn_status s = parse_meta(h, (uint64_t)fsz - 8 - hl, &m);

@@ -19,6 +19,7 @@
 #include <cjson/cJSON.h>
 #include <errno.h>
 #include <inttypes.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -90,6 +91,12 @@ static int ck_settings(const kpcn_trainer *t, ck_setting out[CK_NSET]) {
       s->augment.mirror, s->augment.mirror_v, s->augment.rotate, s->augment.max_shift,
       (int)s->augment.mode);
   SET("train.crop_jitter", "--no-shift", "%d", s->crop_jitter);
+  SET("train.source_lr_scale", "--source-lr-scale", "%.17g",
+      t->arch.source_weight ? s->source_lr_scale : 0.0);
+  /* what identifies the patches a run draws from (the draws depend on the count) */
+  SET("train.store", "--store", "%llu patches of %d px, %d channels, %d sources",
+      (unsigned long long)kpcn_patchstore_count(t->ps), kpcn_patchstore_patch_size(t->ps),
+      kpcn_patchstore_nchannels(t->ps), kpcn_patchstore_nsources(t->ps));
 #undef SET
   return n;
 }
@@ -136,6 +143,16 @@ kpcn_status kt_checkpoint_save(kpcn_trainer *t, const char *path) {
   ck_setting set[CK_NSET];
   for (int i = 0, ns = ck_settings(t, set); i < ns; i++)
     cJSON_AddStringToObject(meta, set[i].key, set[i].value);
+  /* the best model kept so far, so that a resume keeps comparing against it (the CSV, which
+   * earlier checkpoints relied on, may be off); "none": no best model was written */
+  if (t->best_path && isfinite(t->best_val)) {
+    snprintf(buf, sizeof buf, "%.17g", t->best_val);
+    cJSON_AddStringToObject(meta, "train.best_val", buf);
+    cJSON_AddStringToObject(meta, "train.best_by",
+                            t->s.best_by == KPCN_VAL_GEOMEAN ? "geomean" : "mean");
+  } else {
+    cJSON_AddStringToObject(meta, "train.best_val", "none");
+  }
   cJSON_AddItemToObject(root, "__metadata__", meta);
   uint64_t off = 0;
   for (int i = 0; i < n; i++) {
@@ -295,6 +312,50 @@ done:
   return st;
 }
 
+/* The first architecture field that differs, as "key: A in the checkpoint, B in this run",
+ * with the option that sets it; the whole key's name when the JSON does not parse. */
+static void arch_diff(const char *was, const char *mine, char *buf, size_t n) {
+  static const char *const hint[][2] = {{"exposure", " (another --store?)"},
+                                        {"eps", " (--eps)"},
+                                        {"kpa_passes", " (--kpa-passes)"},
+                                        {"source_weight", " (--source-weight)"},
+                                        {"channels", " (--channels, --widen)"}};
+  snprintf(buf, n, "kpcn.architecture");
+  cJSON *a = was ? cJSON_Parse(was) : NULL, *b = mine ? cJSON_Parse(mine) : NULL;
+  for (int pass = 0; a && b && pass < 2; pass++) { /* keys of the checkpoint, then the run's */
+    cJSON *x = pass ? b : a, *y = pass ? a : b;
+    for (cJSON *ix = x->child; ix; ix = ix->next) {
+      cJSON *iy = cJSON_GetObjectItemCaseSensitive(y, ix->string);
+      char *px = cJSON_PrintUnformatted(ix), *py = iy ? cJSON_PrintUnformatted(iy) : NULL;
+      int differ = px && (!py || strcmp(px, py));
+      if (differ) {
+        const char *h = "";
+        for (size_t k = 0; k < sizeof hint / sizeof hint[0]; k++)
+          if (!strcmp(ix->string, hint[k][0])) h = hint[k][1];
+        char vx[96], vy[96];
+        snprintf(vx, sizeof vx, "%s", px);
+        snprintf(vy, sizeof vy, "%s", py ? py : "(absent)");
+        snprintf(buf, n, "kpcn.architecture's %s: %s in the checkpoint, %s in this run%s",
+                 ix->string, pass ? vy : vx, pass ? vx : vy, h);
+      }
+      free(px), free(py);
+      if (differ) pass = 2;
+      if (differ) break;
+    }
+  }
+  cJSON_Delete(a), cJSON_Delete(b);
+}
+
+/* A checkpoint's decimal metadata value in [lo, hi], strictly parsed. */
+static kpcn_status meta_range(cJSON *meta, const char *key, long long lo, long long hi,
+                              const char *path, long long *got) {
+  KPCN_TRY(meta_expect(meta, key, NULL, 0, path, got));
+  if (*got < lo || *got > hi)
+    return kpcn_fail(KPCN_ERR_FORMAT, "checkpoint '%s': metadata '%s' = %lld is out of range", path,
+                     key, *got);
+  return KPCN_OK;
+}
+
 kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
   ck_file c;
   KPCN_TRY(ck_open(path, &c));
@@ -302,15 +363,19 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
   ck_tensor *ts = NULL;
   cJSON *meta = c.meta;
   const char *arch = meta_str(meta, "kpcn.architecture");
-  char *mine = kpcn_arch_to_json(&t->arch);
+  char *mine = kpcn_arch_to_json(&t->arch), diff[400];
   int same = arch && mine && strcmp(arch, mine) == 0;
+  if (!same) arch_diff(arch, mine, diff, sizeof diff);
   free(mine);
-  if (!same)
-    BAD("checkpoint '%s' holds a different architecture than this run (kpcn.architecture)", path);
+  if (!same) BAD("checkpoint '%s' holds a different architecture than this run: %s", path, diff);
   const char *seed = meta_str(meta, "train.seed");
-  if (!seed || strtoull(seed, NULL, 10) != t->s.seed)
-    BAD("checkpoint '%s' was written with train.seed = %s, this run uses %" PRIu64, path,
-        seed ? seed : "(missing)", t->s.seed);
+  char *seed_end = NULL;
+  const unsigned long long seed_v = seed ? strtoull(seed, &seed_end, 10) : 0;
+  if (!seed || !seed_end || *seed_end || seed_end == seed || *seed == '-' || *seed == ' ')
+    BAD("checkpoint '%s': metadata 'train.seed' missing or malformed", path);
+  if (seed_v != t->s.seed)
+    BAD("checkpoint '%s' was written with train.seed = %s, this run uses %" PRIu64, path, seed,
+        t->s.seed);
   if (t->stage1_default) { /* not given: the checkpoint's, so that --iters may grow */
     long long s1 = 0;
     if ((st = meta_expect(meta, "train.stage1_iters", NULL, 0, path, &s1)) != KPCN_OK) goto done;
@@ -351,9 +416,9 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
           path, set[i].key, was, set[i].value, set[i].option);
   }
   long long iter = 0, steps[2] = {0, 0};
-  if ((st = meta_expect(meta, "train.iteration", NULL, 0, path, &iter)) ||
-      (st = meta_expect(meta, "train.adam_steps.diffuse", NULL, 0, path, &steps[0])) ||
-      (st = meta_expect(meta, "train.adam_steps.specular", NULL, 0, path, &steps[1])))
+  if ((st = meta_range(meta, "train.iteration", 0, LLONG_MAX, path, &iter)) ||
+      (st = meta_range(meta, "train.adam_steps.diffuse", 0, iter, path, &steps[0])) ||
+      (st = meta_range(meta, "train.adam_steps.specular", 0, iter, path, &steps[1])))
     goto done;
   /* absent in checkpoints from before session 60: the next CSV row then averages only the
    * iterations after the resume */
@@ -372,6 +437,30 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
         iter, (long long)t->s.iters);
   const char *rng = meta_str(meta, "train.rng"), *el = meta_str(meta, "train.elapsed_s");
   if (!rng || !el) BAD("checkpoint '%s': train.rng or train.elapsed_s missing", path);
+  /* the generator's state as written: 16 hex digits; the elapsed time a finite count */
+  if (strlen(rng) != 16 || strspn(rng, "0123456789abcdefABCDEF") != 16)
+    BAD("checkpoint '%s': metadata 'train.rng' malformed (16 hex digits expected)", path);
+  char *el_end = NULL;
+  const double elapsed = strtod(el, &el_end);
+  if (!el_end || *el_end || el_end == el || !isfinite(elapsed) || elapsed < 0)
+    BAD("checkpoint '%s': metadata 'train.elapsed_s' malformed", path);
+  /* the best model kept before the checkpoint (absent in checkpoints before session 63) */
+  const char *bv = meta_str(meta, "train.best_val"), *bb = meta_str(meta, "train.best_by");
+  t->ckpt_best = 0;
+  if (bv && !strcmp(bv, "none")) {
+    t->ckpt_best = 2;
+  } else if (bv) {
+    char *bv_end = NULL;
+    const double best = strtod(bv, &bv_end);
+    if (!bv_end || *bv_end || bv_end == bv || !(best >= 0) || !isfinite(best) || !bb ||
+        (strcmp(bb, "mean") && strcmp(bb, "geomean")))
+      BAD("checkpoint '%s': metadata 'train.best_val' / 'train.best_by' malformed", path);
+    /* another figure than this run's --best-by: compare by the CSV's column instead */
+    if (!strcmp(bb, t->s.best_by == KPCN_VAL_GEOMEAN ? "geomean" : "mean")) {
+      t->ckpt_best = 1;
+      t->best_val = best;
+    }
+  }
   int n = ck_list(t, NULL);
   ts = kpcn_calloc((size_t)n, sizeof *ts, "checkpoint tensor list");
   if (!ts) {
@@ -384,7 +473,7 @@ kpcn_status kt_checkpoint_load(kpcn_trainer *t, const char *path) {
   kpcn_adam_set_steps(t->adam[0], steps[0]);
   kpcn_adam_set_steps(t->adam[1], steps[1]);
   t->rng.state = strtoull(rng, NULL, 16);
-  t->elapsed_prev = strtod(el, NULL);
+  t->elapsed_prev = elapsed;
   t->log_loss_sum = log_sum;
   t->log_loss_n = log_n;
 done:

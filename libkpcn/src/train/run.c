@@ -225,7 +225,14 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
   KPCN_TRY(csv_open(t, t->csv_path, t->s.resume, t->iter, t->s.best_by == KPCN_VAL_GEOMEAN ? 10 : 7,
                     &csvlog, &best_csv));
   FILE *csv = csvlog.f;
-  if (t->s.resume) t->best_val = best_csv;
+  /* the checkpoint's record of the best model kept, else (older checkpoints) the CSV's best
+   * validation row */
+  if (t->s.resume && t->ckpt_best == 0) t->best_val = best_csv;
+  if (t->s.resume && t->ckpt_best == 2) t->best_val = INFINITY;
+  if (t->s.resume && t->ckpt_best == 2 && t->best_path && t->iter > 0)
+    kpcn_log(t->s.log, t->s.log_user, KPCN_LOG_INFO,
+             "no best model was kept before iteration %lld: '%s' will hold the best from here on",
+             (long long)t->iter, t->best_path);
   const double t0 = kt_now();
   double last_t = t0;
   int64_t last_it = t->iter, last_val_it = -1, start_it = t->iter;
@@ -317,9 +324,11 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
       fprintf(csv, "%lld,%d,%.6g,", (long long)t->iter, t->iter - 1 < t->s.stage1_iters ? 1 : 2,
               kt_lr_at(t, t->iter - 1));
       if (t->log_loss_n) fprintf(csv, "%.9g", t->log_loss_sum / (double)t->log_loss_n);
-      fprintf(csv, ",%.4g,%.2f,%.9g,%.9g,%.6g,%.9g\n",
-              (double)(t->iter - last_it) / fmax(now - last_t, 1e-9), t->elapsed_prev + (now - t0),
-              v.relmse, v.ssim, v.psnr, v.relmse_geo);
+      /* no iterations since the last row: no rate (an empty cell, as the loss's) */
+      fputc(',', csv);
+      if (t->iter > last_it) fprintf(csv, "%.4g", (double)(t->iter - last_it) / fmax(now - last_t, 1e-9));
+      fprintf(csv, ",%.2f,%.9g,%.9g,%.6g,%.9g\n", t->elapsed_prev + (now - t0), v.relmse, v.ssim,
+              v.psnr, v.relmse_geo);
       fflush(csv);
     }
   }

@@ -75,6 +75,8 @@ struct kpcn_trainer {
    * record_exposure replaced it with the store's: run.c validates the model as given too */
   float init_exposure;
   double best_val; /* lowest best_by figure written to best_path (run.c), +inf if none */
+  int ckpt_best;   /* a resumed checkpoint recorded best_val (checkpoint.c): 1 = a figure,
+                      2 = "none" (no best model kept before it), 0 = no record (older ones) */
 };
 
 /* batch.c */

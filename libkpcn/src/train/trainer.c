@@ -411,6 +411,11 @@ kpcn_status kpcn_trainer_create(kpcn_trainer **out, const kpcn_train_settings *s
       t->model = sw;
     }
     t->arch = *kpcn_model_arch(t->model);
+    if (s->source_lr_scale > 0 && !t->arch.source_weight)
+      GO(kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                   "source_lr_scale (--source-lr-scale) has no effect: model '%s' predicts no "
+                   "source weight (add one with source_weight, --source-weight)",
+                   t->init_model));
     char what[600];
     snprintf(what, sizeof what, "model '%s'", t->init_model);
     GO(check_inputs(t, &t->arch, what));
