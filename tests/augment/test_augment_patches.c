@@ -44,6 +44,20 @@ static void test_flat_fraction(void) {
   memset(g, 0, sizeof g);
   memset(b, 0, sizeof b);
   CHECK_NEAR(kpcn_patch_flat_fraction(r, g, b, 4, 0, 0, 4, 0.05, 0.01), 1.0, 1e-12);
+  /* A non-finite channel is never near, whichever channel holds it: a patch of an image with
+   * an infinite red channel is kept, so the store writer's finiteness check names the channel
+   * (a NaN difference in R or G was overwritten by the next channel's finite one, and such an
+   * image had every patch culled, silently). */
+  for (int c = 0; c < 3; c++) {
+    float *ch[3] = {r, g, b};
+    for (int i = 0; i < 16; i++)
+      r[i] = g[i] = b[i] = 0.5f;
+    for (int i = 0; i < 16; i++)
+      ch[c][i] = INFINITY;
+    CHECK_NEAR(kpcn_patch_flat_fraction(r, g, b, 4, 0, 0, 4, 0.05, 0.01), 0.0, 1e-12);
+    ch[c][3] = NAN;
+    CHECK_NEAR(kpcn_patch_flat_fraction(r, g, b, 4, 0, 0, 4, 0.05, 0.01), 0.0, 1e-12);
+  }
 }
 
 static void test_select_culls_flat(void) {

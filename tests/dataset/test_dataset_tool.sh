@@ -320,6 +320,40 @@ ok '[ $rc -eq 1 ] && grep -q "is not the render of job .*earlier plan (plan --fo
 rc=$?
 ok '[ $rc -eq 1 ] && [ ! -e "$T/mf.kps" ] && grep -q "is not the render of job" "$T/err"' \
   "patches: renders of an earlier plan (rc $rc: $(cat "$T/err"))"
+# session 63: a re-plan whose variant scene files would change (an edited base scene, other
+# perturbation strengths) kept the renders, and `run` took them as done (a render is matched to
+# its job by size, spp and seed only). Without --force it is refused naming the file; with it,
+# that variant's renders are removed and rendered again, the other variants' kept.
+rm -rf "$T/cs" "$T/csd" && mkdir -p "$T/cs/a" && cp "$TD/scenes/cornell-box/scene.json" "$T/cs/a/"
+"$DS" plan --scenes "$T/cs" --variants 1 --seed 3 --spp 2 --ref-spp 8 --no-preview -o "$T/csd" > /dev/null &&
+  "$DS" run "$T/csd" --renderer "$FAKE" > /dev/null 2>&1
+ok '[ -f "$T/csd/renders/a/v001_2spp.exr" ] && [ -f "$T/csd/renders/a/v000_2spp.exr" ]' "re-plan: first renders"
+cp "$T/csd/renders/a/v000_2spp.exr" "$T/csd.v0"
+"$DS" plan --scenes "$T/cs" --variants 1 --seed 3 --spp 2 --ref-spp 8 --no-preview --camera 3 \
+  -o "$T/csd" --force > "$T/out" 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 0 ] && grep -q "a/v001.s scene changed: 2 render file(s) removed" "$T/out" &&
+  [ ! -e "$T/csd/renders/a/v001_2spp.exr" ] && [ ! -e "$T/csd/renders/a/v001_ref8spp.exr" ] &&
+  cmp -s "$T/csd.v0" "$T/csd/renders/a/v000_2spp.exr"' \
+  "re-plan --force with other strengths: the changed variant's renders removed, v000's kept (rc $rc: $(cat "$T/out" "$T/err"))"
+"$DS" run "$T/csd" --renderer "$FAKE" > "$T/out" 2>&1
+ok '[ -f "$T/csd/renders/a/v001_2spp.exr" ]' "re-plan: the removed variant rendered again ($(cat "$T/out"))"
+sed 's/"fov": *\([0-9.]*\)/"fov": 31.5/' "$TD/scenes/cornell-box/scene.json" > "$T/cs/a/scene.json"
+cp -r "$T/csd" "$T/csd.keep"
+"$DS" plan --scenes "$T/cs" --variants 1 --seed 3 --spp 2 --ref-spp 8 --no-preview --camera 3 \
+  -o "$T/csd" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && grep -q "csd/scenes/a/v000.json. would change (the base scene .*--force" "$T/err" &&
+  diff -r "$T/csd.keep" "$T/csd" > /dev/null' \
+  "re-plan after the base scene was edited: refused, nothing changed (rc $rc: $(cat "$T/err"))"
+# a render damaged after it was written (cut short): `run` takes it as done (its header
+# matches), so `patches` names it and says how to make it again
+f=$T/csd/renders/a/v001_2spp.exr
+head -c $(($(wc -c < "$f") - 200)) "$f" > "$T/cut.exr" && mv "$T/cut.exr" "$f"
+"$DS" patches "$T/csd" --size 8 --per-image 5 -o "$T/cs.kps" > /dev/null 2> "$T/err"
+rc=$?
+ok '[ $rc -eq 1 ] && [ ! -e "$T/cs.kps" ] && grep -q "truncated or corrupt.*remove .*v001_2spp.exr. and run .kpcn-dataset run. again" "$T/err"' \
+  "patches: a render cut short is named with the remedy (rc $rc: $(cat "$T/err"))"
 for order in "--per-image 5 --stride 4" "--stride 4 --per-image 5"; do
   # shellcheck disable=SC2086 # two options
   "$DS" patches "$T/r" --size 8 $order -o "$T/r/both.kps" 2> "$T/err"

@@ -161,6 +161,43 @@ static void write_bytes(const char *path, const unsigned char *d, size_t n) {
   fclose(f);
 }
 
+static void put64le(unsigned char *o, uint64_t v) {
+  for (int i = 0; i < 8; i++)
+    o[i] = (unsigned char)(v >> (8 * i));
+}
+
+/* A header whose fields are each consistent but whose metadata offset + length wraps past
+ * 2^64 to exactly the file size: both the "truncated" and the "trailing bytes" checks passed
+ * on the sum, and the metadata was then read from before the mapping (a crash). */
+static void wrapping_header(void) {
+  enum { SIZE = 8192 };
+  unsigned char *d = calloc(SIZE, 1);
+  if (!d) {
+    CHECK(0);
+    return;
+  }
+  FILE *f = fopen(kt_tmpfile("rt32.kps"), "rb"); /* its magic (written by round_trip) */
+  CHECK(f && fread(d, 1, 8, f) == 8);
+  if (f) fclose(f);
+  d[8] = 1;                /* version */
+  d[12] = KPCN_DTYPE_F16;  /* dtype */
+  d[16] = 1, d[20] = 1;    /* patch size 1, one channel: 2 bytes a patch */
+  const uint64_t rec = 2 + 32, count = (UINT64_MAX - KPCN_PATCHSTORE_DATA_OFFSET) / rec;
+  const uint64_t index_offset = KPCN_PATCHSTORE_DATA_OFFSET + count * 2;
+  const uint64_t meta_offset = index_offset + count * 32;
+  put64le(d + 24, count);
+  put64le(d + 32, 2);
+  put64le(d + 40, index_offset);
+  put64le(d + 48, meta_offset);
+  put64le(d + 56, (uint64_t)SIZE - meta_offset); /* meta_offset + this wraps to SIZE */
+  const char *p = kt_tmpfile("wrap.kps");
+  write_bytes(p, d, SIZE);
+  kpcn_patchstore *ps = NULL;
+  CHECK(kpcn_patchstore_open(&ps, p, NULL, 0) == KPCN_ERR_FORMAT && !ps);
+  CHECK(strstr(kpcn_last_error(), "truncated") != NULL);
+  free(d);
+}
+
 static void malformed(void) {
   const char *good = kt_tmpfile("rt32.kps"); /* written by round_trip */
   FILE *f = fopen(good, "rb");
@@ -241,6 +278,7 @@ static void malformed(void) {
   /* missing file */
   CHECK(kpcn_patchstore_open(&ps, kt_tmpfile("nonexistent.kps"), NULL, 0) == KPCN_ERR_IO);
   free(d);
+  wrapping_header();
 }
 
 static void writer_errors(void) {

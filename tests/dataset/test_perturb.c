@@ -549,7 +549,49 @@ static void test_render_swapped(void) {
   }
 }
 
+/* Lights: a number or [r,g,b] emission is scaled and the summary gives the factor; a textured
+ * emission (bitmap, checker, constant object) keeps its value and the summary says so (it
+ * claimed a factor it had not applied). A constant-object albedo is recoloured like an
+ * [r,g,b] one (its "value" was left as it was). */
+static void test_lights_and_constants(void) {
+  const char *base =
+      "{\"bsdfs\":[{\"name\":\"w\",\"type\":\"lambert\",\"albedo\":{\"type\":\"constant\","
+      "\"value\":[0.6,0.2,0.1]}},{\"name\":\"light\",\"type\":\"null\"}],"
+      "\"primitives\":[{\"type\":\"quad\",\"bsdf\":\"light\",\"emission\":[2,2,2]},"
+      "{\"type\":\"disk\",\"bsdf\":\"light\",\"emission\":{\"type\":\"checker\","
+      "\"on_color\":[3,3,3],\"off_color\":[0.3,0.3,0.3]}},"
+      "{\"type\":\"quad\",\"bsdf\":\"light\",\"emission\":{\"type\":\"bitmap\","
+      "\"file\":\"e.png\"}}]}";
+  kpcn_perturb_settings s = {0, 0, 1, 0, 1, 0, 0, NULL, 0}; /* material and light only */
+  char *out = NULL, sm[512];
+  CHECK(kpcn_perturb_scene(&out, base, 7, 1, &s, sm, sizeof sm) == KPCN_OK);
+  cJSON *o = cJSON_Parse(out), *b = cJSON_Parse(base);
+  const cJSON *op = cJSON_GetObjectItemCaseSensitive(o, "primitives");
+  const cJSON *bp = cJSON_GetObjectItemCaseSensitive(b, "primitives");
+  const cJSON *e0 = cJSON_GetObjectItemCaseSensitive(cJSON_GetArrayItem(op, 0), "emission");
+  CHECK(cJSON_GetArrayItem(e0, 0)->valuedouble != 2.0); /* scaled */
+  for (int i = 1; i < 3; i++)                            /* textured: as they were */
+    CHECK(cJSON_Compare(cJSON_GetObjectItemCaseSensitive(cJSON_GetArrayItem(op, i), "emission"),
+                        cJSON_GetObjectItemCaseSensitive(cJSON_GetArrayItem(bp, i), "emission"),
+                        1));
+  char want[64];
+  snprintf(want, sizeof want, "light(x%.2f", cJSON_GetArrayItem(e0, 0)->valuedouble / 2.0);
+  CHECK(strstr(sm, want) != NULL);
+  const char *t = strstr(sm, "light(textured, not scaled");
+  CHECK(t != NULL && strstr(t + 1, "light(textured, not scaled") != NULL);
+  const cJSON *val = cJSON_GetObjectItemCaseSensitive(
+      cJSON_GetObjectItemCaseSensitive(cJSON_GetArrayItem(cJSON_GetObjectItemCaseSensitive(o, "bsdfs"), 0),
+                                       "albedo"),
+      "value");
+  CHECK(cJSON_IsArray(val) && cJSON_GetArrayItem(val, 0)->valuedouble != 0.6);
+  if (!t) printf("summary: %s\n", sm);
+  cJSON_Delete(o);
+  cJSON_Delete(b);
+  free(out);
+}
+
 int main(void) {
+  test_lights_and_constants();
   test_scene(KPCN_TESTDATA "/scenes/cornell-box/scene.json");
   test_scene(KPCN_TESTDATA "/scenes/materialtest/materialtest.json");
   char *o = NULL;
