@@ -313,6 +313,7 @@ b_train() {
   --widen) CMD+=(--init "$WD/m0.safetensors") ;;
   --ssim-window) CMD+=(--loss ssim) ;;
   --source-lr-scale) CMD+=(--source-weight) ;;
+  --val-every) CMD+=(--val "$NOISY,$REF") ;; # without validation images it has no effect
   esac
   CMD+=("$o" "$2")
 }

@@ -179,9 +179,9 @@ static void wrapping_header(void) {
   FILE *f = fopen(kt_tmpfile("rt32.kps"), "rb"); /* its magic (written by round_trip) */
   CHECK(f && fread(d, 1, 8, f) == 8);
   if (f) fclose(f);
-  d[8] = 1;                /* version */
-  d[12] = KPCN_DTYPE_F16;  /* dtype */
-  d[16] = 1, d[20] = 1;    /* patch size 1, one channel: 2 bytes a patch */
+  d[8] = 1;               /* version */
+  d[12] = KPCN_DTYPE_F16; /* dtype */
+  d[16] = 1, d[20] = 1;   /* patch size 1, one channel: 2 bytes a patch */
   const uint64_t rec = 2 + 32, count = (UINT64_MAX - KPCN_PATCHSTORE_DATA_OFFSET) / rec;
   const uint64_t index_offset = KPCN_PATCHSTORE_DATA_OFFSET + count * 2;
   const uint64_t meta_offset = index_offset + count * 32;

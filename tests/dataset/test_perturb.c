@@ -570,7 +570,7 @@ static void test_lights_and_constants(void) {
   const cJSON *bp = cJSON_GetObjectItemCaseSensitive(b, "primitives");
   const cJSON *e0 = cJSON_GetObjectItemCaseSensitive(cJSON_GetArrayItem(op, 0), "emission");
   CHECK(cJSON_GetArrayItem(e0, 0)->valuedouble != 2.0); /* scaled */
-  for (int i = 1; i < 3; i++)                            /* textured: as they were */
+  for (int i = 1; i < 3; i++)                           /* textured: as they were */
     CHECK(cJSON_Compare(cJSON_GetObjectItemCaseSensitive(cJSON_GetArrayItem(op, i), "emission"),
                         cJSON_GetObjectItemCaseSensitive(cJSON_GetArrayItem(bp, i), "emission"),
                         1));
@@ -580,8 +580,8 @@ static void test_lights_and_constants(void) {
   const char *t = strstr(sm, "light(textured, not scaled");
   CHECK(t != NULL && strstr(t + 1, "light(textured, not scaled") != NULL);
   const cJSON *val = cJSON_GetObjectItemCaseSensitive(
-      cJSON_GetObjectItemCaseSensitive(cJSON_GetArrayItem(cJSON_GetObjectItemCaseSensitive(o, "bsdfs"), 0),
-                                       "albedo"),
+      cJSON_GetObjectItemCaseSensitive(
+          cJSON_GetArrayItem(cJSON_GetObjectItemCaseSensitive(o, "bsdfs"), 0), "albedo"),
       "value");
   CHECK(cJSON_IsArray(val) && cJSON_GetArrayItem(val, 0)->valuedouble != 0.6);
   if (!t) printf("summary: %s\n", sm);

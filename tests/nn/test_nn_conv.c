@@ -571,6 +571,67 @@ static void bf16_training(void) {
   bf16_training_cfg(&deep, 0.15);
 }
 
+/* A training net with input_grad whose input planes lie input_plane_stride apart writes
+ * dinput dense, [N][n_inputs][H][W], as documented (it once wrote it at the input's stride,
+ * past the end of a dense buffer): nothing after the dense floats changes, and they equal the
+ * dinput of a net reading the same input dense. */
+static void dinput_dense_with_stride(void) {
+  kpcn_arch a;
+  kpcn_model *m = preset_model("tiny", 3, 5, &a);
+  if (!m) return;
+  unsigned rs = 4242u;
+  randomize_bias(m, &rs);
+  const int N = 2, H = 8, W = 8, K2 = a.kernel_size * a.kernel_size;
+  const size_t hw = (size_t)H * W, ps = kpcn_plane_stride(hw), guard = 1024;
+  const size_t nin = (size_t)N * a.n_inputs * hw, nout = (size_t)N * K2 * hw;
+  CHECK(ps > hw); /* 64 pixels: 80 floats apart */
+  float *in = malloc(nin * 4), *sin = malloc((size_t)N * a.n_inputs * ps * 4);
+  float *dl = malloc(nout * 4), *lg = malloc(nout * 4), *lgs = malloc(nout * 4);
+  float *dref = malloc(nin * 4), *din = malloc((nin + guard) * 4);
+  fill(in, nin, &rs, 1.f);
+  fill(dl, nout, &rs, 1.f);
+  for (size_t i = 0; i < (size_t)N * a.n_inputs * ps; i++)
+    sin[i] = 1e30f; /* the padding between planes, never read */
+  for (size_t q = 0; q < (size_t)N * a.n_inputs; q++)
+    memcpy(sin + q * ps, in + q * hw, hw * 4);
+  const float sentinel = -12345.f;
+  for (size_t i = 0; i < nin + guard; i++)
+    din[i] = sentinel;
+  kpcn_net_options o;
+  kpcn_net_options_defaults(&o);
+  o.batch = N, o.height = H, o.width = W, o.training = 1, o.input_grad = 1;
+  kpcn_net *dense = NULL, *strided = NULL;
+  CHECK(kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &dense) == KPCN_OK);
+  o.input_plane_stride = ps;
+  CHECK(kpcn_net_create(m, KPCN_BRANCH_DIFFUSE, &o, &strided) == KPCN_OK);
+  if (dense && strided) {
+    CHECK(kpcn_net_forward(dense, in, lg) == KPCN_OK);
+    CHECK(kpcn_net_backward(dense, dl, dref) == KPCN_OK);
+    CHECK(kpcn_net_forward(strided, sin, lgs) == KPCN_OK);
+    CHECK(memcmp(lg, lgs, nout * 4) == 0);
+    CHECK(kpcn_net_backward(strided, dl, din) == KPCN_OK);
+    size_t touched = 0, differ = 0;
+    for (size_t i = 0; i < guard; i++)
+      touched += memcmp(&din[nin + i], &sentinel, 4) != 0;
+    for (size_t i = 0; i < nin; i++)
+      differ += memcmp(&din[i], &dref[i], 4) != 0;
+    printf("dinput with input plane stride %zu (planes of %zu): %zu of %zu floats after the "
+           "dense dinput written, %zu of %zu dinput values differ from the dense net's\n",
+           ps, hw, touched, guard, differ, nin);
+    if (touched || differ)
+      fprintf(stderr,
+              "kpcn_net_backward with input_plane_stride %zu: dinput not dense "
+              "[N][n_inputs][H][W] (%zu floats written past it, %zu values differ)\n",
+              ps, touched, differ);
+    CHECK(touched == 0);
+    CHECK(differ == 0);
+  }
+  kpcn_net_destroy(dense);
+  kpcn_net_destroy(strided);
+  kpcn_model_destroy(m);
+  free(in), free(sin), free(dl), free(lg), free(lgs), free(dref), free(din);
+}
+
 /* The presets must run on optimized oneDNN kernels in every mode we use (a layout mix-up once
  * sent a dilated layer to oneDNN's reference kernel, 100x slower). Creation only. */
 static void presets_fast(void) {
@@ -747,6 +808,7 @@ static void widen(void) {
 
 int main(void) {
   presets_fast();
+  dinput_dense_with_stride();
   inference_layouts();
   winograd_scratch_bounded();
   widen();

@@ -402,6 +402,68 @@ static void passes_check(int K, int passes, int sw, int n, int nc, int h, int w)
   free(scr), free(dlb), free(scr2), free(swv), free(lgb), free(outb);
 }
 
+/* s must be KPCN_ERR_INVALID_ARGUMENT; otherwise says which call (what) returned what. */
+static void expect_invalid(kpcn_status s, const char *what) {
+  if (s != KPCN_ERR_INVALID_ARGUMENT)
+    fprintf(stderr, "%s: %s, expected invalid argument\n", what, kpcn_status_string(s));
+  CHECK(s == KPCN_ERR_INVALID_ARGUMENT);
+}
+
+/* The source-weighted layer and the pass chain refuse a bad logits layout before they index
+ * through it: block 0 (score_at divides by it: SIGFPE before they checked), pixel stride 0, a
+ * pixel stride that makes a pixel's score channel its neighbour's first logit, and (backward,
+ * two passes, where the scratch layout reads its image stride) a NULL layout. */
+static void layout_argument_checks(void) {
+  const int K = 3, K2 = K * K, n = 1, nc = 3, h = 4, w = 4;
+  const size_t pl = (size_t)h * w;
+  const kpcn_logits_layout planar = kpcn_logits_layout_planar(K2 + 1, h, w);
+  const size_t nbuf = 4 * (size_t)n * (nc + 1) * (K2 + 2) * pl +
+                      kpcn_kpa_passes_mid_floats(2, 1, n, nc, h, w) +
+                      kpcn_kpa_passes_scratch_floats(2, 1, n, nc, h, w, &planar);
+  float *lg = calloc(nbuf, 4), *nz = calloc(nbuf, 4), *mid = calloc(nbuf, 4);
+  float *src1 = calloc(nbuf, 4), *acc1 = calloc(nbuf, 4), *out = calloc(nbuf, 4);
+  float *wt = calloc(nbuf, 4), *dl = calloc(nbuf, 4), *scr = calloc(nbuf, 4);
+  kpcn_logits_layout bad[3] = {planar, planar, planar};
+  const char *what[3] = {"block 0", "pixel stride 0", "pixel stride K2 < K2 + 1 logits"};
+  bad[0].block = 0;
+  bad[1].pixel_stride = 0;
+  bad[2].block = K2 + 1, bad[2].pixel_stride = K2; /* pixel-major, a channel short */
+  bad[2].block_stride = pl * (size_t)(K2 + 1), bad[2].image_stride = bad[2].block_stride;
+  char call[160];
+  for (int v = 0; v < 3; v++) {
+    /* printed first: before the checks a bad layout could crash the calls below */
+    printf("kpa layout check: source weight, %s\n", what[v]);
+    fflush(stdout);
+    snprintf(call, sizeof call, "kpcn_kpa_forward_weighted, layout %s", what[v]);
+    expect_invalid(
+        kpcn_kpa_forward_weighted(K, n, nc, h, w, lg, &bad[v], nz, src1, acc1, out, NULL, 1), call);
+    for (int passes = 1; passes <= 2; passes++) {
+      snprintf(call, sizeof call, "kpcn_kpa_forward_passes (%d passes), layout %s", passes,
+               what[v]);
+      expect_invalid(
+          kpcn_kpa_forward_passes(K, passes, 1, n, nc, h, w, lg, &bad[v], nz, mid, out, wt, 1),
+          call);
+      snprintf(call, sizeof call, "kpcn_kpa_backward_passes (%d passes), layout %s", passes,
+               what[v]);
+      expect_invalid(kpcn_kpa_backward_passes(K, passes, 1, n, nc, h, w, wt, nz, mid, out, dl,
+                                              &bad[v], scr, 1),
+                     call);
+    }
+  }
+  /* the valid layout passes the same checks (a forward of zero logits, then its backward) */
+  CHECK(kpcn_kpa_forward_passes(K, 2, 1, n, nc, h, w, lg, &planar, nz, mid, out, wt, 1) == KPCN_OK);
+  CHECK(kpcn_kpa_backward_passes(K, 2, 1, n, nc, h, w, wt, nz, mid, out, dl, &planar, scr, 1) ==
+        KPCN_OK);
+  printf("kpa layout check: NULL layout\n");
+  fflush(stdout);
+  expect_invalid(kpcn_kpa_backward_passes(K, 2, 0, n, nc, h, w, wt, nz, mid, out, dl, NULL, scr, 1),
+                 "kpcn_kpa_backward_passes (2 passes), NULL layout");
+  const size_t sf = kpcn_kpa_passes_scratch_floats(2, 1, n, nc, h, w, NULL);
+  if (sf != 0) fprintf(stderr, "kpcn_kpa_passes_scratch_floats(NULL layout) = %zu, not 0\n", sf);
+  CHECK(sf == 0);
+  free(lg), free(nz), free(mid), free(src1), free(acc1), free(out), free(wt), free(dl), free(scr);
+}
+
 int main(void) {
   forward_vs_naive(3, 1, 3, 5, 4, 2.f);
   forward_vs_naive(5, 2, 3, 9, 13, 4.f);
@@ -422,6 +484,7 @@ int main(void) {
   passes_check(3, 1, 1, 2, 3, 6, 5);   /* source weights: one pass, two images */
   passes_check(5, 2, 1, 1, 3, 7, 9);   /* source weights, then a plain second pass */
   passes_check(11, 2, 1, 2, 3, 9, 13); /* the cpu preset's K: score in a 16-block's padding */
+  layout_argument_checks();
   float x = 0;
   CHECK(kpcn_kpa_forward(4, 1, 3, 4, 4, &x, &x, &x, NULL, 1) == KPCN_ERR_INVALID_ARGUMENT);
   CHECK(kpcn_kpa_forward(3, 1, 3, 0, 4, &x, &x, &x, NULL, 1) != KPCN_OK);

@@ -8,6 +8,7 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 typedef struct blob {
   unsigned char *p;
@@ -63,6 +64,17 @@ static void expect_reject(const char *what, const char *path, const char *needle
   CHECK(s == KPCN_ERR_FORMAT);
   CHECK(m == NULL);
   CHECK(named);
+}
+
+/* Loads `path`, expects a model. */
+static void expect_load(const char *what, const char *path) {
+  kpcn_model *m = NULL;
+  kpcn_status s = kpcn_model_load(path, &m);
+  printf("%-28s -> %s%s%s\n", what, kpcn_status_string(s), s == KPCN_OK ? "" : ": ",
+         s == KPCN_OK ? "" : kpcn_last_error());
+  CHECK(s == KPCN_OK);
+  CHECK(m != NULL);
+  kpcn_model_destroy(m);
 }
 
 typedef void (*mutate_fn)(cJSON *h);
@@ -178,20 +190,73 @@ static void m_meta_number(cJSON *h) {
  * must say so before it allocates the 78 MB such a model would take. */
 static void m_huge_arch(cJSON *h) { set_arch_channels(h, 1024); }
 
-static void mutated(const blob *good, const char *what, mutate_fn fn, const char *needle) {
+/* A key given twice in __metadata__ (cJSON finds the first copy, the user entries would keep
+ * the last): refused, with the same value as much as with another. */
+static void m_dup_format(cJSON *h) {
+  cJSON_AddStringToObject(cJSON_GetObjectItem(h, "__metadata__"), "kpcn.format", "kpcn-model-1");
+}
+static void m_dup_user(cJSON *h) {
+  cJSON_AddStringToObject(cJSON_GetObjectItem(h, "__metadata__"), "train.iterations", "9");
+}
+/* a second __metadata__ object (the loader reads the first; the second would be ignored) */
+static void m_dup_meta(cJSON *h) {
+  cJSON_AddItemToObject(h, "__metadata__",
+                        cJSON_Duplicate(cJSON_GetObjectItem(h, "__metadata__"), 1));
+}
+/* replaces metadata string `key` with its value followed by `tail` */
+static void meta_append(cJSON *h, const char *key, const char *tail) {
+  cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
+  const char *v = cJSON_GetObjectItem(meta, key)->valuestring;
+  char *nv = malloc(strlen(v) + strlen(tail) + 1);
+  strcpy(nv, v);
+  strcat(nv, tail);
+  cJSON_ReplaceItemInObject(meta, key, cJSON_CreateString(nv));
+  free(nv);
+}
+static void m_arch_trailing(cJSON *h) { meta_append(h, "kpcn.architecture", " {\"x\":1}"); }
+static void m_inputs_trailing(cJSON *h) { meta_append(h, "kpcn.inputs", "]"); }
+static void m_meta_empty_key(cJSON *h) {
+  cJSON_AddStringToObject(cJSON_GetObjectItem(h, "__metadata__"), "", "x");
+}
+/* 1e-60 is > 0 as a double but 0 as a float: "not recorded" if it were stored */
+static void m_exp_tiny(cJSON *h) { arch_set_raw(h, "exposure", "1e-60"); }
+static void m_exp_huge(cJSON *h) { arch_set_raw(h, "exposure", "1e31"); }
+/* user metadata entries added until __metadata__ holds meta_fill_to entries */
+static int meta_fill_to;
+static void m_meta_fill(cJSON *h) {
+  cJSON *meta = cJSON_GetObjectItem(h, "__metadata__");
+  char key[32];
+  for (int i = cJSON_GetArraySize(meta); i < meta_fill_to; i++) {
+    snprintf(key, sizeof key, "user.k%d", i);
+    cJSON_AddStringToObject(meta, key, "v");
+  }
+}
+
+/* Writes good's file with its header passed through fn (when not NULL) and `after` appended
+ * to the header JSON (the declared length counts it); returns the path. */
+static const char *write_mutated(const blob *good, mutate_fn fn, const char *after) {
   uint64_t hl = hlen(good);
   char *txt = malloc(hl + 1);
   memcpy(txt, good->p + 8, hl);
   txt[hl] = 0;
   cJSON *h = cJSON_Parse(txt);
   free(txt);
-  fn(h);
+  if (fn) fn(h);
   char *js = cJSON_PrintUnformatted(h);
   cJSON_Delete(h);
-  const char *path = kt_tmpfile("mut.safetensors");
-  write_st(path, strlen(js), js, good->p + 8 + hl, good->n - 8 - hl);
+  const size_t jl = strlen(js), al = strlen(after);
+  char *full = malloc(jl + al + 1);
+  memcpy(full, js, jl);
+  memcpy(full + jl, after, al + 1);
   free(js);
-  expect_reject(what, path, needle);
+  const char *path = kt_tmpfile("mut.safetensors");
+  write_st(path, jl + al, full, good->p + 8 + hl, good->n - 8 - hl);
+  free(full);
+  return path;
+}
+
+static void mutated(const blob *good, const char *what, mutate_fn fn, const char *needle) {
+  expect_reject(what, write_mutated(good, fn, ""), needle);
 }
 
 static kpcn_model *tiny_model(uint64_t seed) {
@@ -290,6 +355,19 @@ static void test_arch(void) {
   CHECK(kpcn_arch_receptive_radius(&a) == 12);
   CHECK(kpcn_arch_from_json("{}", &a) == KPCN_ERR_FORMAT);
   CHECK(kpcn_arch_from_json("nope", &a) == KPCN_ERR_FORMAT);
+  /* no architecture, no description; a branch out of range has no tensor name (the names
+   * table has two entries: before the check it was read past its end) */
+  CHECK(kpcn_arch_to_json(NULL) == NULL);
+  char tn[64];
+  kpcn_model_tensor_name(tn, sizeof tn, KPCN_BRANCH_SPECULAR, 2, 1);
+  CHECK(!strcmp(tn, "specular.conv2.bias"));
+  const int bad_branch[2] = {5, -1};
+  for (int i = 0; i < 2; i++) {
+    strcpy(tn, "unchanged");
+    kpcn_model_tensor_name(tn, sizeof tn, (kpcn_branch)bad_branch[i], 0, 0);
+    if (tn[0]) fprintf(stderr, "tensor name of branch %d: '%s', expected ''\n", bad_branch[i], tn);
+    CHECK(tn[0] == 0);
+  }
 }
 
 static void test_init(void) {
@@ -483,6 +561,33 @@ static void test_malformed(const blob *good) {
   mutated(good, "no __metadata__", m_nometa, "__metadata__");
   mutated(good, "unknown format version", m_format, "kpcn.format");
   mutated(good, "non-string metadata", m_meta_number, "user");
+  mutated(good, "kpcn.format twice", m_dup_format, "key 'kpcn.format' appears twice");
+  mutated(good, "user metadata key twice", m_dup_user, "key 'train.iterations' appears twice");
+  mutated(good, "__metadata__ twice", m_dup_meta, "__metadata__ appears twice");
+  mutated(good, "arch with text after it", m_arch_trailing, "kpcn.architecture");
+  mutated(good, "inputs with text after them", m_inputs_trailing, "kpcn.inputs");
+  mutated(good, "empty metadata key", m_meta_empty_key, "empty key");
+  mutated(good, "arch exposure 1e-60", m_exp_tiny, "exposure");
+  mutated(good, "arch exposure 1e31", m_exp_huge, "exposure");
+  /* the header JSON is followed by the padding to 8 bytes (spaces) and nothing else */
+  expect_load("header + 13 spaces", write_mutated(good, NULL, "             "));
+  expect_reject("text after the header", write_mutated(good, NULL, "  x     "), "text follows it");
+  expect_reject("object after the header", write_mutated(good, NULL, "{}"), "text follows it");
+  /* at most 4096 __metadata__ entries (kpcn.* and user ones together); a header of very many
+   * is refused at once, not after storing each (each searched among the earlier ones) */
+  meta_fill_to = 4096;
+  expect_load("4096 metadata entries", write_mutated(good, m_meta_fill, ""));
+  meta_fill_to = 4097;
+  mutated(good, "4097 metadata entries", m_meta_fill, "more than 4096 entries");
+  meta_fill_to = 30000;
+  const char *many = write_mutated(good, m_meta_fill, "");
+  struct timespec t0, t1;
+  clock_gettime(CLOCK_MONOTONIC, &t0);
+  expect_reject("30000 metadata entries", many, "more than 4096 entries");
+  clock_gettime(CLOCK_MONOTONIC, &t1);
+  const double sec = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
+  printf("30000 metadata entries refused in %.3f s\n", sec);
+  CHECK(sec < 2.0);
   /* random byte corruption of the header: never a crash, a model only if still valid */
   unsigned rs = 2024;
   blob c = {malloc(good->n), good->n};
@@ -505,13 +610,118 @@ static void test_malformed(const blob *good) {
   free(c.p);
 }
 
+/* cJSON's allocator for test_save_oom: fails allocation number oom_fail_at (counted from 1
+ * since the last reset), every other one is malloc's. */
+static long oom_count, oom_fail_at;
+static void *oom_malloc(size_t n) {
+  if (++oom_count == oom_fail_at) return NULL;
+  return malloc(n);
+}
+
+/* kpcn_model_save with each of its cJSON allocations failing in turn (the last run has none
+ * fail): it never reports success for a file that does not load, and a refused save leaves the
+ * model already at the path as it was. The model writes every optional field (two passes, a
+ * source weight, an exposure, user metadata). */
+static void test_save_oom(void) {
+  kpcn_model *m0 = tiny_model(21), *m = NULL;
+  CHECK(kpcn_model_set_kpa_passes(m0, 2) == KPCN_OK);
+  CHECK(kpcn_model_set_exposure(m0, 0.25f) == KPCN_OK);
+  CHECK(kpcn_model_add_source_weight(m0, &m) == KPCN_OK);
+  kpcn_model_destroy(m0);
+  if (!m) return;
+  CHECK(kpcn_model_set_meta(m, "train.iterations", "77") == KPCN_OK);
+  CHECK(kpcn_model_set_meta(m, "train.dataset", "store.kpcnp") == KPCN_OK);
+  /* another model already at the path */
+  const char *path = kt_tmpfile("oom.safetensors");
+  kpcn_model *other = tiny_model(22);
+  CHECK(kpcn_model_save(other, path) == KPCN_OK);
+  kpcn_model_destroy(other);
+  blob before = slurp(path);
+  CHECK(before.n > 8);
+  cJSON_Hooks hooks = {oom_malloc, free};
+  int refused = 0, saved = 0, bad = 0;
+  long n;
+  for (n = 1; n < 100000; n++) {
+    oom_count = 0, oom_fail_at = n;
+    cJSON_InitHooks(&hooks);
+    kpcn_status s = kpcn_model_save(m, path);
+    cJSON_InitHooks(NULL);
+    const int injected = oom_count >= n;
+    if (s != KPCN_OK) {
+      refused++;
+      blob now = slurp(path);
+      const int same = now.n == before.n && memcmp(now.p, before.p, now.n) == 0;
+      if (s != KPCN_ERR_OUT_OF_MEMORY || !same || !injected) {
+        fprintf(stderr, "allocation %ld failing: kpcn_model_save: %s (%s)%s\n", n,
+                kpcn_status_string(s), kpcn_last_error(),
+                same ? "" : ", and the model at the path changed");
+        bad++;
+      }
+      CHECK(s == KPCN_ERR_OUT_OF_MEMORY);
+      CHECK(same);
+      free(now.p);
+      continue;
+    }
+    saved += injected;
+    kpcn_model *r = NULL;
+    s = kpcn_model_load(path, &r);
+    if (s != KPCN_OK) {
+      fprintf(stderr,
+              "allocation %ld failing: kpcn_model_save said OK, the file does not load: %s\n", n,
+              kpcn_last_error());
+      bad++;
+    }
+    CHECK(s == KPCN_OK);
+    if (r) {
+      CHECK(memcmp(kpcn_model_arch(r), kpcn_model_arch(m), sizeof(kpcn_arch)) == 0);
+      CHECK(kpcn_model_get_meta(r, "train.dataset") &&
+            !strcmp(kpcn_model_get_meta(r, "train.dataset"), "store.kpcnp"));
+      kpcn_model_destroy(r);
+    }
+    if (!injected) break; /* every allocation the save makes has been failed once */
+    spit(path, before.p, before.n);
+  }
+  printf("save with cJSON allocation k of %ld failing: %d refused, %d saved (and loaded), %d bad\n",
+         n - 1, refused, saved, bad);
+  CHECK(n < 100000);
+  CHECK(refused > 0);
+  free(before.p);
+  kpcn_model_destroy(m);
+}
+
+/* A model takes at most the user entries a model file can be loaded with (4096 less the six
+ * kpcn.* keys): a model of more was saved with KPCN_OK and then refused by the loader. */
+static void test_meta_cap(void) {
+  kpcn_model *m = tiny_model(3);
+  if (!m) return;
+  char k[32];
+  int ok = 1;
+  for (int i = 0; i < 4090 && ok; i++) {
+    snprintf(k, sizeof k, "u%d", i);
+    ok = kpcn_model_set_meta(m, k, "v") == KPCN_OK;
+  }
+  CHECK(ok);
+  CHECK(kpcn_model_set_meta(m, "one.more", "v") == KPCN_ERR_INVALID_ARGUMENT);
+  CHECK(strstr(kpcn_last_error(), "4090 user entries") != NULL);
+  CHECK(kpcn_model_set_meta(m, "u7", "updated") == KPCN_OK); /* an existing key still changes */
+  const char *path = kt_tmpfile("meta_cap.safetensors");
+  CHECK(kpcn_model_save(m, path) == KPCN_OK);
+  kpcn_model *r = NULL;
+  CHECK(kpcn_model_load(path, &r) == KPCN_OK);
+  CHECK(r && kpcn_model_get_meta(r, "u7") && !strcmp(kpcn_model_get_meta(r, "u7"), "updated"));
+  kpcn_model_destroy(r);
+  kpcn_model_destroy(m);
+}
+
 int main(void) {
   test_arch();
+  test_meta_cap();
   test_init();
   blob good = {0, 0};
   test_roundtrip(&good);
   if (good.p) test_memory(&good);
   if (good.p) test_malformed(&good);
+  test_save_oom();
   free(good.p);
   return kt_summary("test_nn_model");
 }

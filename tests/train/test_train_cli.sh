@@ -5,7 +5,9 @@
 # --graft: one branch from another model, mismatches named. --freeze: usage and provenance.
 # --firefly: bad ratios named. --time-limit: exit 0, model and checkpoint, bit-exact resume.
 # A periodic checkpoint that cannot be written (full disk, file-size limit): exit 1, named,
-# nothing half-written.
+# nothing half-written. --resume refuses another --source-lr-scale or store and malformed
+# checkpoint metadata, and keeps the best model's record without a CSV; a run stopped on a
+# CSV row writes no rate in its last row.
 # usage: test_train_cli.sh KPCN_TRAIN KPCNTOOL TESTDATA
 set -u
 K=$1; T=$2; TD=$3
@@ -140,6 +142,21 @@ bad_usage "needs a model to start from" --freeze specular
 bad_usage "kernel_size = 4: must be odd" --preset tiny --kernel 4
 bad_usage "conv_size[0] = 2: must be odd" --preset tiny --conv 2
 bad_usage "(widen_channels, kpcn-train --widen) needs an init model" --preset tiny --widen 16
+# options that conflict or would do nothing (session 63; they were accepted, or read the store
+# first and exited 1 on something else): --channels other than --widen's, --source-lr-scale
+# without a source weight, --val-every without validation images, --best-by without --best
+bad_usage "--channels 32 conflicts with --widen 64" --init "$M" --widen 64 --channels 32
+bad_usage "--source-lr-scale has no effect without --source-weight" --preset tiny --source-lr-scale 2
+bad_usage "--val-every has no effect without --val or --val-store" --preset tiny --val-every 5
+bad_usage "--best-by has no effect without --best" --preset tiny --best-by geomean
+# an --init model without a source weight: known once it is read (exit 1), nothing written
+"$K" --store "$D/p.kps" -o "$D/u.safetensors" --init "$D/t.safetensors" --iters 1 --batch 2 \
+  --patch 16 --source-lr-scale 2 --csv '' --plot '' --ckpt '' 2>"$D/err"
+rc=$?
+[ $rc -eq 1 ] || fail "--init without a source weight, --source-lr-scale 2: exit $rc (want 1): $(cat "$D/err")"
+grep -qF "source_lr_scale (--source-lr-scale) has no effect: model '$D/t.safetensors' predicts no source weight" "$D/err" ||
+  fail "--source-lr-scale on an --init model without a source weight unclear: $(cat "$D/err")"
+[ ! -e "$D/u.safetensors" ] || fail "output written for --source-lr-scale without a source weight"
 # an output that cannot be written is a usage mistake too (exit 2, as in the other tools)
 bad_usage "folder '$D/nodir'" --plot "$D/nodir/u.png"
 bad_usage "must end in .png" --plot "$D/u.jpg"
@@ -206,6 +223,23 @@ grep -q "validation inputs as rendered (noisy): relMSE $(printf '%.4g' "$(/usr/b
   fail "--val-store did not validate on the sample pair: $(cat "$D/log")"
 bad_usage "is the training store" --val-store "$D/p.kps"
 bad_usage "--val-from-store is replaced by --val-store" --val-from-store
+# an output that is one of --val-store's images is a usage mistake as with --val (exit 2, it
+# was 1: the store's pairs were listed after the usage check), and the image is left alone
+# (copies: a regression must not write over testdata)
+mkdir "$D/vsrc"
+cp "$N" "$D/vsrc/n.exr" && cp "$R" "$D/vsrc/r.exr" || fail "copy validation images"
+"$T" "$D/vsrc/n.exr" "$D/vsrc/r.exr" --patches:size=16:count=6:cull=1:out="$D/vsrc/v.kps" >/dev/null ||
+  fail "patches for --val-store copies"
+for img in n r; do
+  "$K" --store "$D/p.kps" -o "$D/y.safetensors" --preset tiny --iters 2 --batch 2 --patch 16 \
+    --plot '' --val-store "$D/vsrc/v.kps" --csv "$D/vsrc/$img.exr" 2>"$D/err"
+  rc=$?
+  [ $rc -eq 2 ] || fail "--csv over --val-store's $img.exr: exit $rc (want 2): $(cat "$D/err")"
+  grep -qF "the CSV log (--csv) '$D/vsrc/$img.exr' is the same file as a --val" "$D/err" ||
+    fail "--csv over --val-store's $img.exr unclear: $(cat "$D/err")"
+  [ -z "$(ls "$D" | grep -E '^y\.')" ] || fail "files left for --csv over --val-store's $img.exr: $(ls "$D")"
+done
+cmp -s "$N" "$D/vsrc/n.exr" && cmp -s "$R" "$D/vsrc/r.exr" || fail "a --val-store image was changed"
 # a training patch larger than the store's says which two options meet
 "$K" --store "$D/p.kps" -o "$D/vv.safetensors" --preset tiny --iters 1 --patch 32 2>"$D/err"
 rc=$?
@@ -440,4 +474,132 @@ for f in m.safetensors m.safetensors.ckpt m.safetensors.csv; do
   cmp -s "$D/ul0/$f" "$D/ul/$f" || fail "a failed checkpoint save changed the earlier run's $f"
 done
 ls -A "$D/ul" | cmp -s - "$D/ul.before" || fail "a failed checkpoint save left: $(ls -A "$D/ul")"
+# --- resume checks added in session 63 (one thread: determinism holds for one thread count).
+# st_set SRC DST KEY=VALUE...: a copy of a checkpoint with metadata values replaced (the
+# header rewritten, its 8-byte little-endian length set again, padded with spaces to 8 bytes;
+# tensor offsets count from the header's end, so the data stays valid)
+st_set() {
+  /usr/bin/python3 - "$@" <<'PYEOF'
+import json, struct, sys
+b = open(sys.argv[1], "rb").read()
+n = struct.unpack("<Q", b[:8])[0]
+h = json.loads(b[8:8 + n])
+for kv in sys.argv[3:]:
+    k, v = kv.split("=", 1)
+    h["__metadata__"][k] = v
+j = json.dumps(h, separators=(",", ":")).encode()
+j += b" " * (-len(j) % 8)
+open(sys.argv[2], "wb").write(struct.pack("<Q", len(j)) + j + b[8 + n:])
+PYEOF
+}
+tr1() { "$K" --store "$D/p.kps" --preset tiny --batch 2 --patch 16 --plot '' --threads 1 "$@"; }
+# (1) the source score's learning rate is part of the run: a resume with another
+# --source-lr-scale is refused naming train.source_lr_scale and the option, the checkpoint kept;
+# the same one resumes
+tr1 --source-weight --source-lr-scale 2 --iters 4 --csv '' -o "$D/sl.safetensors" 2>"$D/log" ||
+  fail "--source-lr-scale 2: $(cat "$D/log")"
+cp "$D/sl.safetensors.ckpt" "$D/sl0.ckpt"
+tr1 --source-weight --source-lr-scale 3 --iters 8 --csv '' -o "$D/sl.safetensors" --resume 2>"$D/err"
+rc=$?
+[ $rc -eq 1 ] || fail "resume with another --source-lr-scale: exit $rc (want 1): $(cat "$D/err")"
+grep -qF "train.source_lr_scale = 2, this run uses 3 (--source-lr-scale)" "$D/err" ||
+  fail "--source-lr-scale mismatch unclear: $(cat "$D/err")"
+cmp -s "$D/sl0.ckpt" "$D/sl.safetensors.ckpt" || fail "a refused resume changed the checkpoint"
+tr1 --source-weight --source-lr-scale 2 --iters 8 --csv '' -o "$D/sl.safetensors" --resume 2>"$D/log" ||
+  fail "resume with the same --source-lr-scale: $(cat "$D/log")"
+# (2) the checkpoint records the best model kept (train.best_val / train.best_by), so that a
+# resume without a CSV keeps comparing against it. Stage 2 at a 10x learning rate makes every
+# validation after iteration 40 worse than the best at 40 (0.17 against 0.055 here): an
+# uninterrupted run keeps iteration 40's model; a resume from 40 must too (it wrote the
+# worse model at 50, 60, 70 when the best was taken from a CSV that --csv '' turned off)
+tb() { tr1 --stage1-iters 40 --lr2 1e-2 --val "$N,$R" --val-every 10 "$@"; }
+tb --iters 80 --csv '' -o "$D/bu.safetensors" --best "$D/bu.best" 2>"$D/log" ||
+  fail "80 iterations with --best: $(cat "$D/log")"
+grep -q "best model so far .* at iteration 40$" "$D/log" &&
+  ! grep -q "best model so far .* at iteration [5-8]0$" "$D/log" ||
+  fail "--best check set-up: the best model is not iteration 40's: $(cat "$D/log")"
+tb --iters 40 --csv '' -o "$D/br.safetensors" --best "$D/br.best" 2>"$D/log" ||
+  fail "40 iterations with --best: $(cat "$D/log")"
+[ "$(st_cmp meta "$D/br.safetensors.ckpt" train.best_by)" = mean ] &&
+  awk -v b="$(st_cmp meta "$D/br.safetensors.ckpt" train.best_val)" 'BEGIN { exit !(b + 0 > 0) }' ||
+  fail "checkpoint records no best model: train.best_val '$(st_cmp meta "$D/br.safetensors.ckpt" train.best_val)'"
+tb --iters 80 --csv '' -o "$D/br.safetensors" --best "$D/br.best" --resume 2>"$D/log" ||
+  fail "resume to 80 with --best: $(cat "$D/log")"
+! grep -q "best model so far" "$D/log" || fail "resume without a CSV replaced the best model by a worse one: $(cat "$D/log")"
+st_cmp same "$D/bu.best" "$D/br.best" || fail "resumed at 40: the best model differs from the uninterrupted run's"
+st_cmp same "$D/bu.safetensors.ckpt" "$D/br.safetensors.ckpt" ||
+  fail "resumed at 40 with --best: the checkpoint differs from the uninterrupted run's"
+# a run without --best records "none"; --best on its resume says so and keeps the best from
+# there (it compared against the CSV's best validation row and wrote no best model here)
+tb --iters 40 -o "$D/bn.safetensors" 2>"$D/log" || fail "40 iterations without --best: $(cat "$D/log")"
+[ "$(st_cmp meta "$D/bn.safetensors.ckpt" train.best_val)" = none ] ||
+  fail "no --best: train.best_val is '$(st_cmp meta "$D/bn.safetensors.ckpt" train.best_val)', not none"
+tb --iters 80 -o "$D/bn.safetensors" --best "$D/bn.best" --resume 2>"$D/log" ||
+  fail "resume with --best: $(cat "$D/log")"
+grep -qF "no best model was kept before iteration 40: '$D/bn.best' will hold the best from here on" "$D/log" ||
+  fail "resume with a new --best does not say so: $(cat "$D/log")"
+grep -qF "written to '$D/bn.best' at iteration 50" "$D/log" && [ -e "$D/bn.best" ] ||
+  fail "resume with a new --best wrote no best model at its first validation: $(cat "$D/log")"
+# a session without --best between two with it passes the record on: the third session does
+# not replace iteration 40's best model by a worse one
+tb --iters 40 --csv '' -o "$D/bp.safetensors" --best "$D/bp.best" 2>"$D/log" || fail "bp 40: $(cat "$D/log")"
+tb --iters 60 --csv '' -o "$D/bp.safetensors" --resume 2>"$D/log" || fail "bp 60: $(cat "$D/log")"
+[ "$(st_cmp meta "$D/bp.safetensors.ckpt" train.best_val)" = \
+  "$(st_cmp meta "$D/br.safetensors.ckpt" train.best_val)" ] ||
+  fail "a session without --best dropped the best record: '$(st_cmp meta "$D/bp.safetensors.ckpt" train.best_val)'"
+tb --iters 80 --csv '' -o "$D/bp.safetensors" --best "$D/bp.best" --resume 2>"$D/log" ||
+  fail "bp 80: $(cat "$D/log")"
+! grep -q "best model so far" "$D/log" && st_cmp same "$D/bu.best" "$D/bp.best" ||
+  fail "after a session without --best, the best model was replaced: $(cat "$D/log")"
+# (3) metadata out of range or malformed is refused (exit 1) naming the key, nothing written;
+# the same checkpoint with its header rewritten but no value changed resumes (the control)
+tr1 --iters 4 --csv '' -o "$D/m4.safetensors" 2>"$D/log" || fail "4 iterations: $(cat "$D/log")"
+for kv in train.iteration=4 train.iteration=-5 train.rng=zz train.elapsed_s=abc train.seed=1xyz \
+  train.adam_steps.diffuse=-1 train.adam_steps.specular=5; do
+  rm -f "$D/mr.safetensors"
+  st_set "$D/m4.safetensors.ckpt" "$D/bad.ckpt" "$kv" || fail "st_set $kv"
+  tr1 --iters 8 --csv '' -o "$D/mr.safetensors" --ckpt "$D/bad.ckpt" --resume 2>"$D/err"
+  rc=$?
+  if [ "$kv" = train.iteration=4 ]; then
+    [ $rc -eq 0 ] || fail "a checkpoint with its header rewritten as it was is refused: $(cat "$D/err")"
+    continue
+  fi
+  [ $rc -eq 1 ] || fail "checkpoint with $kv: exit $rc (want 1): $(cat "$D/err")"
+  grep -F "'${kv%%=*}'" "$D/err" | grep -Eq "malformed|out of range" ||
+    fail "checkpoint with $kv: not refused as malformed: $(cat "$D/err")"
+  [ ! -e "$D/mr.safetensors" ] || fail "a model written from a checkpoint with $kv"
+done
+# (4) another store: another patch count (the draws differ) is refused naming train.store and
+# --store; images at another exposure, naming the architecture's field that differs
+"$T" "$N" "$R" --patches:size=16:count=8:cull=1:out="$D/p8.kps" >/dev/null || fail "patches count 8"
+oiiotool "$N" --mulc 4 -o "$D/n4.exr" && oiiotool "$R" --mulc 4 -o "$D/r4.exr" || fail "scaled images"
+"$T" "$D/n4.exr" "$D/r4.exr" --patches:size=16:count=6:cull=1:out="$D/p4.kps" >/dev/null || fail "patches x4"
+cp "$D/m4.safetensors.ckpt" "$D/m40.ckpt"
+"$K" --store "$D/p8.kps" --preset tiny --batch 2 --patch 16 --plot '' --threads 1 --iters 8 --csv '' \
+  -o "$D/m4.safetensors" --resume 2>"$D/err"
+rc=$?
+[ $rc -eq 1 ] || fail "resume on a store of 8 patches: exit $rc (want 1): $(cat "$D/err")"
+grep -qF "train.store = 6 patches of 16 px, 33 channels, 1 sources, this run uses 8 patches of 16 px, 33 channels, 1 sources (--store)" "$D/err" ||
+  fail "store mismatch unclear: $(cat "$D/err")"
+"$K" --store "$D/p4.kps" --preset tiny --batch 2 --patch 16 --plot '' --threads 1 --iters 8 --csv '' \
+  -o "$D/m4.safetensors" --resume 2>"$D/err"
+rc=$?
+[ $rc -eq 1 ] || fail "resume on a store at 4x the exposure: exit $rc (want 1): $(cat "$D/err")"
+grep -q "kpcn.architecture's exposure: .* in the checkpoint, .* in this run (another --store?)" "$D/err" ||
+  fail "exposure mismatch unclear: $(cat "$D/err")"
+cmp -s "$D/m40.ckpt" "$D/m4.safetensors.ckpt" || fail "a resume on another store changed the checkpoint"
+# (5) a run stopped right on a CSV row (--log-every 1: every iteration is one) ends with a
+# validation row with no rate (an empty its_per_s cell, as the loss's: 0 was written), which
+# --compare --y its_per_s plots (it refused the 0 on its log axis)
+tr1 --iters 20000 --time-limit 0.005 --log-every 1 --val "$N,$R" -o "$D/tc.safetensors" 2>"$D/log" ||
+  fail "--time-limit with --log-every 1: $(cat "$D/log")"
+stop=$(sed -n 's/.*time limit reached at iteration \([0-9]*\): checkpointing$/\1/p' "$D/log")
+[ -n "$stop" ] && [ "$stop" -gt 0 ] && [ "$stop" -lt 20000 ] || fail "--time-limit did not stop the run: $(cat "$D/log")"
+tail -n 2 "$D/tc.safetensors.csv" | awk -F, -v s="$stop" '
+  NR == 1 && !($1 == s && $5 != "" && $7 == "") { exit 1 }
+  NR == 2 && !($1 == s && $4 == "" && $5 == "" && $7 != "") { exit 1 }' ||
+  fail "stopped at $stop: the last rows are not a log row and a validation row without a rate: $(tail -n 2 "$D/tc.safetensors.csv")"
+"$K" --compare "$D/ips.png" --y its_per_s a="$D/tc.safetensors.csv" 2>"$D/err" ||
+  fail "--compare --y its_per_s of a run stopped on a row: $(cat "$D/err")"
+[ -s "$D/ips.png" ] || fail "--compare --y its_per_s wrote no plot"
 echo "test_train_cli: ok"

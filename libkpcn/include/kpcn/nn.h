@@ -196,7 +196,9 @@ kpcn_status kpcn_model_load_memory(const void *data, size_t size, kpcn_model **o
 void kpcn_model_tensor_name(char *buf, size_t n, kpcn_branch b, int layer, int is_bias);
 
 /* Free-form user metadata stored in __metadata__ (e.g. training iteration, dataset).
- * Keys must not start with "kpcn." (reserved). get returns NULL when absent. */
+ * Keys must not start with "kpcn." (reserved). At most 4090 entries (a model file holds 4096
+ * with the kpcn.* keys); a new key beyond that is refused, updating one is not. get returns
+ * NULL when absent. */
 kpcn_status kpcn_model_set_meta(kpcn_model *m, const char *key, const char *value);
 const char *kpcn_model_get_meta(const kpcn_model *m, const char *key);
 int kpcn_model_meta_count(const kpcn_model *m);

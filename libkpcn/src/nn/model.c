@@ -273,6 +273,12 @@ kpcn_status kpcn_model_set_meta(kpcn_model *m, const char *key, const char *valu
       m->meta_val[i] = v;
       return KPCN_OK;
     }
+  /* a file with more could be saved but not loaded again */
+  if (m->n_meta >= KPCN_MODEL_MAX_META_ENTRIES - KPCN_MODEL_KPCN_KEYS)
+    return kpcn_fail(KPCN_ERR_INVALID_ARGUMENT,
+                     "kpcn_model_set_meta: the model already holds %d user entries, the most a "
+                     "model file takes",
+                     m->n_meta);
   char **k2 = realloc(m->meta_key, (size_t)(m->n_meta + 1) * sizeof *k2);
   if (!k2) return kpcn_fail(KPCN_ERR_OUT_OF_MEMORY, "out of memory for the metadata table");
   m->meta_key = k2;

@@ -15,6 +15,12 @@ struct kpcn_model {
 
 extern const char *const kpcn_nn_branch_names[KPCN_N_BRANCHES];
 
+/* A model file's __metadata__ holds at most this many entries (the loader refuses more: each
+ * is searched for among the earlier ones), KPCN_MODEL_KPCN_KEYS of them the kpcn.* keys the
+ * saver writes, so a model takes at most the difference in user entries. */
+#define KPCN_MODEL_MAX_META_ENTRIES 4096
+#define KPCN_MODEL_KPCN_KEYS 6
+
 /* Allocates a model with zeroed tensors for a validated arch (no init). */
 kpcn_status kpcn_model_alloc(const kpcn_arch *arch, kpcn_model **out);
 /* Element count of the weight tensor of layer l. */

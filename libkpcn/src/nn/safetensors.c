@@ -21,7 +21,7 @@
 
 #define KPCN_MODEL_FORMAT "kpcn-model-1"
 #define MAX_HEADER ((uint64_t)64 << 20)
-#define MAX_META_ENTRIES 4096 /* user metadata plus the kpcn.* keys */
+#define MAX_META_ENTRIES KPCN_MODEL_MAX_META_ENTRIES /* user metadata plus the kpcn.* keys */
 
 void kpcn_model_tensor_name(char *buf, size_t n, kpcn_branch b, int layer, int is_bias) {
   if ((unsigned)b >= KPCN_N_BRANCHES) { /* no name: an empty string */

@@ -144,8 +144,9 @@ kpcn_status kt_checkpoint_save(kpcn_trainer *t, const char *path) {
   for (int i = 0, ns = ck_settings(t, set); i < ns; i++)
     cJSON_AddStringToObject(meta, set[i].key, set[i].value);
   /* the best model kept so far, so that a resume keeps comparing against it (the CSV, which
-   * earlier checkpoints relied on, may be off); "none": no best model was written */
-  if (t->best_path && isfinite(t->best_val)) {
+   * earlier checkpoints relied on, may be off); "none": no best model was written. A session
+   * without --best passes on the record it resumed from. */
+  if (isfinite(t->best_val) && (t->best_path || t->ckpt_best == 1)) {
     snprintf(buf, sizeof buf, "%.17g", t->best_val);
     cJSON_AddStringToObject(meta, "train.best_val", buf);
     cJSON_AddStringToObject(meta, "train.best_by",

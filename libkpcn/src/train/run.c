@@ -326,7 +326,8 @@ kpcn_status kpcn_trainer_run(kpcn_trainer *t, int *stopped) {
       if (t->log_loss_n) fprintf(csv, "%.9g", t->log_loss_sum / (double)t->log_loss_n);
       /* no iterations since the last row: no rate (an empty cell, as the loss's) */
       fputc(',', csv);
-      if (t->iter > last_it) fprintf(csv, "%.4g", (double)(t->iter - last_it) / fmax(now - last_t, 1e-9));
+      if (t->iter > last_it)
+        fprintf(csv, "%.4g", (double)(t->iter - last_it) / fmax(now - last_t, 1e-9));
       fprintf(csv, ",%.2f,%.9g,%.9g,%.6g,%.9g\n", t->elapsed_prev + (now - t0), v.relmse, v.ssim,
               v.psnr, v.relmse_geo);
       fflush(csv);

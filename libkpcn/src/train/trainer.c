@@ -262,8 +262,10 @@ static kpcn_status check_output_paths(const kpcn_train_settings *s, const char *
     if (!path[i] || (i > 2 && !*path[i])) continue;
     KPCN_TRY(kpcn_check_output_path(path[i], what[i]));
     for (int v = 0; v < s->nval; v++) {
-      KPCN_TRY(kpcn_check_not_input(path[i], what[i], s->val_noisy[v], "a --val input"));
-      KPCN_TRY(kpcn_check_not_input(path[i], what[i], s->val_ref[v], "a --val reference"));
+      KPCN_TRY(
+          kpcn_check_not_input(path[i], what[i], s->val_noisy[v], "a --val or --val-store input"));
+      KPCN_TRY(kpcn_check_not_input(path[i], what[i], s->val_ref[v],
+                                    "a --val or --val-store reference"));
     }
   }
   return KPCN_OK;
