@@ -575,18 +575,17 @@ done
 oiiotool "$N" --mulc 4 -o "$D/n4.exr" && oiiotool "$R" --mulc 4 -o "$D/r4.exr" || fail "scaled images"
 "$T" "$D/n4.exr" "$D/r4.exr" --patches:size=16:count=6:cull=1:out="$D/p4.kps" >/dev/null || fail "patches x4"
 cp "$D/m4.safetensors.ckpt" "$D/m40.ckpt"
-"$K" --store "$D/p8.kps" --preset tiny --batch 2 --patch 16 --plot '' --threads 1 --iters 8 --csv '' \
-  -o "$D/m4.safetensors" --resume 2>"$D/err"
-rc=$?
-[ $rc -eq 1 ] || fail "resume on a store of 8 patches: exit $rc (want 1): $(cat "$D/err")"
-grep -qF "train.store = 6 patches of 16 px, 33 channels, 1 sources, this run uses 8 patches of 16 px, 33 channels, 1 sources (--store)" "$D/err" ||
-  fail "store mismatch unclear: $(cat "$D/err")"
-"$K" --store "$D/p4.kps" --preset tiny --batch 2 --patch 16 --plot '' --threads 1 --iters 8 --csv '' \
-  -o "$D/m4.safetensors" --resume 2>"$D/err"
-rc=$?
-[ $rc -eq 1 ] || fail "resume on a store at 4x the exposure: exit $rc (want 1): $(cat "$D/err")"
-grep -q "kpcn.architecture's exposure: .* in the checkpoint, .* in this run (another --store?)" "$D/err" ||
-  fail "exposure mismatch unclear: $(cat "$D/err")"
+resume_on() { # STORE WHAT NEEDLE (grep -E): the resume exits 1 with NEEDLE in its message
+  "$K" --store "$1" --preset tiny --batch 2 --patch 16 --plot '' --threads 1 --iters 8 --csv '' \
+    -o "$D/m4.safetensors" --resume 2>"$D/err"
+  rc=$?
+  [ $rc -eq 1 ] || fail "resume on $2: exit $rc (want 1): $(cat "$D/err")"
+  grep -qE "$3" "$D/err" || fail "resume on $2: message unclear: $(cat "$D/err")"
+}
+resume_on "$D/p8.kps" "a store of 8 patches" \
+  "train.store = 6 patches of 16 px, 33 channels, 1 sources, this run uses 8 patches of 16 px, 33 channels, 1 sources \(--store\)"
+resume_on "$D/p4.kps" "a store at 4x the exposure" \
+  "kpcn.architecture's exposure: .* in the checkpoint, .* in this run \(another --store\?\)"
 cmp -s "$D/m40.ckpt" "$D/m4.safetensors.ckpt" || fail "a resume on another store changed the checkpoint"
 # (5) a run stopped right on a CSV row (--log-every 1: every iteration is one) ends with a
 # validation row with no rate (an empty its_per_s cell, as the loss's: 0 was written), which
