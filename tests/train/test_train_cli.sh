@@ -601,4 +601,17 @@ tail -n 2 "$D/tc.safetensors.csv" | awk -F, -v s="$stop" '
 "$K" --compare "$D/ips.png" --y its_per_s a="$D/tc.safetensors.csv" 2>"$D/err" ||
   fail "--compare --y its_per_s of a run stopped on a row: $(cat "$D/err")"
 [ -s "$D/ips.png" ] || fail "--compare --y its_per_s wrote no plot"
+# the developer scripts without validation pairs: they passed kpcn-train's --val-from-store,
+# refused since session 57, and so failed after their set-up; now they ask for pairs or
+# VAL_STORE before doing anything (exit 2, no work folder made)
+S=$(cd "$(dirname "$0")/../../tools/kpcn-train" && pwd)
+for sc in ship_model.sh experiments.sh; do
+  # ship_model.sh STORE [pairs]; experiments.sh STORE OUTDIR [pairs]
+  if [ $sc = ship_model.sh ]; then set -- "$D/p.kps"; else set -- "$D/p.kps" "$D/expout"; fi
+  KPCN_TRAIN=$K WORK=$D/shipwork bash "$S/$sc" "$@" 2>"$D/err" >/dev/null
+  rc=$?
+  [ $rc -eq 2 ] && grep -q "give validation pairs (NOISY.exr,REF.exr) or VAL_STORE=VAL.kps" "$D/err" &&
+    [ ! -e "$D/shipwork" ] && [ ! -e "$D/expout" ] ||
+    fail "$sc without validation: exit $rc (want 2): $(cat "$D/err")"
+done
 echo "test_train_cli: ok"

@@ -8,7 +8,8 @@
 #        small = 2 hidden layers (3 convs) | large1 = 3 hidden (4 convs) | large2 = 6 hidden (7 convs)
 #
 # usage: tools/kpcn-train/experiments.sh STORE.kps OUTDIR [NOISY.exr,REF.exr ...]
-#   Validation pairs: the arguments after OUTDIR, or (none given) the store's "val" sources.
+#   Validation pairs: the arguments after OUTDIR, or (none given) VAL_STORE=VAL.kps
+#   (kpcn-train --val-store: the full renders a validation store was cut from); one is required.
 # environment (defaults in brackets):
 #   KPCN_TRAIN   path of kpcn-train          [build/tools/kpcn-train/kpcn-train]
 #   MINUTES      wall-clock budget per run   [10]
@@ -37,10 +38,14 @@ MINUTES=${MINUTES:-10} THREADS=${THREADS:-0} BATCH=${BATCH:-16} PATCH=${PATCH:-6
 CH=${CH:-32} K=${K:-11} PRESET=${PRESET:-cpu} VAL_EVERY=${VAL_EVERY:-50}
 DECAY_EVERY=${DECAY_EVERY:-1000} SEED=${SEED:-1} ONLY=${ONLY:-}
 val=()
+# (kpcn-train's --val-from-store, which this used, was replaced by --val-store in session 57)
 if [ $# -gt 0 ]; then
   for p in "$@"; do val+=(--val "$p"); done
+elif [ -n "${VAL_STORE:-}" ]; then
+  val+=(--val-store "$VAL_STORE")
 else
-  val+=(--val-from-store)
+  echo "experiments.sh: give validation pairs (NOISY.exr,REF.exr) or VAL_STORE=VAL.kps" >&2
+  exit 2
 fi
 mkdir -p "$out"
 

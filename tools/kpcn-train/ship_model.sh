@@ -6,6 +6,8 @@
 # run of this script replaces that README with its own.
 #
 # usage: tools/kpcn-train/ship_model.sh STORE.kps [NOISY.exr,REF.exr ...]
+#   Validation: the pairs given, or (none given) VAL_STORE=VAL.kps (kpcn-train --val-store: the
+#   full renders a validation store was cut from); one of the two is required.
 # environment (defaults): MINUTES (60) training budget, PRESET (cpu), ITERS (none: sized to fit
 #   MINUTES from a 20-iteration speed probe, below), STAGE1_FRACTION (0.6 of the iterations, or of the
 #   budget when time-limited: see below), LOSS2 (l1), THREADS (0), SEED (1),
@@ -50,9 +52,17 @@ MINUTES=${MINUTES:-60} PRESET=${PRESET:-cpu} LOSS2=${LOSS2:-l1} THREADS=${THREAD
 SEED=${SEED:-1} NAME=${NAME:-kpcn-$PRESET} FRAC=${STAGE1_FRACTION:-0.6}
 outdir=$here/testdata/models
 work=${WORK:-$here/out/ship-$NAME} # /out/ is git-ignored
-mkdir -p "$outdir" "$work"
 val=()
-if [ $# -gt 0 ]; then for p in "$@"; do val+=(--val "$p"); done; else val+=(--val-from-store); fi
+# (kpcn-train's --val-from-store, which this used, was replaced by --val-store in session 57)
+if [ $# -gt 0 ]; then
+  for p in "$@"; do val+=(--val "$p"); done
+elif [ -n "${VAL_STORE:-}" ]; then
+  val+=(--val-store "$VAL_STORE")
+else
+  echo "ship_model.sh: give validation pairs (NOISY.exr,REF.exr) or VAL_STORE=VAL.kps" >&2
+  exit 2
+fi
+mkdir -p "$outdir" "$work"
 
 if [ -n "${ITERS:-}" ]; then
   iters=$ITERS
